@@ -1,0 +1,47 @@
+# amrepro: `make run` reproduces everything, `make test` checks everything.
+# One build profile (release) for run, test and bench, so CI compiles once.
+
+CARGO_TARGET_DIR ?= $(HOME)/.cache/amrepro-target
+export CARGO_TARGET_DIR
+AMREPRO_DATA ?= $(abspath ../shared/data)
+export AMREPRO_DATA
+VENV ?= $(HOME)/.cache/amrepro-venv
+export AMREPRO_PYTHON := $(VENV)/bin/python
+OUT ?= out
+BIN := $(CARGO_TARGET_DIR)/release/amrepro
+SPECS := $(sort $(wildcard specs/*.toml))
+
+.PHONY: run build test check lint bench docs clean
+
+## run: build, run every shipped spec into $(OUT)/, print where the report is
+run: build
+	@for spec in $(SPECS); do $(BIN) run --out $(OUT) $$spec || exit 1; done
+	@echo "published tables: $(OUT)/fdm/ (see docs/OUTPUTS.md)"
+	@echo "open the report:  $(OUT)/report/index.html"
+
+build:
+	cargo build --release --bin amrepro
+
+## test: format and lint checks, then every test (installs duckdb/polars for Python first)
+test: $(VENV)/.installed lint
+	cargo test --release --workspace
+
+lint:
+	cargo fmt --all --check
+	cargo clippy --release --workspace --all-targets -- -D warnings
+
+$(VENV)/.installed: requirements-test.txt
+	python3 -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
+	touch $@
+
+## bench: criterion benchmarks of the hot paths
+bench:
+	cargo bench --workspace
+
+## docs: regenerate docs/STAGES.md from the registry
+docs: build
+	$(BIN) stages --markdown > docs/STAGES.md
+
+clean:
+	rm -rf $(OUT)

@@ -1,0 +1,16 @@
+//! On-disk dataset formats (DESIGN §4), importers of measured data and, in later
+//! issues, the virtual printers that generate datasets in the same formats.
+//!
+//! A dataset is one folder with a `dataset.toml` (kind, printer, units, provenance), a
+//! per-item table and the item files. Analysis stages read datasets only through the
+//! readers here, never through a generator's internals. This crate does no tables
+//! through polars: dataset tables are plain CSV so anyone can write them by hand.
+#![deny(missing_docs)]
+
+pub mod csv_table;
+pub mod error;
+pub mod fdm_widths;
+pub mod fsu;
+pub mod manifest;
+
+pub use error::DatasetError;

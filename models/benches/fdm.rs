@@ -1,0 +1,86 @@
+//! Criterion benchmarks of the paper-000 numeric core (Ren et al. 2021): one full
+//! `r_a`, `r_F` grid-search fit (441 pairs, Sec. II-A) on 8 synthetic lines of ~2500
+//! samples, a 9-fold leave-one-out (Table II), and one transfer fit with inner
+//! cross-validation of `λ` (eq. 5). Inputs are built outside the timed closures.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use models::fdm::{
+    fit, leave_one_out, transfer_source_mean, Bp1PowerLaw, FittedPiecewise, LineKinematics, MeasuredLine,
+    PiecewiseCoefficients, PiecewiseParams, SourcePrior, TransferParams,
+};
+
+const TABLE_I: [(f64, f64); 9] = [
+    (800.0, 150.0),
+    (800.0, 100.0),
+    (800.0, 50.0),
+    (600.0, 150.0),
+    (600.0, 100.0),
+    (600.0, 50.0),
+    (400.0, 150.0),
+    (400.0, 100.0),
+    (400.0, 50.0),
+];
+
+/// A Taz-5-like (blob) or Taz-6-like model; `bump` perturbs the widths per line so the
+/// fit is not exact.
+fn lines(blob: bool, bump: f64) -> Vec<MeasuredLine> {
+    let model = FittedPiecewise {
+        r_a: 1.03,
+        r_f: 0.97,
+        coefficients: PiecewiseCoefficients {
+            alpha1: 0.03,
+            alpha2: 1.0,
+            beta: 0.004,
+            gamma: 0.02,
+            c_mm: 0.8,
+            rho: 0.12,
+            w_start_mm: 0.5,
+        },
+        bp1_law: blob.then_some(Bp1PowerLaw { c0_s: 0.01, c1: 4.0, c2: -0.8 }),
+        has_start_blob: blob,
+        training_rmse_mm: 0.0,
+        lambda: 0.0,
+    };
+    TABLE_I
+        .iter()
+        .enumerate()
+        .map(|(k, &(a, f))| {
+            let nominal = LineKinematics::paper_line(a, f).unwrap();
+            let xs: Vec<f64> = (0..2500).map(|i| i as f64 * 0.048).collect();
+            let mut ws = model.predict(&nominal, &xs).unwrap();
+            for (i, w) in ws.iter_mut().enumerate() {
+                *w += bump * ((i * 13 + k * 5) as f64).sin();
+            }
+            MeasuredLine::new(nominal, xs, ws).unwrap()
+        })
+        .collect()
+}
+
+fn bench_fit(c: &mut Criterion) {
+    let data = lines(true, 0.01);
+    let params = PiecewiseParams::paper_defaults().check().unwrap();
+    let mut g = c.benchmark_group("fdm_piecewise");
+    g.sample_size(10);
+    g.bench_function("grid_fit_441pairs_8lines_2500samples", |b| b.iter(|| fit(&data[..8], &params).unwrap()));
+    g.bench_function("leave_one_out_9lines", |b| b.iter(|| leave_one_out(&data, &params).unwrap()));
+    g.finish();
+}
+
+fn bench_transfer(c: &mut Criterion) {
+    let source = lines(true, 0.01);
+    let target = lines(false, 0.01);
+    let sp = PiecewiseParams::paper_defaults().check().unwrap();
+    let tp = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+    let transfer = TransferParams::paper_defaults().check().unwrap();
+    let prior = SourcePrior::build(&source, &sp, &transfer).unwrap();
+    let mut g = c.benchmark_group("fdm_transfer");
+    g.sample_size(10);
+    g.bench_function("source_mean_2lines_21lambdas_inner_cv", |b| {
+        b.iter(|| transfer_source_mean(&target[..2], &tp, &prior, &transfer).unwrap())
+    });
+    g.bench_function("source_prior_build_9lines", |b| b.iter(|| SourcePrior::build(&source, &sp, &transfer).unwrap()));
+    g.finish();
+}
+
+criterion_group!(benches, bench_fit, bench_transfer);
+criterion_main!(benches);

@@ -1,0 +1,67 @@
+//! Error types of the paper-000 models (Ren et al. 2021): invalid kinematics, invalid
+//! hyper-parameters (caught once by `.check()`), and fit failures. Parameter errors are
+//! kept apart from run errors, as CONVENTIONS.md asks.
+
+use thiserror::Error;
+
+/// A straight-line motion that the planner of Sec. II-A cannot describe.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum KinematicsError {
+    /// A kinematic quantity is zero, negative or not finite.
+    #[error("{name} must be positive and finite, got {value}")]
+    NotPositive {
+        /// Which quantity.
+        name: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// The target feed does not exceed the start speed (jerk), so there is no
+    /// acceleration phase at all.
+    #[error("feed {feed_mm_s} mm/s must exceed the start speed (jerk) {jerk_mm_s} mm/s")]
+    FeedNotAboveJerk {
+        /// Target feed (mm/s).
+        feed_mm_s: f64,
+        /// Start/end speed (mm/s).
+        jerk_mm_s: f64,
+    },
+}
+
+/// A hyper-parameter outside its valid range (returned by the `.check()` methods).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ParamError {
+    /// A parameter is outside its allowed range.
+    #[error("parameter `{name}` = {value} is invalid: {reason}")]
+    OutOfRange {
+        /// Parameter name.
+        name: &'static str,
+        /// The offending value.
+        value: f64,
+        /// What the valid range is.
+        reason: &'static str,
+    },
+}
+
+/// A fit that could not be carried out on the given data.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum FitError {
+    /// A measured line is malformed (lengths differ, unsorted positions, non-finite values).
+    #[error("measured line {line}: {reason}")]
+    BadLine {
+        /// Index of the line in the input slice (or `usize::MAX` when built alone).
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Too few lines or samples for the requested fit.
+    #[error("not enough data: {0}")]
+    NotEnoughData(String),
+    /// The kinematics of a line are invalid.
+    #[error(transparent)]
+    Kinematics(#[from] KinematicsError),
+    /// A linear system (normal equations, MAP) is singular or not positive definite.
+    #[error("singular system: {0}")]
+    Singular(String),
+    /// Dimensions of the inputs disagree.
+    #[error("dimension mismatch: {0}")]
+    Dimension(String),
+}

@@ -1,0 +1,875 @@
+//! Fitting the five-phase piecewise model (paper 000, Sec. II-A, the 8-step procedure
+//! after eq. 3), optionally with the informative prior of eqs 4-5 (Sec. II-B).
+//!
+//! For every pair `(r_a, r_F)` of the grid of eq. 1 (441 pairs by default, evaluated in
+//! parallel with rayon, per-thread scratch buffers, no allocation per sample):
+//!
+//! 1. actual kinematics of every training line; nominal time and speed of every sample;
+//! 2. bp2, bp4 from the kinematics; bp1 of each line is the time of its measured width
+//!    minimum (smoothed, see `PiecewiseParams::smoothing_mm`), whose *position* does not
+//!    depend on `r`;
+//! 3. p1: `w = 1/(α1 v + α2)` on the pooled samples `t ≤ bp1` of all lines, fitted by
+//!    linear least squares on `1/w = α1 v + α2` and refined by Gauss-Newton on the widths
+//!    themselves (step halving, keeping `α1 v + α2 > 0` on the data);
+//! 4. p2, p3, p4, p5: per-segment linear least squares with the continuity offsets
+//!    `w(bp_{i-1})` of the model's own chain (eq. 3). For a fixed bp3 partition the
+//!    offsets are linear in the parameters, and the parameters that minimise every
+//!    segment's sum of squares with the offsets held at their own values solve one
+//!    ≤ 5 × 5 non-symmetric system (stack LU; with a prior `λ Σ⁻¹` is added, eq. 5).
+//!    Without a prior this equals the paper's sequential segment-by-segment fit. bp3
+//!    starts at the first crossing of `c` by the smoothed measured widths, then follows
+//!    the model (where p3 reaches `c`) until the partition stops changing. Segment sums
+//!    come from prefix sums, so one partition update costs O(lines · log n);
+//! 5. the training RMSE of the whole fitted curve (measured bp1, model chain) is the
+//!    grid criterion (step 6-8); the pair with the smallest RMSE wins (ties: first in
+//!    grid order, so the result does not depend on the number of threads).
+//!
+//! The bp1 power law (eq. 2) is then fitted on the winning pair's bp1 times and actual
+//! accelerations (`Bp1PowerLaw::fit`); the prediction of a new line uses it, never the
+//! line's own width minimum.
+
+use rayon::prelude::*;
+
+use super::errors::FitError;
+use super::hyperparams::PiecewiseValidParams;
+use super::kinematics::LineKinematics;
+use super::line::MeasuredLine;
+use super::piecewise::{
+    bp3_time, p2_regressor, p3_regressor, p5_regressor, Bp1PowerLaw, LineChain, PiecewiseCoefficients,
+};
+use super::predict::FittedPiecewise;
+use super::small_linalg::{lu_solve, spd_solve};
+
+/// Number of chain parameters solved by least squares: `β, γ, c, ρ, w_start`.
+pub(crate) const NP: usize = 5;
+pub(crate) const BETA: usize = 0;
+pub(crate) const GAMMA: usize = 1;
+pub(crate) const C: usize = 2;
+pub(crate) const RHO: usize = 3;
+pub(crate) const W_START: usize = 4;
+
+/// A Gaussian prior `N(μ, Σ/λ)` on `(β, γ, c, ρ, w_start)` given by its precision `Σ⁻¹`
+/// (zero rows for parameters without a prior) and mean `μ`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SegmentPrior {
+    pub(crate) precision: [[f64; NP]; NP],
+    pub(crate) mean: [f64; NP],
+}
+
+/// Fits the piecewise model to the training lines with the paper's grid search over
+/// `r_a`, `r_F` (no prior: the single-printer fit of Sec. II-A).
+pub fn fit(lines: &[MeasuredLine], params: &PiecewiseValidParams) -> Result<FittedPiecewise, FitError> {
+    let grid = full_grid(params);
+    let mut fits = fit_on_grid(lines, params, &grid, None, &[0.0])?;
+    Ok(fits.remove(0))
+}
+
+/// Fits at one fixed `(r_a, r_F)` pair (no grid search), e.g. the per-line fits of
+/// Algorithm 1 at the source printer's selected pair.
+pub fn fit_at(
+    lines: &[MeasuredLine],
+    params: &PiecewiseValidParams,
+    r_a: f64,
+    r_f: f64,
+) -> Result<FittedPiecewise, FitError> {
+    let mut fits = fit_on_grid(lines, params, &[(r_a, r_f)], None, &[0.0])?;
+    Ok(fits.remove(0))
+}
+
+/// All `(r_a, r_F)` pairs of the grid, `r_a` major.
+pub(crate) fn full_grid(params: &PiecewiseValidParams) -> Vec<(f64, f64)> {
+    let r = params.r_values();
+    r.iter().flat_map(|&ra| r.iter().map(move |&rf| (ra, rf))).collect()
+}
+
+/// The fit for each `λ` in `lambdas` (one fit when `prior` is `None`), each with its own
+/// best grid pair.
+pub(crate) fn fit_on_grid(
+    lines: &[MeasuredLine],
+    params: &PiecewiseValidParams,
+    grid: &[(f64, f64)],
+    prior: Option<&SegmentPrior>,
+    lambdas: &[f64],
+) -> Result<Vec<FittedPiecewise>, FitError> {
+    if grid.is_empty() || lambdas.is_empty() {
+        return Err(FitError::NotEnoughData("empty grid or λ list".into()));
+    }
+    let prepared = prepare_lines(lines, params)?;
+    let n_lambda = if prior.is_some() { lambdas.len() } else { 1 };
+    let outcomes: Vec<Result<GridOutcome, FitError>> = grid
+        .par_iter()
+        .map_init(
+            || Scratch::new(&prepared),
+            |scratch, &(ra, rf)| evaluate_pair(&prepared, params, ra, rf, scratch, prior, &lambdas[..n_lambda]),
+        )
+        .collect();
+    (0..n_lambda).map(|k| best_fit(&prepared, params, &outcomes, k, lambdas[k])).collect()
+}
+
+/// A measured line with what the fit derives from the data alone.
+pub(crate) struct PreparedLine<'a> {
+    line: &'a MeasuredLine,
+    smoothed: Vec<f64>,
+    /// Position of the measured width minimum (bp1), if the printer has a start blob.
+    bp1_pos_mm: Option<f64>,
+}
+
+pub(crate) fn prepare_lines<'a>(
+    lines: &'a [MeasuredLine],
+    params: &PiecewiseValidParams,
+) -> Result<Vec<PreparedLine<'a>>, FitError> {
+    if lines.is_empty() {
+        return Err(FitError::NotEnoughData("no training lines".into()));
+    }
+    let mut out = Vec::with_capacity(lines.len());
+    for (i, line) in lines.iter().enumerate() {
+        line.validate(i)?;
+        let smoothed = moving_average(&line.positions_mm, &line.widths_mm, params.get().smoothing_mm);
+        let bp1_pos_mm = params.has_start_blob().then(|| measured_bp1_position(line, &smoothed, params));
+        out.push(PreparedLine { line, smoothed, bp1_pos_mm });
+    }
+    if params.has_start_blob() {
+        let n_p1: usize = out.iter().map(p1_count).sum();
+        if n_p1 < 3 {
+            return Err(FitError::NotEnoughData(format!("only {n_p1} samples before the width minima (phase p1)")));
+        }
+    }
+    Ok(out)
+}
+
+fn p1_count(p: &PreparedLine) -> usize {
+    p.bp1_pos_mm.map_or(0, |x| p.line.positions_mm.partition_point(|&xi| xi <= x))
+}
+
+/// Position of the smoothed width minimum in `[0, min(x_dec, fraction·L)]`.
+fn measured_bp1_position(line: &MeasuredLine, smoothed: &[f64], params: &PiecewiseValidParams) -> f64 {
+    let k = &line.nominal;
+    let x_max = k.decel_start_mm().min(params.get().bp1_search_fraction * k.length_mm);
+    let end = line.positions_mm.partition_point(|&x| x <= x_max).max(1);
+    let mut best = 0;
+    for i in 1..end {
+        if smoothed[i] < smoothed[best] {
+            best = i;
+        }
+    }
+    line.positions_mm[best]
+}
+
+/// Centred moving average over a window of `window_mm` (all samples within ±window/2).
+pub(crate) fn moving_average(xs: &[f64], ys: &[f64], window_mm: f64) -> Vec<f64> {
+    if window_mm <= 0.0 {
+        return ys.to_vec();
+    }
+    let half = 0.5 * window_mm;
+    let mut prefix = Vec::with_capacity(ys.len() + 1);
+    prefix.push(0.0);
+    for &y in ys {
+        prefix.push(prefix.last().copied().unwrap_or(0.0) + y);
+    }
+    let (mut lo, mut hi) = (0, 0);
+    xs.iter()
+        .map(|&x| {
+            while xs[lo] < x - half {
+                lo += 1;
+            }
+            while hi < xs.len() && xs[hi] <= x + half {
+                hi += 1;
+            }
+            (prefix[hi] - prefix[lo]) / (hi - lo) as f64
+        })
+        .collect()
+}
+
+/// Running sums of `(x, y)` pairs for one segment's least squares.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Moments {
+    pub(crate) n: f64,
+    pub(crate) sx: f64,
+    pub(crate) sxx: f64,
+    pub(crate) sy: f64,
+    pub(crate) syy: f64,
+    pub(crate) sxy: f64,
+}
+
+impl Moments {
+    fn add(&mut self, x: f64, y: f64) {
+        self.n += 1.0;
+        self.sx += x;
+        self.sxx += x * x;
+        self.sy += y;
+        self.syy += y * y;
+        self.sxy += x * y;
+    }
+
+    fn minus(&self, o: &Self) -> Self {
+        Self {
+            n: self.n - o.n,
+            sx: self.sx - o.sx,
+            sxx: self.sxx - o.sxx,
+            sy: self.sy - o.sy,
+            syy: self.syy - o.syy,
+            sxy: self.sxy - o.sxy,
+        }
+    }
+
+    /// `Σ (y − off − θ x)²`.
+    fn sse(&self, off: f64, theta: f64) -> f64 {
+        let r = self.syy - 2.0 * off * self.sy + self.n * off * off - 2.0 * theta * (self.sxy - off * self.sx)
+            + theta * theta * self.sxx;
+        r.max(0.0)
+    }
+}
+
+/// Per-line buffers reused across grid pairs (one set per rayon job).
+struct LineScratch {
+    t: Vec<f64>,
+    v: Vec<f64>,
+    /// Prefix sums of the p3 regressor over the region `(start3, bp4]`.
+    pre3: Vec<Moments>,
+}
+
+struct Scratch {
+    lines: Vec<LineScratch>,
+    p1: Vec<(f64, f64)>,
+    data: Vec<LineFit>,
+    bp3: Vec<f64>,
+}
+
+impl Scratch {
+    fn new(prepared: &[PreparedLine]) -> Self {
+        let lines = prepared
+            .iter()
+            .map(|p| LineScratch {
+                t: vec![0.0; p.line.len()],
+                v: vec![0.0; p.line.len()],
+                pre3: Vec::with_capacity(p.line.len() + 1),
+            })
+            .collect();
+        Self {
+            lines,
+            p1: Vec::new(),
+            data: Vec::with_capacity(prepared.len()),
+            bp3: Vec::with_capacity(prepared.len()),
+        }
+    }
+}
+
+/// What one grid pair needs of one line: breakpoints, index ranges and segment sums.
+#[derive(Debug, Clone, Copy)]
+struct LineFit {
+    start3: f64,
+    bp4: f64,
+    top: f64,
+    w_bp1: f64,
+    /// p2 regressor at the start of p3 (0 when p2 is empty).
+    g_start3: f64,
+    /// p3 regressor at bp4.
+    s_bp4: f64,
+    p2: Moments,
+    p5: Moments,
+    i3: usize,
+    i4: usize,
+    bp3_init: f64,
+}
+
+/// Result of one grid pair: p1 coefficients, and per λ the chain parameters and SSE.
+struct GridOutcome {
+    r_a: f64,
+    r_f: f64,
+    alpha: (f64, f64),
+    per_lambda: Vec<([f64; NP], f64)>,
+}
+
+fn evaluate_pair(
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    r_a: f64,
+    r_f: f64,
+    scratch: &mut Scratch,
+    prior: Option<&SegmentPrior>,
+    lambdas: &[f64],
+) -> Result<GridOutcome, FitError> {
+    let blob = params.has_start_blob();
+    // Times, speeds and measured bp1 per line.
+    scratch.p1.clear();
+    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
+        let kin = p.line.nominal.scaled(r_a, r_f)?;
+        kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
+        if let Some(x1) = p.bp1_pos_mm {
+            let end = p.line.positions_mm.partition_point(|&x| x <= x1);
+            for i in 0..end {
+                scratch.p1.push((ls.v[i], p.line.widths_mm[i]));
+            }
+        }
+    }
+    let (alpha, sse1) = if blob {
+        fit_p1(&scratch.p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
+    } else {
+        ((0.0, 0.0), 0.0)
+    };
+    let p1_coef = PiecewiseCoefficients { alpha1: alpha.0, alpha2: alpha.1, ..Default::default() };
+    scratch.data.clear();
+    let (mut c_sum, mut c_n) = (0.0, 0.0);
+    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
+        let kin = p.line.nominal.scaled(r_a, r_f)?;
+        let lf = line_moments(p, &kin, ls, &p1_coef);
+        // Initial c: mean width over the second half of the p3/p4 region.
+        let mid = 0.5 * (lf.start3 + lf.bp4);
+        let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
+        let m = ls.pre3[lf.i4 - lf.i3].minus(&ls.pre3[j - lf.i3]);
+        c_sum += m.sy;
+        c_n += m.n;
+        scratch.data.push(lf);
+    }
+    let c_init = if c_n > 0.0 {
+        c_sum / c_n
+    } else {
+        prepared.iter().map(|p| p.line.widths_mm.iter().sum::<f64>() / p.line.len() as f64).sum::<f64>()
+            / prepared.len() as f64
+    };
+    for (lf, (p, ls)) in scratch.data.iter_mut().zip(prepared.iter().zip(scratch.lines.iter())) {
+        let first = (lf.i3..lf.i4).find(|&i| p.smoothed[i] >= c_init);
+        lf.bp3_init = first.map_or(lf.bp4, |i| ls.t[i]);
+    }
+    let mut per_lambda = Vec::with_capacity(lambdas.len());
+    for &lambda in lambdas {
+        let theta = solve_chain(scratch, blob, c_init, prior.map(|p| (p, lambda)), params)?;
+        let sse = chain_sse(&scratch.data, &scratch.lines, blob, &theta);
+        per_lambda.push((theta, sse + sse1));
+    }
+    Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
+}
+
+/// Segment sums of one line at one grid pair (fills the line's scratch prefix sums).
+fn line_moments(p: &PreparedLine, kin: &LineKinematics, ls: &mut LineScratch, p1: &PiecewiseCoefficients) -> LineFit {
+    let (t, v, y) = (&ls.t, &ls.v, &p.line.widths_mm);
+    let a = kin.accel_mm_s2;
+    let bp2 = kin.accel_end_s();
+    let bp4 = kin.decel_start_s();
+    let top = kin.peak_speed_mm_s();
+    let (bp1, w_bp1) = match p.bp1_pos_mm {
+        Some(x1) => {
+            let bp1 = kin.time_at_position(x1).min(bp4);
+            (bp1, p1.p1_width_mm(kin.speed_at_time(bp1)))
+        }
+        None => (0.0, 0.0),
+    };
+    let i1 = match p.bp1_pos_mm {
+        Some(_) => t.partition_point(|&ti| ti <= bp1),
+        None => 0,
+    };
+    let i2 = t.partition_point(|&ti| ti <= bp2).max(i1);
+    let mut p2 = Moments::default();
+    for i in i1..i2 {
+        p2.add(p2_regressor(t[i], v[i], bp1, a), y[i]);
+    }
+    let start3 = bp1.max(bp2);
+    let i3 = t.partition_point(|&ti| ti <= start3);
+    let i4 = t.partition_point(|&ti| ti <= bp4).max(i3);
+    ls.pre3.clear();
+    let mut acc = Moments::default();
+    ls.pre3.push(acc);
+    for i in i3..i4 {
+        acc.add(p3_regressor(t[i], v[i], start3), y[i]);
+        ls.pre3.push(acc);
+    }
+    let mut p5 = Moments::default();
+    for i in i4..t.len() {
+        p5.add(p5_regressor(v[i], top), y[i]);
+    }
+    LineFit {
+        start3,
+        bp4,
+        top,
+        w_bp1,
+        g_start3: if bp1 < bp2 { p2_regressor(bp2, top, bp1, a) } else { 0.0 },
+        s_bp4: p3_regressor(bp4, top, start3),
+        p2,
+        p5,
+        i3,
+        i4,
+        bp3_init: bp4,
+    }
+}
+
+/// Offsets and p3/p4 split of one line for given chain parameters and bp3.
+struct LineState {
+    w1: f64,
+    w3: f64,
+    w4: f64,
+    m3: Moments,
+    m4: Moments,
+}
+
+fn line_state(lf: &LineFit, ls: &LineScratch, blob: bool, theta: &[f64; NP], bp3: f64) -> LineState {
+    let w1 = if blob { lf.w_bp1 } else { theta[W_START] };
+    let w3 = w1 + theta[BETA] * lf.g_start3;
+    let j3 = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t <= bp3);
+    let m3 = ls.pre3[j3 - lf.i3];
+    let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
+    let w4 = if bp3 < lf.bp4 { theta[C] } else { w3 + theta[GAMMA] * lf.s_bp4 };
+    LineState { w1, w3, w4, m3, m4 }
+}
+
+/// The model's bp3 for the given parameters (see `LineChain`).
+fn chain_bp3(lf: &LineFit, blob: bool, theta: &[f64; NP]) -> f64 {
+    let w1 = if blob { lf.w_bp1 } else { theta[W_START] };
+    let w3 = w1 + theta[BETA] * lf.g_start3;
+    if lf.start3 < lf.bp4 {
+        bp3_time(w3, theta[C], theta[GAMMA], lf.start3, lf.bp4, lf.top)
+    } else {
+        lf.bp4
+    }
+}
+
+/// The per-segment (MAP) least squares with consistent continuity offsets; returns
+/// `(β, γ, c, ρ, w_start)`.
+///
+/// For a fixed partition (bp3 of every line, as a sample index, and whether the plateau
+/// is reached before bp4), the offsets `w(bp2) = w(bp1) + β·g(bp2)` and `w(bp4) = c` or
+/// `w(bp2) + γ·s(bp4)` are linear in the parameters. The parameters are then the fixed
+/// point "θ minimises the segment sums of squares (plus prior) with the offsets held at
+/// their values under θ" (eq. 3 fitted segment by segment, eq. 6's constant offsets),
+/// which is one non-symmetric linear system (`solve_partition`). Without a prior it is
+/// exactly the paper's sequential per-segment fit. The partition is then updated from
+/// the new bp3 and the solve repeated until the partition no longer changes. Because
+/// bp3 moves in whole samples this can end in a short cycle between neighbouring
+/// partitions; a cycle of up to `HISTORY` steps is detected and its member with the
+/// smallest training SSE is returned (likewise among the last `HISTORY` states if
+/// `max_iterations` is reached, which happens only with a strong prior).
+fn solve_chain(
+    scratch: &mut Scratch,
+    blob: bool,
+    c_init: f64,
+    prior: Option<(&SegmentPrior, f64)>,
+    params: &PiecewiseValidParams,
+) -> Result<[f64; NP], FitError> {
+    const HISTORY: usize = 8;
+    let mut theta = [0.0; NP];
+    theta[C] = c_init;
+    let mut history = [[f64::NAN; NP]; HISTORY];
+    scratch.bp3.clear();
+    scratch.bp3.extend(scratch.data.iter().map(|lf| lf.bp3_init));
+    let p = params.get();
+    for it in 0..p.max_iterations {
+        let solved = solve_partition(scratch, blob, &theta, prior)?;
+        let mut moved = false;
+        for ((lf, ls), bp3) in scratch.data.iter().zip(&scratch.lines).zip(scratch.bp3.iter_mut()) {
+            let new = chain_bp3(lf, blob, &solved);
+            moved |= partition_key(lf, ls, new) != partition_key(lf, ls, *bp3);
+            *bp3 = new;
+        }
+        if !moved {
+            return Ok(solved);
+        }
+        let repeat =
+            (1..HISTORY).find(|&k| it >= k && relative_change(&solved, &history[(it - k) % HISTORY]) < p.tolerance);
+        if let Some(k) = repeat {
+            let sse = |t: &[f64; NP]| chain_sse(&scratch.data, &scratch.lines, blob, t);
+            let cycle = (1..k).map(|j| history[(it - j) % HISTORY]);
+            let best = cycle.fold(solved, |b, t| if sse(&t) < sse(&b) { t } else { b });
+            return Ok(best);
+        }
+        history[it % HISTORY] = solved;
+        theta = solved;
+    }
+    // No fixed point within the budget: the best of the last states visited.
+    let sse = |t: &[f64; NP]| chain_sse(&scratch.data, &scratch.lines, blob, t);
+    let recent = history.iter().filter(|t| t.iter().all(|v| v.is_finite()));
+    Ok(recent.fold(theta, |b, t| if sse(t) < sse(&b) { *t } else { b }))
+}
+
+/// The partition of one line's p3/p4 region for a bp3: first p4 sample, plateau reached.
+fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> (usize, bool) {
+    let j3 = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t <= bp3);
+    (j3, bp3 < lf.bp4)
+}
+
+/// Solves the offset-consistent segment equations for the current partition.
+fn solve_partition(
+    scratch: &Scratch,
+    blob: bool,
+    theta: &[f64; NP],
+    prior: Option<(&SegmentPrior, f64)>,
+) -> Result<[f64; NP], FitError> {
+    let (mut a, mut b) = ([[0.0; NP]; NP], [0.0; NP]);
+    for ((lf, ls), &bp3) in scratch.data.iter().zip(&scratch.lines).zip(&scratch.bp3) {
+        accumulate_line(lf, ls, blob, bp3, &mut a, &mut b);
+    }
+    if let Some((pr, lambda)) = prior {
+        add_prior(&mut a, &mut b, pr, lambda);
+    }
+    pin_unidentified(&mut a, &mut b, theta);
+    lu_solve(&a, &b).ok_or_else(|| FitError::Singular("segment equations".into()))
+}
+
+/// Largest relative difference of two parameter vectors (NaN compares as infinite).
+fn relative_change(a: &[f64; NP], b: &[f64; NP]) -> f64 {
+    (0..NP)
+        .map(|k| {
+            let d = (a[k] - b[k]).abs() / (1.0 + b[k].abs());
+            if d.is_nan() {
+                f64::INFINITY
+            } else {
+                d
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Adds one line's segment equations for the partition given by `bp3`. Row `k` is the
+/// normal equation of parameter `k` over its own segment; the offsets' dependence on
+/// the other parameters gives the off-diagonal terms (`M[γ][β] = g(bp2)·Σs`, …).
+fn accumulate_line(lf: &LineFit, ls: &LineScratch, blob: bool, bp3: f64, a: &mut [[f64; NP]; NP], b: &mut [f64; NP]) {
+    let (j3, plateau) = partition_key(lf, ls, bp3);
+    let m3 = ls.pre3[j3 - lf.i3];
+    let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
+    // Constant part of w(bp1): the p1 width at bp1, or 0 when w_start is a parameter.
+    let w1 = if blob { lf.w_bp1 } else { 0.0 };
+    let (p2, p5, g3) = (&lf.p2, &lf.p5, lf.g_start3);
+    a[BETA][BETA] += p2.sxx;
+    b[BETA] += p2.sxy - w1 * p2.sx;
+    a[GAMMA][GAMMA] += m3.sxx;
+    a[GAMMA][BETA] += g3 * m3.sx;
+    b[GAMMA] += m3.sxy - w1 * m3.sx;
+    a[C][C] += m4.n;
+    b[C] += m4.sy;
+    a[RHO][RHO] += p5.sxx;
+    b[RHO] += p5.sxy;
+    if plateau {
+        a[RHO][C] += p5.sx;
+    } else {
+        a[RHO][BETA] += g3 * p5.sx;
+        a[RHO][GAMMA] += lf.s_bp4 * p5.sx;
+        b[RHO] -= w1 * p5.sx;
+    }
+    if !blob {
+        a[W_START][W_START] += p2.n;
+        a[W_START][BETA] += p2.sx;
+        a[BETA][W_START] += p2.sx;
+        b[W_START] += p2.sy;
+        a[GAMMA][W_START] += m3.sx;
+        if !plateau {
+            a[RHO][W_START] += p5.sx;
+        }
+    }
+}
+
+fn add_prior(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], prior: &SegmentPrior, lambda: f64) {
+    for i in 0..NP {
+        for j in 0..NP {
+            a[i][j] += lambda * prior.precision[i][j];
+            b[i] += lambda * prior.precision[i][j] * prior.mean[j];
+        }
+    }
+}
+
+/// A parameter with neither data nor prior (an empty segment) keeps its current value.
+fn pin_unidentified(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], theta: &[f64; NP]) {
+    for k in 0..NP {
+        if a[k][k] == 0.0 {
+            a[k] = [0.0; NP];
+            a[k][k] = 1.0;
+            b[k] = theta[k];
+        }
+    }
+}
+
+/// SSE of p2-p5 over all lines for the chain of `theta` (bp3 from the model).
+fn chain_sse(data: &[LineFit], lines: &[LineScratch], blob: bool, theta: &[f64; NP]) -> f64 {
+    data.iter()
+        .zip(lines)
+        .map(|(lf, ls)| {
+            let st = line_state(lf, ls, blob, theta, chain_bp3(lf, blob, theta));
+            lf.p2.sse(st.w1, theta[BETA])
+                + st.m3.sse(st.w3, theta[GAMMA])
+                + st.m4.sse(theta[C], 0.0)
+                + lf.p5.sse(st.w4, theta[RHO])
+        })
+        .sum()
+}
+
+/// Fits `w = 1/(α1 v + α2)` to `(v, w)` pairs: linearised least squares on `1/w`, then
+/// Gauss-Newton on the widths. Returns `((α1, α2), SSE)`.
+pub(crate) fn fit_p1(samples: &[(f64, f64)]) -> Option<((f64, f64), f64)> {
+    if samples.len() < 3 {
+        return None;
+    }
+    let (v_min, v_max) =
+        samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &(v, _)| (lo.min(v), hi.max(v)));
+    let valid = |a: (f64, f64)| a.0 * v_min + a.1 > 0.0 && a.0 * v_max + a.1 > 0.0;
+    let sse = |a: (f64, f64)| -> f64 { samples.iter().map(|&(v, w)| (w - 1.0 / (a.0 * v + a.1)).powi(2)).sum() };
+    let mut alpha = linearised_p1(samples).filter(|&a| valid(a)).unwrap_or_else(|| {
+        let mean = samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
+        (0.0, 1.0 / mean)
+    });
+    let mut current = sse(alpha);
+    for _ in 0..50 {
+        let Some(step) = gauss_newton_step(samples, alpha) else {
+            break;
+        };
+        let mut scale = 1.0;
+        let mut improved = false;
+        for _ in 0..30 {
+            let cand = (alpha.0 + scale * step.0, alpha.1 + scale * step.1);
+            if valid(cand) {
+                let s = sse(cand);
+                if s <= current {
+                    improved = current - s > 1e-15 * current.max(1e-300);
+                    alpha = cand;
+                    current = s;
+                    break;
+                }
+            }
+            scale *= 0.5;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Some((alpha, current))
+}
+
+fn linearised_p1(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let mut m = Moments::default();
+    for &(v, w) in samples {
+        m.add(v, 1.0 / w);
+    }
+    let det = m.n * m.sxx - m.sx * m.sx;
+    if det.abs() <= 1e-12 * m.n * m.sxx {
+        return None;
+    }
+    let a1 = (m.n * m.sxy - m.sx * m.sy) / det;
+    Some((a1, (m.sy - a1 * m.sx) / m.n))
+}
+
+fn gauss_newton_step(samples: &[(f64, f64)], a: (f64, f64)) -> Option<(f64, f64)> {
+    // r = w − 1/d, d = α1 v + α2; ∂r/∂α = (v, 1)/d².
+    let (mut j11, mut j12, mut j22, mut g1, mut g2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(v, w) in samples {
+        let d = a.0 * v + a.1;
+        let r = w - 1.0 / d;
+        let (d1, d2) = (v / (d * d), 1.0 / (d * d));
+        j11 += d1 * d1;
+        j12 += d1 * d2;
+        j22 += d2 * d2;
+        g1 += d1 * r;
+        g2 += d2 * r;
+    }
+    let x = spd_solve(&[[j11, j12], [j12, j22]], &[-g1, -g2])?;
+    Some((x[0], x[1]))
+}
+
+/// The best grid pair for the `k`-th λ, turned into a fitted model.
+fn best_fit(
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    outcomes: &[Result<GridOutcome, FitError>],
+    k: usize,
+    lambda: f64,
+) -> Result<FittedPiecewise, FitError> {
+    let mut best: Option<(&GridOutcome, f64)> = None;
+    for o in outcomes.iter().flatten() {
+        let sse = o.per_lambda[k].1;
+        if sse.is_finite() && best.is_none_or(|(_, b)| sse < b) {
+            best = Some((o, sse));
+        }
+    }
+    let Some((o, sse)) = best else {
+        return Err(outcomes
+            .iter()
+            .find_map(|r| r.as_ref().err().cloned())
+            .unwrap_or_else(|| FitError::NotEnoughData("no valid grid pair".into())));
+    };
+    let theta = o.per_lambda[k].0;
+    let coefficients = PiecewiseCoefficients {
+        alpha1: o.alpha.0,
+        alpha2: o.alpha.1,
+        beta: theta[BETA],
+        gamma: theta[GAMMA],
+        c_mm: theta[C],
+        rho: theta[RHO],
+        w_start_mm: theta[W_START],
+    };
+    let bp1_law = if params.has_start_blob() { Some(fit_bp1_law(prepared, params, o.r_a, o.r_f)?) } else { None };
+    debug_assert!(sse.is_finite());
+    let mut fitted = FittedPiecewise {
+        r_a: o.r_a,
+        r_f: o.r_f,
+        coefficients,
+        bp1_law,
+        has_start_blob: params.has_start_blob(),
+        training_rmse_mm: 0.0,
+        lambda,
+    };
+    fitted.training_rmse_mm = direct_training_rmse(prepared, &fitted)?;
+    Ok(fitted)
+}
+
+/// RMSE of eq. 3 evaluated sample by sample on the training lines with their measured
+/// bp1 (the quantity the grid search minimises, recomputed without the cancellation of
+/// the prefix-sum form).
+fn direct_training_rmse(prepared: &[PreparedLine], fitted: &FittedPiecewise) -> Result<f64, FitError> {
+    let (mut sse, mut n) = (0.0, 0usize);
+    for p in prepared {
+        let kin = fitted.actual_kinematics(&p.line.nominal)?;
+        let bp1 = p.bp1_pos_mm.map_or(0.0, |x| kin.time_at_position(x));
+        let chain = LineChain::new(&fitted.coefficients, &kin, fitted.has_start_blob, bp1);
+        for (&x, &w) in p.line.positions_mm.iter().zip(&p.line.widths_mm) {
+            let pred = chain.width_at(&fitted.coefficients, kin.time_at_position(x), kin.speed_at_position(x));
+            sse += (pred - w).powi(2);
+            n += 1;
+        }
+    }
+    Ok((sse / n as f64).sqrt())
+}
+
+/// Eq. 2 fitted on the measured bp1 times of the training lines at `(r_a, r_F)`.
+fn fit_bp1_law(
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    r_a: f64,
+    r_f: f64,
+) -> Result<Bp1PowerLaw, FitError> {
+    let mut accels = Vec::with_capacity(prepared.len());
+    let mut times = Vec::with_capacity(prepared.len());
+    for p in prepared {
+        let kin = p.line.nominal.scaled(r_a, r_f)?;
+        if let Some(x1) = p.bp1_pos_mm {
+            accels.push(kin.accel_mm_s2);
+            times.push(kin.time_at_position(x1));
+        }
+    }
+    let q = params.get();
+    Bp1PowerLaw::fit(&accels, &times, (q.bp1_c2_min, q.bp1_c2_max, q.bp1_c2_step), q.bp1_c2_fallback)
+        .ok_or_else(|| FitError::Singular("bp1 power law".into()))
+}
+
+/// The measured bp1 times (s) of the lines at `(r_a, r_F)` (for diagnostics and tests);
+/// `None` entries without a start blob.
+pub fn measured_bp1_times(
+    lines: &[MeasuredLine],
+    params: &PiecewiseValidParams,
+    r_a: f64,
+    r_f: f64,
+) -> Result<Vec<Option<f64>>, FitError> {
+    let prepared = prepare_lines(lines, params)?;
+    prepared
+        .iter()
+        .map(|p| {
+            let kin = p.line.nominal.scaled(r_a, r_f)?;
+            Ok(p.bp1_pos_mm.map(|x| kin.time_at_position(x)))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_support::{synthetic_lines, synthetic_truth};
+    use super::*;
+    use crate::fdm::hyperparams::PiecewiseParams;
+
+    fn exact_params(blob: bool) -> PiecewiseValidParams {
+        PiecewiseParams { smoothing_mm: 0.0, has_start_blob: blob, ..PiecewiseParams::paper_defaults() }
+            .check()
+            .unwrap()
+    }
+
+    #[test]
+    fn p1_gauss_newton_recovers_exact_reciprocal_law() {
+        // Noiseless w = 1/(0.02 v + 1.1) must be fitted exactly.
+        let s: Vec<(f64, f64)> = (0..40)
+            .map(|i| {
+                let v = 8.0 + i as f64;
+                (v, 1.0 / (0.02 * v + 1.1))
+            })
+            .collect();
+        let ((a1, a2), sse) = fit_p1(&s).unwrap();
+        assert!((a1 - 0.02).abs() < 1e-9 && (a2 - 1.1).abs() < 1e-9 && sse < 1e-20);
+    }
+
+    #[test]
+    fn grid_search_recovers_known_model() {
+        // Widths generated by the model itself at r_a = 1.03, r_F = 0.97 (on the grid),
+        // sampled like the real data (0.048 mm): the grid search must land within one
+        // step. Without a blob the recovery is exact; with it the measured bp1 is the
+        // sample nearest the true minimum, and the sqrt singularity of p2 at bp1 turns
+        // that sub-sample error into a few per cent on β and γ.
+        for blob in [true, false] {
+            let truth = synthetic_truth(blob);
+            let lines = synthetic_lines(&truth, 0.048);
+            let fit = fit(&lines, &exact_params(blob)).unwrap();
+            assert!((fit.r_a - truth.r_a).abs() <= 0.0101, "r_a {}", fit.r_a);
+            assert!((fit.r_f - truth.r_f).abs() <= 0.0101, "r_f {}", fit.r_f);
+            let tol = if blob { 0.1 } else { 1e-6 };
+            assert!(fit.training_rmse_mm < tol * 0.03, "rmse {}", fit.training_rmse_mm);
+            let (t, f) = (truth.coefficients, fit.coefficients);
+            for (name, a, b) in
+                [("beta", f.beta, t.beta), ("gamma", f.gamma, t.gamma), ("c", f.c_mm, t.c_mm), ("rho", f.rho, t.rho)]
+            {
+                assert!((a - b).abs() < tol * b.abs(), "{name}: {a} vs {b}");
+            }
+            if blob {
+                assert!((f.alpha1 - t.alpha1).abs() < 1e-6 * t.alpha1);
+                assert!((f.alpha2 - t.alpha2).abs() < 1e-6 * t.alpha2);
+            } else {
+                assert!((f.w_start_mm - t.w_start_mm).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn blob_recovery_improves_with_finer_sampling() {
+        // At the true (r_a, r_F), bp1's quantisation error shrinks with the sample step,
+        // and so must the error of β and γ (consistency of the procedure).
+        let truth = synthetic_truth(true);
+        let err = |step: f64| {
+            let lines = synthetic_lines(&truth, step);
+            let f = fit_at(&lines, &exact_params(true), truth.r_a, truth.r_f).unwrap().coefficients;
+            let t = truth.coefficients;
+            ((f.beta - t.beta) / t.beta).abs() + ((f.gamma - t.gamma) / t.gamma).abs()
+        };
+        let (coarse, fine) = (err(0.048), err(0.004));
+        assert!(fine < 0.3 * coarse && fine < 0.02, "coarse {coarse}, fine {fine}");
+    }
+
+    #[test]
+    fn prefix_sum_criterion_equals_direct_evaluation() {
+        // The grid criterion (prefix-sum SSE) must equal the SSE of evaluating eq. 3
+        // sample by sample with the measured bp1: an identity, checked on data the model
+        // does not fit exactly.
+        let truth = synthetic_truth(true);
+        let mut lines = synthetic_lines(&truth, 0.1);
+        for (k, l) in lines.iter_mut().enumerate() {
+            for (i, w) in l.widths_mm.iter_mut().enumerate() {
+                *w += 0.02 * ((i * 7 + k * 3) as f64).sin();
+            }
+        }
+        let params = exact_params(true);
+        let prepared = prepare_lines(&lines, &params).unwrap();
+        let mut scratch = Scratch::new(&prepared);
+        let o = evaluate_pair(&prepared, &params, 1.02, 0.98, &mut scratch, None, &[0.0]).unwrap();
+        let n: usize = lines.iter().map(MeasuredLine::len).sum();
+        let criterion = (o.per_lambda[0].1 / n as f64).sqrt();
+        let fit = fit_at(&lines, &params, 1.02, 0.98).unwrap();
+        assert!(criterion > 1e-3);
+        assert!((criterion - fit.training_rmse_mm).abs() < 1e-9 * criterion);
+        let theta = o.per_lambda[0].0;
+        assert_eq!(fit.coefficients.gamma, theta[GAMMA]);
+        assert_eq!(fit.coefficients.alpha1, o.alpha.0);
+    }
+
+    #[test]
+    fn moving_average_is_centred_box() {
+        let xs: Vec<f64> = (0..10).map(|i| i as f64).collect();
+        let ys: Vec<f64> = xs.iter().map(|x| x * x).collect();
+        let m = moving_average(&xs, &ys, 2.0);
+        assert!((m[5] - (16.0 + 25.0 + 36.0) / 3.0).abs() < 1e-12);
+        assert!((m[0] - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn too_few_lines_is_an_error() {
+        assert!(matches!(fit(&[], &exact_params(true)), Err(FitError::NotEnoughData(_))));
+    }
+}

@@ -1,0 +1,45 @@
+//! Paper 000 (Ren et al. 2021, "Improved Modeling of Kinematics-Induced Geometric
+//! Variations in Extrusion-Based AM Through Between-Printer Transfer Learning"): the
+//! numeric core.
+//!
+//! - [`kinematics`]: trapezoidal nozzle motion of one straight line (Sec. II-A, eq. 1).
+//! - [`piecewise`]: the five-phase width model (eqs 2-3) and its breakpoint chain.
+//! - [`hyperparams`], [`fit`], [`predict`]: the 8-step fitting procedure with the
+//!   `r_a`, `r_F` grid search, and prediction from kinematics only.
+//! - [`loo`]: leave-one-out evaluation (Sec. III-A, Table II).
+//! - [`lag`]: physics baseline: mass conservation with a first-order extrusion lag
+//!   (DESIGN §5.1), not in the paper.
+//! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
+//!
+//! Architecture invariant: no file I/O and no tables here; functions take slices and
+//! structs and return structs.
+
+pub mod errors;
+pub mod fit;
+pub mod hyperparams;
+pub mod kinematics;
+pub mod lag;
+pub mod line;
+pub mod loo;
+pub mod piecewise;
+pub mod predict;
+mod small_linalg;
+pub mod transfer;
+
+#[cfg(test)]
+mod test_support;
+
+pub use errors::{FitError, KinematicsError, ParamError};
+pub use fit::{fit, fit_at};
+pub use hyperparams::{PiecewiseParams, PiecewiseValidParams};
+pub use kinematics::{KinematicSamples, LineKinematics, MotionPhase};
+pub use lag::{fit_lag, FittedLag, LagParams, LagValidParams};
+pub use line::{rmse, MeasuredLine};
+pub use loo::{leave_one_out, leave_one_out_lag, LagLooFold, LooFold};
+pub use piecewise::{Bp1PowerLaw, LineChain, PiecewiseCoefficients, WidthPhase};
+pub use predict::FittedPiecewise;
+pub use transfer::{
+    all_condition_subsets, condition_subsets, estimate_covariance, single, solve_map, transfer_source_mean,
+    transfer_zero_mean, ConditionSubset, LambdaRule, ParameterCovariance, PriorMean, SourcePrior, TransferFit,
+    TransferParams, TransferValidParams,
+};

@@ -1,0 +1,28 @@
+//! Paper 002: Lu, Zheng, Mishra 2015, "A Layer-To-Layer Model and Feedback Control of
+//! Ink-Jet 3-D Printing" (IEEE/ASME Trans. Mechatronics 20(3)).
+//!
+//! Code map, one file per step:
+//! - [`grid`]: the droplet grid, height maps and patterns (Sec. III-A, eq. 1).
+//! - [`height_model`]: the layer-to-layer height-change model, single and two material
+//!   (eqs 2-7, corrected per DESIGN §5.2).
+//! - [`objective`]: the cost of eq. 8 and its running sums.
+//! - [`horizon`]: the N-layer prediction and the incremental / naive flip evaluation.
+//! - [`mpc`]: the stochastic greedy search (Sec. IV-C).
+//! - [`controller`]: open-loop and closed-loop layer patterns (Sec. IV-A).
+//! - [`experiments`]: the paper's simulations (Figs 11-12, Table II, Sec. IV-C).
+//!
+//! Architecture Invariant: pure numerics: no I/O, every random stream comes from a
+//! caller-supplied seeded generator, and results do not depend on the thread count.
+
+pub mod controller;
+pub mod errors;
+pub mod experiments;
+pub mod grid;
+pub mod height_model;
+pub mod horizon;
+pub mod mpc;
+pub mod objective;
+
+pub use errors::InkjetError;
+pub use grid::{Grid, HeightMap, Pattern};
+pub use height_model::DropletCoeffs;

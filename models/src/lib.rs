@@ -1,0 +1,13 @@
+//! Numeric process models of the reproduced papers.
+//!
+//! Pure numerics: no file I/O, no tables, no plotting. Each submodule implements one
+//! paper's model and cites the equations it implements:
+//!
+//! - [`fdm`]: Ren et al. 2021 (paper 000): nozzle kinematics, the five-phase piecewise
+//!   line-width model, the first-order extrusion-lag baseline, covariance-prior transfer.
+//! - [`inkjet`]: Lu, Zheng, Mishra 2015 (paper 002): layer-to-layer droplet height model
+//!   and the model-predictive controller.
+#![deny(missing_docs)]
+
+pub mod fdm;
+pub mod inkjet;

@@ -1,0 +1,148 @@
+//! Artifacts on disk: atomic writes (temp file + rename, so a crash never leaves a
+//! half-written file), Parquet tables with key/value metadata, atomic replacement of
+//! a stage's whole output folder, and publishing to the stable analyst paths.
+//!
+//! This is the one place that calls polars' Parquet writer: its API moves between
+//! releases, so it is wrapped here once.
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::{DataFrame, KeyValueMetadata, ParquetCompression, ParquetWriter};
+
+use crate::error::StageError;
+use crate::TOOL_VERSION;
+
+/// Key/value metadata written into every Parquet table.
+#[derive(Debug, Clone)]
+pub struct TableMeta {
+    /// The stage that wrote the table.
+    pub stage: String,
+    /// The stage's cache key.
+    pub stage_hash: String,
+    /// Version of the table's column contract.
+    pub schema_version: u32,
+}
+
+/// Writes `df` to `path` as Parquet (zstd, statistics) with `meta`, atomically.
+pub fn write_parquet(path: &Path, df: &mut DataFrame, meta: &TableMeta) -> Result<(), StageError> {
+    let kv = KeyValueMetadata::from_static(vec![
+        ("amrepro_tool_version".into(), TOOL_VERSION.into()),
+        ("amrepro_stage".into(), meta.stage.clone()),
+        ("amrepro_stage_hash".into(), meta.stage_hash.clone()),
+        ("amrepro_schema_version".into(), meta.schema_version.to_string()),
+    ]);
+    write_atomic_with(path, |file| {
+        ParquetWriter::new(file)
+            .with_compression(ParquetCompression::Zstd(None))
+            .with_key_value_metadata(Some(kv))
+            .set_parallel(false)
+            .finish(df)
+            .map(|_| ())
+            .map_err(|source| StageError::Table { path: path.to_path_buf(), source })
+    })
+}
+
+/// Writes `bytes` to `path` atomically.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), StageError> {
+    write_atomic_with(path, |file| file.write_all(bytes).map_err(|e| StageError::io(path, e)))
+}
+
+/// Creates a temp file beside `path`, lets `fill` write it, syncs and renames it onto
+/// `path`. On any error the temp file is removed and `path` is untouched.
+pub fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut fs::File) -> Result<(), StageError>,
+) -> Result<(), StageError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    fs::create_dir_all(dir).map_err(|e| StageError::io(dir, e))?;
+    let tmp = temp_sibling(path);
+    let result = fs::File::create(&tmp)
+        .map_err(|e| StageError::io(&tmp, e))
+        .and_then(|mut file| {
+            fill(&mut file)?;
+            file.sync_all().map_err(|e| StageError::io(&tmp, e))
+        })
+        .and_then(|_| fs::rename(&tmp, path).map_err(|e| StageError::io(path, e)));
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Copies `src` onto `dst` atomically (for publishing a stage output).
+pub fn copy_atomic(src: &Path, dst: &Path) -> Result<(), StageError> {
+    write_atomic_with(dst, |file| {
+        let mut reader = fs::File::open(src).map_err(|e| StageError::io(src, e))?;
+        std::io::copy(&mut reader, file).map(|_| ()).map_err(|e| StageError::io(dst, e))
+    })
+}
+
+/// Replaces folder `dst` by the fully written folder `staged`: the old folder stays
+/// intact until the new one is complete, and is removed only after the swap.
+pub fn replace_dir(staged: &Path, dst: &Path) -> std::io::Result<()> {
+    let old = dst.with_extension(format!("old-{}", std::process::id()));
+    let had_old = dst.exists();
+    if had_old {
+        fs::rename(dst, &old)?;
+    }
+    if let Err(e) = fs::rename(staged, dst) {
+        if had_old {
+            let _ = fs::rename(&old, dst);
+        }
+        return Err(e);
+    }
+    if had_old {
+        fs::remove_dir_all(&old)?;
+    }
+    Ok(())
+}
+
+/// A fresh, empty staging folder beside `dst` for a stage to write into.
+pub fn staging_dir(dst: &Path) -> std::io::Result<PathBuf> {
+    let staged = temp_sibling(dst);
+    if staged.exists() {
+        fs::remove_dir_all(&staged)?;
+    }
+    fs::create_dir_all(&staged)?;
+    Ok(staged)
+}
+
+fn temp_sibling(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failed_write_leaves_previous_file_untouched() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.txt");
+        write_atomic(&path, b"good").unwrap();
+        let failed = write_atomic_with(&path, |f| {
+            f.write_all(b"half").unwrap();
+            Err(StageError::BadInput { file: path.clone(), location: None, expected: "x".into() })
+        });
+        assert!(failed.is_err());
+        assert_eq!(fs::read(&path).unwrap(), b"good");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1, "temp file removed");
+    }
+
+    #[test]
+    fn replace_dir_swaps_whole_folders() {
+        let dir = tempfile::tempdir().unwrap();
+        let dst = dir.path().join("stage");
+        fs::create_dir_all(&dst).unwrap();
+        fs::write(dst.join("old.txt"), "old").unwrap();
+        let staged = staging_dir(&dst).unwrap();
+        fs::write(staged.join("new.txt"), "new").unwrap();
+        replace_dir(&staged, &dst).unwrap();
+        assert!(dst.join("new.txt").exists());
+        assert!(!dst.join("old.txt").exists());
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+}

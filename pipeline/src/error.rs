@@ -1,0 +1,106 @@
+//! Typed errors of the engine: spec errors (before anything runs) apart from stage
+//! errors (while a stage runs).
+
+use std::path::PathBuf;
+
+/// A spec that cannot become a plan. Always names the spec file and, where there is
+/// one, the line or the `stage.NAME.field` it is about.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {location}: {message}", file.display())]
+pub struct SpecError {
+    /// The spec file.
+    pub file: PathBuf,
+    /// Where in the spec: `line 12, column 3` or `stage.loo.params.step`.
+    pub location: String,
+    /// What was wrong and what was expected.
+    pub message: String,
+}
+
+impl SpecError {
+    /// Builds an error about `location` in `file`.
+    pub fn new(file: &std::path::Path, location: impl Into<String>, message: impl Into<String>) -> Self {
+        Self { file: file.to_path_buf(), location: location.into(), message: message.into() }
+    }
+}
+
+/// A failure while a stage runs.
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    /// An input file is malformed; names the file and, where known, the line or field.
+    #[error("{}{}: {expected}", file.display(), location.as_ref().map(|l| format!(":{l}")).unwrap_or_default())]
+    BadInput {
+        /// The offending file.
+        file: PathBuf,
+        /// Line number or field, if known.
+        location: Option<String>,
+        /// What was expected there.
+        expected: String,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A table could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Table {
+        /// The table file.
+        path: PathBuf,
+        /// The polars error.
+        source: polars::error::PolarsError,
+    },
+    /// An error from a domain library (dataset reader, model fit), with its message.
+    #[error(transparent)]
+    Domain(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl StageError {
+    /// Wraps a domain library error.
+    pub fn domain<E: std::error::Error + Send + Sync + 'static>(err: E) -> Self {
+        Self::Domain(Box::new(err))
+    }
+
+    /// Wraps an I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io { path: path.into(), source }
+    }
+}
+
+/// An error of a whole run: which stage failed and why.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A stage failed; its earlier outputs are untouched.
+    #[error("stage `{stage}` ({kind}) failed: {source}")]
+    Stage {
+        /// The stage name in the spec.
+        stage: String,
+        /// Its kind.
+        kind: String,
+        /// Why it failed.
+        source: StageError,
+    },
+    /// Bookkeeping I/O of the engine failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// `--only` named a stage that is not in the spec.
+    #[error("{0}")]
+    Selection(String),
+    /// A dataset folder named in the spec does not exist.
+    #[error("dataset `{name}`: folder {} does not exist{}", dir.display(), if source_hint.is_empty() { String::new() } else { format!(". {source_hint}") })]
+    MissingDataset {
+        /// Dataset name in the spec.
+        name: String,
+        /// The resolved folder.
+        dir: PathBuf,
+        /// Where to get it.
+        source_hint: String,
+    },
+}

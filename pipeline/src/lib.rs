@@ -1,0 +1,31 @@
+//! The amrepro engine: declarative spec → validated plan → execution.
+//!
+//! This crate knows nothing about additive manufacturing. It parses a TOML spec
+//! ([`spec`]), checks it against the registry of stage kinds into a [`plan::Plan`]
+//! (names, inputs, cycles, parameter types and ranges), and executes the plan
+//! ([`execute`]): independent stages in parallel with rayon, each cached by a content
+//! hash of (kind, kind version, parameters, seed, input hashes), every artifact
+//! written atomically, and a run manifest written last (DESIGN §3).
+#![deny(missing_docs)]
+
+pub mod artifact;
+pub mod cache;
+pub mod error;
+pub mod execute;
+pub mod graph;
+pub mod hash;
+pub mod manifest;
+pub mod params;
+pub mod plan;
+pub mod spec;
+pub mod stage;
+
+pub use error::{SpecError, StageError};
+pub use execute::{run_plan, RunOptions, RunSummary};
+pub use manifest::{Manifest, StageRecord};
+pub use params::{ParamSpec, ParamType, ParamValue, Params};
+pub use plan::Plan;
+pub use stage::{InputArtifact, Registry, StageContext, StageKind};
+
+/// The version of this tool, written into every artifact and manifest.
+pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");

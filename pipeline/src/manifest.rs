@@ -1,0 +1,109 @@
+//! The run manifest (`manifest.json`, written last) and the per-stage record
+//! (`.stage.json`, inside each stage folder) from which the cache decides.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::params::Params;
+
+/// One output file of a stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputFile {
+    /// Path relative to the stage folder.
+    pub path: PathBuf,
+    /// Hex SHA-256 of its contents.
+    pub sha256: String,
+}
+
+/// Everything the engine knows about one stage's last successful execution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageRecord {
+    /// Stage name in the spec.
+    pub stage: String,
+    /// Stage kind.
+    pub kind: String,
+    /// Kind version.
+    pub kind_version: u32,
+    /// Tool version that produced the outputs.
+    pub tool_version: String,
+    /// Cache key: hash of (kind, version, tool version, params, seed, inputs).
+    pub key_hash: String,
+    /// The parameters it ran with.
+    pub params: Params,
+    /// The stage seed.
+    pub seed: u64,
+    /// Input name → content hash.
+    pub input_hashes: BTreeMap<String, String>,
+    /// Hash over all output files (what downstream stages key on).
+    pub output_hash: String,
+    /// Output files.
+    pub outputs: Vec<OutputFile>,
+    /// Table rows written.
+    pub rows: u64,
+    /// Wall time of the execution that produced the outputs, in seconds.
+    pub wall_time_s: f64,
+}
+
+/// A stage's entry in the run manifest.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ManifestStage {
+    /// The record of the outputs in place.
+    #[serde(flatten)]
+    pub record: StageRecord,
+    /// `run` or `cached` in this invocation.
+    pub status: String,
+    /// Why it ran (empty when cached).
+    pub reason: String,
+    /// Wall time in this invocation (near zero when cached).
+    pub this_run_wall_time_s: f64,
+    /// Published copies: output file → path relative to the out folder.
+    pub published: BTreeMap<String, PathBuf>,
+}
+
+/// The manifest of one run of one spec.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Tool version.
+    pub tool_version: String,
+    /// Run name.
+    pub run: String,
+    /// Run title.
+    pub title: String,
+    /// The spec file, as given.
+    pub spec_file: PathBuf,
+    /// Hash of the spec file's text.
+    pub spec_sha256: String,
+    /// Unix time at which the run finished.
+    pub finished_unix_s: u64,
+    /// Total wall time of this invocation, in seconds.
+    pub wall_time_s: f64,
+    /// Stages in plan order.
+    pub stages: Vec<ManifestStage>,
+}
+
+impl Manifest {
+    /// Reads a manifest file.
+    pub fn read(path: &Path) -> std::io::Result<Self> {
+        let text = std::fs::read_to_string(path)?;
+        serde_json::from_str(&text).map_err(std::io::Error::other)
+    }
+
+    /// Every `runs/*/manifest.json` under the out folder, sorted by run name.
+    pub fn read_all(out_dir: &Path) -> std::io::Result<Vec<Self>> {
+        let runs = out_dir.join("runs");
+        if !runs.exists() {
+            return Ok(Vec::new());
+        }
+        let mut manifests = Vec::new();
+        for entry in std::fs::read_dir(&runs)? {
+            let path = entry?.path().join("manifest.json");
+            if path.exists() {
+                manifests.push(Self::read(&path)?);
+            }
+        }
+        manifests.sort_by(|a, b| a.run.cmp(&b.run));
+        Ok(manifests)
+    }
+}

@@ -1,0 +1,172 @@
+//! `figure.fdm_width_profiles`: measured line width against position for every line
+//! of one printer, one panel per condition (rows: acceleration, columns: feed), in the
+//! style of paper 000 Fig. 3(a). Reads `widths.parquet` of an `fdm.import` stage and
+//! marks each line's steady width from `line_summary.parquet` when that is an input.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::read::{f64s, read_parquet, strs};
+use crate::style::{draw_png_and_svg, text, PALETTE};
+
+/// The `figure.fdm_width_profiles` stage kind.
+pub struct WidthProfilesFigure;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "printer",
+        ty: ParamType::Text,
+        default: ParamDefault::Required,
+        doc: "Printer whose lines are drawn.",
+    },
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: the printer name).",
+    },
+];
+
+/// One line's profile.
+struct Profile {
+    accel_mm_s2: f64,
+    feed_mm_s: f64,
+    points: Vec<(f64, f64)>,
+    steady_width_mm: Option<f64>,
+}
+
+impl StageKind for WidthProfilesFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_width_profiles"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Width vs position of every line of one printer, a panel per (acceleration, feed) → width_profiles.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 000 Fig. 3(a)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity { min: 1, max: 2 }
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printer = ctx.params.str("printer").to_string();
+        let mut profiles = read_profiles(&ctx.inputs[0].dir.join("widths.parquet"), &printer)?;
+        if let Some(summary) = ctx.inputs.get(1) {
+            add_steady_widths(&summary.dir.join("line_summary.parquet"), &printer, &mut profiles)?;
+        }
+        let title = match ctx.params.str("title") {
+            "" => format!("Measured line width along the line: {printer}"),
+            t => t.to_string(),
+        };
+        let stem = ctx.output_path("width_profiles")?;
+        let profiles: Vec<Profile> = profiles.into_values().collect();
+        draw_png_and_svg(&stem, (1500, 1050), |a| draw(a, &title, &profiles), |a| draw(a, &title, &profiles))
+    }
+}
+
+fn read_profiles(path: &Path, printer: &str) -> Result<BTreeMap<String, Profile>, StageError> {
+    let df = read_parquet(path)?;
+    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
+    let (accel, feed) = (f64s(&df, "accel_mm_s2", path)?, f64s(&df, "feed_mm_s", path)?);
+    let (pos, width) = (f64s(&df, "position_mm", path)?, f64s(&df, "width_mm", path)?);
+    let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
+    for i in (0..df.height()).filter(|i| printers[*i] == printer) {
+        profiles
+            .entry(conditions[i].clone())
+            .or_insert_with(|| Profile {
+                accel_mm_s2: accel[i],
+                feed_mm_s: feed[i],
+                points: Vec::new(),
+                steady_width_mm: None,
+            })
+            .points
+            .push((pos[i], width[i]));
+    }
+    if profiles.is_empty() {
+        return Err(StageError::BadInput {
+            file: path.to_path_buf(),
+            location: Some("printer".into()),
+            expected: format!("expected rows of printer `{printer}`"),
+        });
+    }
+    Ok(profiles)
+}
+
+fn add_steady_widths(path: &Path, printer: &str, profiles: &mut BTreeMap<String, Profile>) -> Result<(), StageError> {
+    let df = read_parquet(path)?;
+    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
+    let steady = f64s(&df, "steady_width_mm", path)?;
+    for i in (0..df.height()).filter(|i| printers[*i] == printer) {
+        if let Some(p) = profiles.get_mut(&conditions[i]) {
+            p.steady_width_mm = Some(steady[i]);
+        }
+    }
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, profiles: &[Profile]) -> Result<(), String> {
+    let area = area.margin(14, 6, 6, 18).titled(title, text(28.0)).map_err(|e| e.to_string())?;
+    let accels = distinct(profiles.iter().map(|p| p.accel_mm_s2));
+    let feeds = distinct(profiles.iter().map(|p| p.feed_mm_s));
+    let panels = area.split_evenly((accels.len(), feeds.len()));
+    let y_max = profiles.iter().flat_map(|p| p.points.iter().map(|q| q.1)).fold(0.0_f64, f64::max) * 1.05;
+    for p in profiles {
+        let row = accels.iter().position(|a| *a == p.accel_mm_s2).expect("collected");
+        let col = feeds.iter().position(|f| *f == p.feed_mm_s).expect("collected");
+        draw_panel(&panels[row * feeds.len() + col], p, y_max, PALETTE[col]).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    p: &Profile,
+    y_max: f64,
+    color: RGBColor,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let x_max = p.points.last().map_or(120.0, |q| q.0);
+    let caption = format!("a = {} mm/s², F = {} mm/s", p.accel_mm_s2, p.feed_mm_s);
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(19.0))
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(52)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("position along the line (mm)")
+        .y_desc("width (mm)")
+        .label_style(text(14.0))
+        .axis_desc_style(text(15.0))
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .light_line_style(WHITE)
+        .draw()?;
+    chart.draw_series(LineSeries::new(p.points.iter().copied(), color.stroke_width(2)))?;
+    if let Some(steady) = p.steady_width_mm {
+        let dashed = DashedLineSeries::new([(0.0, steady), (x_max, steady)], 6, 4, BLACK.stroke_width(1));
+        chart.draw_series(dashed)?.label(format!("steady {steady:.3} mm"));
+    }
+    Ok(())
+}
+
+fn distinct(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
+}

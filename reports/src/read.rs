@@ -1,0 +1,28 @@
+//! Reading published Parquet tables into plain vectors for drawing.
+
+use std::path::Path;
+
+use pipeline::StageError;
+use polars::prelude::{DataFrame, ParquetReader, SerReader};
+
+/// Reads a Parquet file.
+pub fn read_parquet(path: &Path) -> Result<DataFrame, StageError> {
+    let file = std::fs::File::open(path).map_err(|e| StageError::io(path, e))?;
+    ParquetReader::new(file).finish().map_err(|source| StageError::Table { path: path.to_path_buf(), source })
+}
+
+/// Column `name` as floats (nulls are an error).
+pub fn f64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageError> {
+    let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
+    let col = df.column(name).map_err(bad)?;
+    let ca = col.f64().map_err(bad)?;
+    Ok(ca.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
+}
+
+/// Column `name` as strings.
+pub fn strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, StageError> {
+    let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
+    let col = df.column(name).map_err(bad)?;
+    let ca = col.str().map_err(bad)?;
+    Ok(ca.iter().map(|v| v.unwrap_or_default().to_string()).collect())
+}

@@ -1,0 +1,124 @@
+//! Command-line arguments (clap derive): the raw values; `commands` resolves them.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// Reproduce additive-manufacturing papers end to end: declarative specs of stages
+/// that write Parquet tables, figures and an HTML report.
+#[derive(Debug, Parser)]
+#[command(name = "amrepro", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run a spec: every stage whose inputs or parameters changed, then the report.
+    Run(RunArgs),
+    /// Print a spec's stage graph.
+    Graph(GraphArgs),
+    /// List every registered stage kind with its parameters.
+    Stages(StagesArgs),
+    /// Import or inspect datasets.
+    #[command(subcommand)]
+    Datasets(DatasetsCommand),
+    /// Rebuild the HTML report from the manifests under the out folder.
+    Report(ReportArgs),
+}
+
+/// `amrepro run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// Out folder.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Print which stages would run and why, run nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Run only this stage (and whatever of its upstream is out of date).
+    #[arg(long, value_name = "STAGE")]
+    pub only: Option<String>,
+    /// Run even when the cache says the outputs are up to date.
+    #[arg(long)]
+    pub force: bool,
+    /// Print the checked plan before running.
+    #[arg(short, long, conflicts_with = "quiet")]
+    pub verbose: bool,
+    /// Print only errors.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// `amrepro graph`.
+#[derive(Debug, Args)]
+pub struct GraphArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = GraphFormatArg::Dot)]
+    pub format: GraphFormatArg,
+}
+
+/// Graph output formats.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum GraphFormatArg {
+    /// Graphviz dot.
+    Dot,
+    /// Mermaid flowchart.
+    Mermaid,
+}
+
+/// `amrepro stages`.
+#[derive(Debug, Args)]
+pub struct StagesArgs {
+    /// Print Markdown (as in docs/STAGES.md) instead of plain text.
+    #[arg(long)]
+    pub markdown: bool,
+}
+
+/// `amrepro datasets ...`.
+#[derive(Debug, Subcommand)]
+pub enum DatasetsCommand {
+    /// Convert raw measured data into datasets of our format.
+    #[command(subcommand)]
+    Import(ImportCommand),
+}
+
+/// Importers.
+#[derive(Debug, Subcommand)]
+pub enum ImportCommand {
+    /// The FSU Taz 5 / Taz 6 line widths (paper 000): writes OUT/taz5 and OUT/taz6 as fdm-widths datasets.
+    #[command(name = "fsu-linewidth")]
+    FsuLinewidth(FsuImportArgs),
+}
+
+/// `amrepro datasets import fsu-linewidth`.
+#[derive(Debug, Args)]
+pub struct FsuImportArgs {
+    /// Folder holding taz5/ and taz6/ (the unzipped Linewidth_Data.zip).
+    #[arg(long)]
+    pub src: PathBuf,
+    /// Folder to write the datasets into.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Import only this printer.
+    #[arg(long, value_parser = ["taz5", "taz6"])]
+    pub printer: Option<String>,
+    /// Skip the SHA-256 check against the published release (for your own data).
+    #[arg(long)]
+    pub no_verify: bool,
+}
+
+/// `amrepro report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// Out folder holding runs/.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+}

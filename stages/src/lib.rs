@@ -1,0 +1,15 @@
+//! Domain stage kinds: each a small struct implementing [`pipeline::StageKind`],
+//! registered in [`register`]. Stages read only their declared input folders (through
+//! the `datasets` readers or Parquet) and write only through their context; they never
+//! draw (figures live in `reports`).
+#![deny(missing_docs)]
+
+pub mod fdm;
+pub mod table;
+
+use pipeline::Registry;
+
+/// Registers every domain stage kind.
+pub fn register(registry: &mut Registry) {
+    fdm::register(registry);
+}

@@ -1,0 +1,82 @@
+//! Helpers for the end-to-end tests: run the real `amrepro` binary in a temp folder.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The real FSU data folder (shared/ beside the clone, or `$AMREPRO_DATA`).
+pub fn data_root() -> PathBuf {
+    let root = std::env::var("AMREPRO_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let root = root.canonicalize().unwrap_or(root);
+    assert!(
+        root.join("fsu-linewidth/taz5").is_dir(),
+        "the FSU data is missing under {}: set AMREPRO_DATA",
+        root.display()
+    );
+    root
+}
+
+/// Runs `amrepro args...` in `cwd`.
+pub fn amrepro(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_amrepro"))
+        .args(args)
+        .current_dir(cwd)
+        .env_remove("AMREPRO_DATA")
+        .output()
+        .expect("amrepro runs")
+}
+
+/// Runs and asserts success; returns stdout + stderr.
+pub fn ok(cwd: &Path, args: &[&str]) -> String {
+    let out = amrepro(cwd, args);
+    let text = text(&out);
+    assert!(out.status.success(), "amrepro {args:?} failed:\n{text}");
+    text
+}
+
+/// Runs and asserts failure; returns stdout + stderr.
+pub fn fails(cwd: &Path, args: &[&str]) -> String {
+    let out = amrepro(cwd, args);
+    let text = text(&out);
+    assert!(!out.status.success(), "amrepro {args:?} should have failed:\n{text}");
+    assert!(text.contains("error:"), "{text}");
+    text
+}
+
+fn text(out: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
+}
+
+/// The shipped FSU spec with its dataset path pointed at `raw` (a folder holding
+/// taz5/ and taz6/), written into `dir`.
+pub fn fsu_spec(dir: &Path, raw: &Path) -> PathBuf {
+    let shipped =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/fsu_linewidth.toml")).unwrap();
+    let text = shipped.replace("${AMREPRO_DATA:-../../shared/data}/fsu-linewidth", &raw.display().to_string());
+    assert_ne!(text, shipped, "the shipped spec's dataset path changed; update this helper");
+    let path = dir.join("fsu.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A copy of the real FSU folder in `dir`, to corrupt.
+pub fn copy_raw(dir: &Path) -> PathBuf {
+    let src = data_root().join("fsu-linewidth");
+    let dst = dir.join("raw");
+    for printer in ["taz5", "taz6"] {
+        std::fs::create_dir_all(dst.join(printer)).unwrap();
+        for entry in std::fs::read_dir(src.join(printer)).unwrap() {
+            let path = entry.unwrap().path();
+            std::fs::copy(&path, dst.join(printer).join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    dst
+}
+
+/// Number of rows of a Parquet file.
+pub fn parquet_rows(path: &Path) -> usize {
+    use polars::prelude::{ParquetReader, SerReader};
+    ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap().height()
+}
