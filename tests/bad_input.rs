@@ -28,7 +28,11 @@ fn fails_and_keeps_outputs(corrupt: impl Fn(&Path), expected: &[&str]) {
         assert!(err.contains(part), "expected `{part}` in:\n{err}");
     }
     assert_eq!(std::fs::read(&published).unwrap(), before, "published table untouched");
-    assert_eq!(listing(&tmp.path().join("out/runs/fsu_linewidth")), stage_before, "outputs untouched, no temp or half-written files left");
+    assert_eq!(
+        listing(&tmp.path().join("out/runs/fsu_linewidth")),
+        stage_before,
+        "outputs untouched, no temp or half-written files left"
+    );
 }
 
 /// Every output file under `dir` with its size, sorted. Stage records are left out:

@@ -376,10 +376,10 @@ fn line(stage: &PlannedStage, status: Status, reason: String, wall_time_s: f64) 
 fn format_line(line: &StageLine) -> String {
     match line.status {
         Status::Ran => {
-            format!("  ran      {:<24} {:<22} {:>7.2} s  ({})", line.stage, line.kind, line.wall_time_s, line.reason)
+            format!("  ran      {:<24} {:<26} {:>7.2} s  ({})", line.stage, line.kind, line.wall_time_s, line.reason)
         }
         Status::Cached => format!("  cached   {:<24} {}", line.stage, line.kind),
-        Status::WouldRun => format!("  would run {:<23} {:<22} because {}", line.stage, line.kind, line.reason),
+        Status::WouldRun => format!("  would run {:<23} {:<26} because {}", line.stage, line.kind, line.reason),
     }
 }
 

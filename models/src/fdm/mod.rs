@@ -4,7 +4,7 @@
 //!
 //! - [`kinematics`]: trapezoidal nozzle motion of one straight line (Sec. II-A, eq. 1).
 //! - [`piecewise`]: the five-phase width model (eqs 2-3) and its breakpoint chain.
-//! - [`hyperparams`], [`fit`], [`predict`]: the 8-step fitting procedure with the
+//! - [`hyperparams`], [`fit`](mod@fit), [`predict`]: the 8-step fitting procedure with the
 //!   `r_a`, `r_F` grid search, and prediction from kinematics only.
 //! - [`loo`]: leave-one-out evaluation (Sec. III-A, Table II).
 //! - [`lag`]: physics baseline: mass conservation with a first-order extrusion lag
