@@ -290,30 +290,58 @@ fn evaluate_pair(
     lambdas: &[f64],
 ) -> Result<GridOutcome, FitError> {
     let blob = params.has_start_blob();
-    // Times, speeds and measured bp1 per line.
-    scratch.p1.clear();
-    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
-        let kin = p.line.nominal.scaled(r_a, r_f)?;
-        kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
-        if let Some(x1) = p.bp1_pos_mm {
-            let end = p.line.positions_mm.partition_point(|&x| x <= x1);
-            for i in 0..end {
-                scratch.p1.push((ls.v[i], p.line.widths_mm[i]));
-            }
-        }
-    }
+    times_and_p1_samples(prepared, r_a, r_f, scratch)?;
     let (alpha, sse1) = if blob {
         fit_p1(&scratch.p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
     } else {
         ((0.0, 0.0), 0.0)
     };
     let p1_coef = PiecewiseCoefficients { alpha1: alpha.0, alpha2: alpha.1, ..Default::default() };
+    let c_init = segment_sums(prepared, r_a, r_f, scratch, &p1_coef)?;
+    initial_bp3(prepared, scratch, c_init);
+    let mut per_lambda = Vec::with_capacity(lambdas.len());
+    for &lambda in lambdas {
+        // A singular system disqualifies this pair for this λ only.
+        match solve_chain(scratch, blob, c_init, prior.map(|p| (p, lambda)), params) {
+            Ok(theta) => {
+                let sse = chain_sse(&scratch.data, &scratch.lines, blob, &theta);
+                per_lambda.push((theta, sse + sse1));
+            }
+            Err(_) => per_lambda.push(([f64::NAN; NP], f64::INFINITY)),
+        }
+    }
+    Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
+}
+
+/// Times and speeds of every sample at `(r_a, r_F)`, and the pooled p1 samples
+/// `(v, w)` up to each line's measured bp1.
+fn times_and_p1_samples(prepared: &[PreparedLine], r_a: f64, r_f: f64, scratch: &mut Scratch) -> Result<(), FitError> {
+    scratch.p1.clear();
+    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
+        let kin = p.line.nominal.scaled(r_a, r_f)?;
+        kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
+        if let Some(x1) = p.bp1_pos_mm {
+            let end = p.line.positions_mm.partition_point(|&x| x <= x1);
+            scratch.p1.extend((0..end).map(|i| (ls.v[i], p.line.widths_mm[i])));
+        }
+    }
+    Ok(())
+}
+
+/// Segment sums of every line; returns the initial `c`: the pooled mean width over the
+/// second half of the p3/p4 regions (the overall mean if those are empty).
+fn segment_sums(
+    prepared: &[PreparedLine],
+    r_a: f64,
+    r_f: f64,
+    scratch: &mut Scratch,
+    p1_coef: &PiecewiseCoefficients,
+) -> Result<f64, FitError> {
     scratch.data.clear();
     let (mut c_sum, mut c_n) = (0.0, 0.0);
     for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
         let kin = p.line.nominal.scaled(r_a, r_f)?;
-        let lf = line_moments(p, &kin, ls, &p1_coef);
-        // Initial c: mean width over the second half of the p3/p4 region.
+        let lf = line_moments(p, &kin, ls, p1_coef);
         let mid = 0.5 * (lf.start3 + lf.bp4);
         let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
         let m = ls.pre3[lf.i4 - lf.i3].minus(&ls.pre3[j - lf.i3]);
@@ -321,23 +349,20 @@ fn evaluate_pair(
         c_n += m.n;
         scratch.data.push(lf);
     }
-    let c_init = if c_n > 0.0 {
-        c_sum / c_n
-    } else {
-        prepared.iter().map(|p| p.line.widths_mm.iter().sum::<f64>() / p.line.len() as f64).sum::<f64>()
-            / prepared.len() as f64
-    };
+    if c_n > 0.0 {
+        return Ok(c_sum / c_n);
+    }
+    let means = prepared.iter().map(|p| p.line.widths_mm.iter().sum::<f64>() / p.line.len() as f64);
+    Ok(means.sum::<f64>() / prepared.len() as f64)
+}
+
+/// Initial bp3 of each line: the first sample of its p3/p4 region where the smoothed
+/// measured width reaches `c_init` (bp4 if it never does).
+fn initial_bp3(prepared: &[PreparedLine], scratch: &mut Scratch, c_init: f64) {
     for (lf, (p, ls)) in scratch.data.iter_mut().zip(prepared.iter().zip(scratch.lines.iter())) {
         let first = (lf.i3..lf.i4).find(|&i| p.smoothed[i] >= c_init);
         lf.bp3_init = first.map_or(lf.bp4, |i| ls.t[i]);
     }
-    let mut per_lambda = Vec::with_capacity(lambdas.len());
-    for &lambda in lambdas {
-        let theta = solve_chain(scratch, blob, c_init, prior.map(|p| (p, lambda)), params)?;
-        let sse = chain_sse(&scratch.data, &scratch.lines, blob, &theta);
-        per_lambda.push((theta, sse + sse1));
-    }
-    Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
 }
 
 /// Segment sums of one line at one grid pair (fills the line's scratch prefix sums).
@@ -679,7 +704,7 @@ fn best_fit(
         return Err(outcomes
             .iter()
             .find_map(|r| r.as_ref().err().cloned())
-            .unwrap_or_else(|| FitError::NotEnoughData("no valid grid pair".into())));
+            .unwrap_or_else(|| FitError::Singular("no grid pair gave a solvable fit".into())));
     };
     let theta = o.per_lambda[k].0;
     let coefficients = PiecewiseCoefficients {

@@ -45,14 +45,24 @@ pub(crate) fn spd_solve<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Opti
     Some(x)
 }
 
-/// Solves `A x = b` for a general square `A` by LU factorisation with partial pivoting.
-/// Returns `None` when a pivot vanishes relative to the matrix scale.
+/// Solves `A x = b` for a general square `A` by LU factorisation with partial pivoting,
+/// after scaling every row to unit maximum (a strong prior can make rows differ by many
+/// orders of magnitude). Returns `None` for a zero row, a pivot below `1e-14` of its
+/// equilibrated row, or a non-finite solution.
 pub(crate) fn lu_solve<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64; N]> {
     let (mut m, mut x) = (*a, *b);
-    let scale = a.iter().flat_map(|r| r.iter()).fold(0.0f64, |s, v| s.max(v.abs())).max(f64::MIN_POSITIVE);
+    for (row, rhs) in m.iter_mut().zip(x.iter_mut()) {
+        let scale = row.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        let nonzero = scale > 0.0 && scale.is_finite();
+        if !nonzero {
+            return None;
+        }
+        row.iter_mut().for_each(|v| *v /= scale);
+        *rhs /= scale;
+    }
     for col in 0..N {
         let pivot = (col..N).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        let usable = m[pivot][col].abs() > 1e-14 * scale;
+        let usable = m[pivot][col].abs() > 1e-14;
         if !usable {
             return None;
         }
@@ -73,7 +83,7 @@ pub(crate) fn lu_solve<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Optio
         }
         x[row] = sum / m[row][row];
     }
-    Some(x)
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 #[cfg(test)]
@@ -109,6 +119,10 @@ mod tests {
             assert!((ax - b[i]).abs() < 1e-13);
         }
         assert!(lu_solve(&[[1.0, 2.0], [2.0, 4.0]], &[1.0, 1.0]).is_none());
+        // Rows scaled by 1e12 and 1: equilibration keeps the solve accurate.
+        let a = [[4e12, 1e12], [1.0, 3.0]];
+        let x = lu_solve(&a, &[1e12, 2.0]).unwrap();
+        assert!((4.0 * x[0] + x[1] - 1.0).abs() < 1e-12 && (x[0] + 3.0 * x[1] - 2.0).abs() < 1e-12);
     }
 
     #[test]
