@@ -304,3 +304,79 @@ fn waves(stages: &[PlannedStage]) -> Vec<Vec<usize>> {
     let depth = level.iter().max().map_or(0, |m| m + 1);
     (0..depth).map(|d| (0..stages.len()).filter(|i| level[*i] == d).collect()).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::error::StageError;
+    use crate::params::{ParamDefault, ParamSpec, ParamType};
+    use crate::spec::parse_spec;
+    use crate::stage::{Arity, StageContext, StageKind};
+
+    struct Noop;
+
+    const NOOP_PARAMS: &[ParamSpec] =
+        &[ParamSpec { name: "k", ty: ParamType::Int { min: 0, max: 9 }, default: ParamDefault::Int(1), doc: "a knob" }];
+
+    impl StageKind for Noop {
+        fn name(&self) -> &'static str {
+            "test.noop"
+        }
+        fn version(&self) -> u32 {
+            1
+        }
+        fn summary(&self) -> &'static str {
+            "does nothing"
+        }
+        fn implements(&self) -> &'static str {
+            "tests"
+        }
+        fn params(&self) -> &'static [ParamSpec] {
+            NOOP_PARAMS
+        }
+        fn arity(&self) -> Arity {
+            Arity { min: 0, max: 3 }
+        }
+        fn run(&self, _: &mut StageContext) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    fn plan(text: &str) -> Result<Plan, SpecError> {
+        let mut registry = Registry::new();
+        registry.register(Box::new(Noop));
+        let file = Path::new("t.toml");
+        Plan::check(file, parse_spec(file, text)?, &registry, |_| None)
+    }
+
+    #[test]
+    fn diamond_orders_into_three_waves_with_the_middle_in_parallel() {
+        let p = plan(
+            "[run]\nname = \"d\"\n[dataset.raw]\npath = \"x\"\n\
+             [stage.top]\nkind = \"test.noop\"\ninputs = [\"raw\"]\n\
+             [stage.left]\nkind = \"test.noop\"\ninputs = [\"top\"]\n\
+             [stage.right]\nkind = \"test.noop\"\ninputs = [\"top\"]\n\
+             [stage.bottom]\nkind = \"test.noop\"\ninputs = [\"left\", \"right\"]\n",
+        )
+        .unwrap();
+        let names = |w: &Vec<usize>| w.iter().map(|i| p.stages[*i].name.clone()).collect::<Vec<_>>();
+        let waves: Vec<Vec<String>> = p.waves.iter().map(names).collect();
+        assert_eq!(waves, vec![vec!["top"], vec!["left", "right"], vec!["bottom"]]);
+        assert_eq!(p.datasets[0].dir, Path::new("x"), "relative to the spec's folder (here: none)");
+    }
+
+    #[test]
+    fn publish_paths_must_stay_inside_out_and_be_unique() {
+        let base = "[run]\nname = \"d\"\n[stage.a]\nkind = \"test.noop\"\n";
+        let err = plan(&format!("{base}publish = {{ \"t.parquet\" = \"../t.parquet\" }}\n")).unwrap_err();
+        assert_eq!(err.location, "stage.a.publish.\"t.parquet\"");
+        let two = format!("{base}publish = {{ \"t.parquet\" = \"x/t.parquet\" }}\n[stage.b]\nkind = \"test.noop\"\npublish = {{ \"u.parquet\" = \"x/t.parquet\" }}\n");
+        assert!(plan(&two).unwrap_err().message.contains("also published by stage `a`"));
+    }
+
+    #[test]
+    fn edit_distance_suggests_close_kinds() {
+        assert_eq!(edit_distance("fdm.line_sumary", "fdm.line_summary"), 1);
+        assert_eq!(edit_distance("", "abc"), 3);
+    }
+}

@@ -142,19 +142,3 @@ mod tests {
         }
     }
 }
-#[cfg(test)]
-mod tmp_sens {
-    use super::super::hyperparams::PiecewiseParams;
-    use super::super::test_support::real_lines;
-    use super::*;
-    #[test]
-    fn tmp_sens() {
-        let Some(lines) = real_lines("taz5") else { return };
-        for sm in [0.0, 0.5, 1.0, 2.0] {
-            let p = PiecewiseParams { smoothing_mm: sm, ..PiecewiseParams::paper_defaults() }.check().unwrap();
-            let r: Vec<f64> = leave_one_out(&lines, &p).unwrap().iter().map(|f| f.rmse_mm).collect();
-            let mut s = r.clone(); s.sort_by(f64::total_cmp);
-            eprintln!("smoothing {sm}: median {:.4} max {:.4} {:?}", s[4], s[8], r.iter().map(|x| (x*1e4).round()/1e4).collect::<Vec<_>>());
-        }
-    }
-}
