@@ -4,43 +4,16 @@
 //! cross-validation of `λ` (eq. 5). Inputs are built outside the timed closures.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use models::fdm::synthetic::{synthetic_truth, TABLE_I};
 use models::fdm::{
-    fit, leave_one_out, transfer_source_mean, Bp1PowerLaw, FittedPiecewise, LineKinematics, MeasuredLine,
-    PiecewiseCoefficients, PiecewiseParams, SourcePrior, TransferParams,
+    fit, leave_one_out, transfer_source_mean, LineKinematics, MeasuredLine, PiecewiseParams, SourcePrior,
+    TransferParams,
 };
-
-const TABLE_I: [(f64, f64); 9] = [
-    (800.0, 150.0),
-    (800.0, 100.0),
-    (800.0, 50.0),
-    (600.0, 150.0),
-    (600.0, 100.0),
-    (600.0, 50.0),
-    (400.0, 150.0),
-    (400.0, 100.0),
-    (400.0, 50.0),
-];
 
 /// A Taz-5-like (blob) or Taz-6-like model; `bump` perturbs the widths per line so the
 /// fit is not exact.
 fn lines(blob: bool, bump: f64) -> Vec<MeasuredLine> {
-    let model = FittedPiecewise {
-        r_a: 1.03,
-        r_f: 0.97,
-        coefficients: PiecewiseCoefficients {
-            alpha1: 0.03,
-            alpha2: 1.0,
-            beta: 0.004,
-            gamma: 0.02,
-            c_mm: 0.8,
-            rho: 0.12,
-            w_start_mm: 0.5,
-        },
-        bp1_law: blob.then_some(Bp1PowerLaw { c0_s: 0.01, c1: 4.0, c2: -0.8 }),
-        has_start_blob: blob,
-        training_rmse_mm: 0.0,
-        lambda: 0.0,
-    };
+    let model = synthetic_truth(blob);
     TABLE_I
         .iter()
         .enumerate()

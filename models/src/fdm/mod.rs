@@ -24,6 +24,7 @@ pub mod loo;
 pub mod piecewise;
 pub mod predict;
 mod small_linalg;
+pub mod synthetic;
 pub mod transfer;
 
 #[cfg(test)]
