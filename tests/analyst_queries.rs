@@ -1,6 +1,6 @@
 //! Analysts' contract: DuckDB and Polars (Python, installed by `make test` into a
 //! venv from PyPI) read every published table of a full run, and the example queries
-//! of docs/OUTPUTS.md run on them.
+//! of docs/OUTPUTS.md run on them, for both shipped specs.
 
 mod common;
 
@@ -13,8 +13,11 @@ use common::*;
 fn duckdb_and_polars_read_every_published_table() {
     let python = std::env::var("AMREPRO_PYTHON").unwrap_or_else(|_| "python3".into());
     let tmp = tempfile::tempdir().unwrap();
-    let spec = fsu_spec(tmp.path(), &data_root().join("fsu-linewidth"));
-    ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    let raw = data_root().join("fsu-linewidth");
+    for name in ["fsu_linewidth", "ren2021"] {
+        let spec = shipped_spec(tmp.path(), name, &raw);
+        ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = Command::new(&python)
         .arg(root.join("tests/analyst_queries.py"))
@@ -31,4 +34,5 @@ fn duckdb_and_polars_read_every_published_table() {
         "{python} tests/analyst_queries.py failed (run `make test` to install duckdb and polars):\n{text}"
     );
     assert!(text.contains("ok  fdm/line_summary.parquet  18 rows"), "{text}");
+    assert!(text.contains("ok  fdm/loo.parquet  36 rows"), "2 printers × 9 lines × 2 models: {text}");
 }

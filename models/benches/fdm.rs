@@ -1,12 +1,16 @@
 //! Criterion benchmarks of the paper-000 numeric core (Ren et al. 2021): one full
 //! `r_a`, `r_F` grid-search fit (441 pairs, Sec. II-A) on 8 synthetic lines of ~2500
-//! samples, a 9-fold leave-one-out (Table II), and one transfer fit with inner
-//! cross-validation of `λ` (eq. 5). Inputs are built outside the timed closures.
+//! samples, a 9-fold leave-one-out (Table II), one transfer fit with inner
+//! cross-validation of `λ` (eq. 5), and the whole Fig. 9 cross-validation (Sec. III-B:
+//! 510 training subsets of 9 target lines × 3 methods, 9 source lines). Inputs are built
+//! outside the timed closures.
+
+use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use models::fdm::synthetic::{synthetic_truth, TABLE_I};
 use models::fdm::{
-    fit, leave_one_out, transfer_source_mean, LineKinematics, MeasuredLine, PiecewiseParams, SourcePrior,
+    fit, leave_one_out, transfer_cv, transfer_source_mean, LineKinematics, MeasuredLine, PiecewiseParams, SourcePrior,
     TransferParams,
 };
 
@@ -55,5 +59,20 @@ fn bench_transfer(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_fit, bench_transfer);
+fn bench_transfer_cv(c: &mut Criterion) {
+    let source = lines(true, 0.01);
+    let target = lines(false, 0.01);
+    let sp = PiecewiseParams::paper_defaults().check().unwrap();
+    let tp = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+    let transfer = TransferParams::paper_defaults().check().unwrap();
+    let mut g = c.benchmark_group("fdm_transfer_cv");
+    // Several seconds per run: ten runs need more than criterion's default 5 s.
+    g.sample_size(10).measurement_time(Duration::from_secs(90));
+    g.bench_function("transfer_cv_full_510_subsets_3_methods", |b| {
+        b.iter(|| transfer_cv(&source, &target, &sp, &tp, &transfer).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_fit, bench_transfer, bench_transfer_cv);
 criterion_main!(benches);

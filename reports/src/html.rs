@@ -52,6 +52,9 @@ fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
     );
     s += &stage_table(m);
     for stage in &m.stages {
+        s += &sections(out_dir, m, stage)?;
+    }
+    for stage in &m.stages {
         s += &figures(m, stage);
     }
     for stage in &m.stages {
@@ -76,6 +79,16 @@ fn stage_table(m: &Manifest) -> String {
         );
     }
     s + "</table>\n"
+}
+
+/// The `section.html` fragments a stage wrote (paper-vs-ours sections), inline.
+fn sections(out_dir: &Path, m: &Manifest, stage: &ManifestStage) -> Result<String, StageError> {
+    let mut s = String::new();
+    for out in stage.record.outputs.iter().filter(|o| o.path.file_name().is_some_and(|n| n == "section.html")) {
+        let path = out_dir.join("runs").join(&m.run).join(&stage.record.stage).join(&out.path);
+        s += &std::fs::read_to_string(&path).map_err(|e| StageError::io(&path, e))?;
+    }
+    Ok(s)
 }
 
 fn figures(m: &Manifest, stage: &ManifestStage) -> String {

@@ -8,6 +8,7 @@
 pub mod figures;
 pub mod html;
 pub mod read;
+pub mod sections;
 pub mod style;
 
 use pipeline::Registry;
@@ -15,4 +16,5 @@ use pipeline::Registry;
 /// Registers every figure stage kind.
 pub fn register(registry: &mut Registry) {
     figures::register(registry);
+    sections::register(registry);
 }

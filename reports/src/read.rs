@@ -26,3 +26,29 @@ pub fn strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, Stag
     let ca = col.str().map_err(bad)?;
     Ok(ca.iter().map(|v| v.unwrap_or_default().to_string()).collect())
 }
+
+/// Column `name` as 64-bit integers (nulls are an error).
+pub fn i64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<i64>, StageError> {
+    let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
+    let col = df.column(name).map_err(bad)?;
+    let ca = col.i64().map_err(bad)?;
+    ca.iter()
+        .enumerate()
+        .map(|(row, v)| {
+            v.ok_or_else(|| StageError::BadInput {
+                file: path.to_path_buf(),
+                location: Some(format!("{name}, row {row}")),
+                expected: "expected an integer, found null".into(),
+            })
+        })
+        .collect()
+}
+
+/// The error for a table that holds no rows of the selection a figure draws.
+pub fn no_rows(path: &Path, column: &str, wanted: &str) -> StageError {
+    StageError::BadInput {
+        file: path.to_path_buf(),
+        location: Some(column.into()),
+        expected: format!("expected rows with {wanted}"),
+    }
+}

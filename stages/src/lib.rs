@@ -4,6 +4,7 @@
 //! draw (figures live in `reports`).
 #![deny(missing_docs)]
 
+pub mod concat;
 pub mod fdm;
 pub mod table;
 
@@ -12,4 +13,5 @@ use pipeline::Registry;
 /// Registers every domain stage kind.
 pub fn register(registry: &mut Registry) {
     fdm::register(registry);
+    registry.register(Box::new(concat::ConcatStage));
 }

@@ -52,11 +52,17 @@ fn text(out: &Output) -> String {
 /// The shipped FSU spec with its dataset path pointed at `raw` (a folder holding
 /// taz5/ and taz6/), written into `dir`.
 pub fn fsu_spec(dir: &Path, raw: &Path) -> PathBuf {
-    let shipped =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/fsu_linewidth.toml")).unwrap();
+    shipped_spec(dir, "fsu_linewidth", raw)
+}
+
+/// The shipped `specs/<name>.toml` with its FSU dataset path pointed at `raw`,
+/// written into `dir`.
+pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
+    let file = format!("specs/{name}.toml");
+    let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
     let text = shipped.replace("${AMREPRO_DATA:-../../shared/data}/fsu-linewidth", &raw.display().to_string());
-    assert_ne!(text, shipped, "the shipped spec's dataset path changed; update this helper");
-    let path = dir.join("fsu.toml");
+    assert_ne!(text, shipped, "{file}: dataset path changed; update this helper");
+    let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path
 }

@@ -19,7 +19,8 @@
 //!    Without a prior this equals the paper's sequential segment-by-segment fit. bp3
 //!    starts at the first crossing of `c` by the smoothed measured widths, then follows
 //!    the model (where p3 reaches `c`) until the partition stops changing. Segment sums
-//!    come from prefix sums, so one partition update costs O(lines · log n);
+//!    come from prefix sums, and the first p4 sample of a bp3 from a bucket index of the
+//!    sample times, so one partition update costs O(lines);
 //! 5. the training RMSE of the whole fitted curve (measured bp1, model chain) is the
 //!    grid criterion (step 6-8); the pair with the smallest RMSE wins (ties: first in
 //!    grid order, so the result does not depend on the number of threads).
@@ -27,6 +28,14 @@
 //! The bp1 power law (eq. 2) is then fitted on the winning pair's bp1 times and actual
 //! accelerations (`Bp1PowerLaw::fit`); the prediction of a new line uses it, never the
 //! line's own width minimum.
+//!
+//! Code map: steps 1-2 and the per-line sums of step 4 depend only on the line and the
+//! pair (`LineAtPair`); steps 3-4 for one training set at one pair, once per prior
+//! configuration, are `evaluate_set`. The plain grid search calls both for its lines;
+//! the Fig. 9 cross-validation (`transfer_cv`) computes each `LineAtPair` once per pair
+//! and shares it between all training subsets. Both give the same numbers.
+
+use std::borrow::Borrow;
 
 use rayon::prelude::*;
 
@@ -96,12 +105,11 @@ pub(crate) fn fit_on_grid(
     }
     let prepared = prepare_lines(lines, params)?;
     let n_lambda = if prior.is_some() { lambdas.len() } else { 1 };
+    let configs: Vec<ChainPrior> =
+        lambdas[..n_lambda].iter().map(|&l| prior.map(|p| WeightedPrior::new(p, l))).collect();
     let outcomes: Vec<Result<GridOutcome, FitError>> = grid
         .par_iter()
-        .map_init(
-            || Scratch::new(&prepared),
-            |scratch, &(ra, rf)| evaluate_pair(&prepared, params, ra, rf, scratch, prior, &lambdas[..n_lambda]),
-        )
+        .map_init(|| Scratch::new(&prepared), |scratch, &(ra, rf)| evaluate_pair(params, ra, rf, scratch, &configs))
         .collect();
     (0..n_lambda).map(|k| best_fit(&prepared, params, &outcomes, k, lambdas[k])).collect()
 }
@@ -112,6 +120,8 @@ pub(crate) struct PreparedLine<'a> {
     smoothed: Vec<f64>,
     /// Position of the measured width minimum (bp1), if the printer has a start blob.
     bp1_pos_mm: Option<f64>,
+    /// Mean measured width (the fallback initial `c`).
+    mean_width_mm: f64,
 }
 
 pub(crate) fn prepare_lines<'a>(
@@ -121,20 +131,37 @@ pub(crate) fn prepare_lines<'a>(
     if lines.is_empty() {
         return Err(FitError::NotEnoughData("no training lines".into()));
     }
-    let mut out = Vec::with_capacity(lines.len());
-    for (i, line) in lines.iter().enumerate() {
-        line.validate(i)?;
-        let smoothed = moving_average(&line.positions_mm, &line.widths_mm, params.get().smoothing_mm);
-        let bp1_pos_mm = params.has_start_blob().then(|| measured_bp1_position(line, &smoothed, params));
-        out.push(PreparedLine { line, smoothed, bp1_pos_mm });
-    }
+    let out = lines.iter().enumerate().map(|(i, l)| prepare_line(l, i, params)).collect::<Result<Vec<_>, _>>()?;
+    check_p1_count(&out, params)?;
+    Ok(out)
+}
+
+/// Validates one line (`index` names it in errors) and derives its smoothed widths,
+/// measured bp1 position and mean width.
+pub(crate) fn prepare_line<'a>(
+    line: &'a MeasuredLine,
+    index: usize,
+    params: &PiecewiseValidParams,
+) -> Result<PreparedLine<'a>, FitError> {
+    line.validate(index)?;
+    let smoothed = moving_average(&line.positions_mm, &line.widths_mm, params.get().smoothing_mm);
+    let bp1_pos_mm = params.has_start_blob().then(|| measured_bp1_position(line, &smoothed, params));
+    let mean_width_mm = line.widths_mm.iter().sum::<f64>() / line.len() as f64;
+    Ok(PreparedLine { line, smoothed, bp1_pos_mm, mean_width_mm })
+}
+
+/// With a start blob, the pooled p1 fit of a training set needs at least three samples.
+pub(crate) fn check_p1_count<'a, P: Borrow<PreparedLine<'a>>>(
+    prepared: &[P],
+    params: &PiecewiseValidParams,
+) -> Result<(), FitError> {
     if params.has_start_blob() {
-        let n_p1: usize = out.iter().map(p1_count).sum();
+        let n_p1: usize = prepared.iter().map(|p| p1_count(p.borrow())).sum();
         if n_p1 < 3 {
             return Err(FitError::NotEnoughData(format!("only {n_p1} samples before the width minima (phase p1)")));
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 fn p1_count(p: &PreparedLine) -> usize {
@@ -220,42 +247,147 @@ impl Moments {
     }
 }
 
-/// Per-line buffers reused across grid pairs (one set per rayon job).
+/// Per-line buffers of one grid pair: nominal times and speeds of every sample, the
+/// prefix sums of the p3 regressor over the region `(start3, bp4]`, the running maximum
+/// of the smoothed widths over that region (for the initial bp3), and a bucket index of
+/// the region's times (for the partition lookups of the chain solve).
 struct LineScratch {
     t: Vec<f64>,
     v: Vec<f64>,
-    /// Prefix sums of the p3 regressor over the region `(start3, bp4]`.
     pre3: Vec<Moments>,
+    max3: Vec<f64>,
+    buckets: TimeBuckets,
 }
 
-struct Scratch {
-    lines: Vec<LineScratch>,
-    p1: Vec<(f64, f64)>,
-    data: Vec<LineFit>,
-    bp3: Vec<f64>,
+/// Equal-width buckets over the times `t[i3..i4]` of the p3/p4 region: bucket `b`
+/// starts at `t0 + b·width`, and `below[b]` samples of the region have a time at or
+/// before that edge. Counting the region samples with `t ≤ bp3` then starts at the
+/// bucket of `bp3` and takes a step or two instead of a binary search. The times
+/// belong to increasing positions and are therefore ascending, so the count is the
+/// `partition_point` a binary search would find.
+#[derive(Default)]
+struct TimeBuckets {
+    t0: f64,
+    width: f64,
+    per_s: f64,
+    below: Vec<u32>,
 }
 
-impl Scratch {
-    fn new(prepared: &[PreparedLine]) -> Self {
-        let lines = prepared
-            .iter()
-            .map(|p| LineScratch {
-                t: vec![0.0; p.line.len()],
-                v: vec![0.0; p.line.len()],
-                pre3: Vec::with_capacity(p.line.len() + 1),
-            })
-            .collect();
-        Self {
-            lines,
-            p1: Vec::new(),
-            data: Vec::with_capacity(prepared.len()),
-            bp3: Vec::with_capacity(prepared.len()),
+impl TimeBuckets {
+    fn build(&mut self, t: &[f64]) {
+        self.below.clear();
+        let (Some(&t0), Some(&t1)) = (t.first(), t.last()) else {
+            return;
+        };
+        let n = t.len();
+        self.t0 = t0;
+        self.width = (t1 - t0) / n as f64;
+        self.per_s = if self.width > 0.0 { 1.0 / self.width } else { 0.0 };
+        let mut j = 0;
+        for b in 0..n {
+            let edge = self.edge(b);
+            while j < n && t[j] <= edge {
+                j += 1;
+            }
+            self.below.push(j as u32);
         }
+    }
+
+    fn edge(&self, b: usize) -> f64 {
+        self.t0 + b as f64 * self.width
+    }
+
+    /// Number of leading samples of `t` (the ascending slice the buckets were built on)
+    /// with `t ≤ x`, i.e. `t.partition_point(|&ti| ti <= x)`.
+    fn count_le(&self, t: &[f64], x: f64) -> usize {
+        // Also catches NaN and an empty region.
+        let inside = !self.below.is_empty() && x >= self.t0;
+        if !inside {
+            return 0;
+        }
+        let mut b = (((x - self.t0) * self.per_s) as usize).min(self.below.len() - 1);
+        // Rounding may put x just below its bucket's edge.
+        while self.edge(b) > x {
+            b -= 1;
+        }
+        let mut j = self.below[b] as usize;
+        while j < t.len() && t[j] <= x {
+            j += 1;
+        }
+        j
+    }
+}
+
+/// One training line at one grid pair `(r_a, r_F)`: everything the fit needs of it that
+/// depends neither on the other training lines nor on `λ`. All the per-sample work of
+/// the grid search happens here, so the line can be computed once per pair and shared
+/// by every training set that contains it.
+pub(crate) struct LineAtPair<'p> {
+    prep: &'p PreparedLine<'p>,
+    buf: LineScratch,
+    /// Breakpoints and segment sums; `w_bp1` and `bp3_init` are set per training set.
+    fit: LineFit,
+    /// Speed at bp1, from which `w(bp1)` follows once the pooled p1 law is known.
+    v_bp1: f64,
+    /// Width sum and sample count over the second half of the p3/p4 region.
+    c_sum: f64,
+    c_n: f64,
+    /// Number of p1 samples (those up to the measured bp1).
+    p1_end: usize,
+}
+
+impl<'p> LineAtPair<'p> {
+    /// Buffers for one line; call [`Self::update`] before use.
+    pub(crate) fn new(prep: &'p PreparedLine<'p>) -> Self {
+        let n = prep.line.len();
+        let buf = LineScratch {
+            t: vec![0.0; n],
+            v: vec![0.0; n],
+            pre3: Vec::with_capacity(n + 1),
+            max3: Vec::with_capacity(n),
+            buckets: TimeBuckets::default(),
+        };
+        Self { prep, buf, fit: LineFit::default(), v_bp1: 0.0, c_sum: 0.0, c_n: 0.0, p1_end: 0 }
+    }
+
+    /// Recomputes everything for the grid pair `(r_a, r_F)`. On error the contents are
+    /// stale and must not be used.
+    pub(crate) fn update(&mut self, r_a: f64, r_f: f64) -> Result<(), FitError> {
+        let p = self.prep;
+        let kin = p.line.nominal.scaled(r_a, r_f)?;
+        let ls = &mut self.buf;
+        kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
+        self.p1_end = p.bp1_pos_mm.map_or(0, |x1| p.line.positions_mm.partition_point(|&x| x <= x1));
+        let (lf, v_bp1) = line_moments(p, &kin, ls);
+        let mid = 0.5 * (lf.start3 + lf.bp4);
+        let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
+        let m = ls.pre3[lf.i4 - lf.i3].minus(&ls.pre3[j - lf.i3]);
+        let mut run = f64::NEG_INFINITY;
+        ls.max3.clear();
+        ls.max3.extend(p.smoothed[lf.i3..lf.i4].iter().map(|&s| {
+            run = run.max(s);
+            run
+        }));
+        ls.buckets.build(&ls.t[lf.i3..lf.i4]);
+        (self.fit, self.v_bp1, self.c_sum, self.c_n) = (lf, v_bp1, m.sy, m.n);
+        Ok(())
+    }
+}
+
+/// Per-thread buffers of the plain grid search: every training line at the current pair.
+struct Scratch<'p> {
+    lines: Vec<LineAtPair<'p>>,
+    set: SetScratch,
+}
+
+impl<'p> Scratch<'p> {
+    fn new(prepared: &'p [PreparedLine<'p>]) -> Self {
+        Self { lines: prepared.iter().map(LineAtPair::new).collect(), set: SetScratch::default() }
     }
 }
 
 /// What one grid pair needs of one line: breakpoints, index ranges and segment sums.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 struct LineFit {
     start3: f64,
     bp4: f64,
@@ -281,101 +413,137 @@ struct GridOutcome {
 }
 
 fn evaluate_pair(
-    prepared: &[PreparedLine],
     params: &PiecewiseValidParams,
     r_a: f64,
     r_f: f64,
     scratch: &mut Scratch,
-    prior: Option<&SegmentPrior>,
-    lambdas: &[f64],
+    configs: &[ChainPrior],
 ) -> Result<GridOutcome, FitError> {
+    for line in scratch.lines.iter_mut() {
+        line.update(r_a, r_f)?;
+    }
+    let mut per_lambda = Vec::with_capacity(configs.len());
+    let alpha = evaluate_set(&scratch.lines, params, &mut scratch.set, configs, &mut per_lambda)?;
+    Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
+}
+
+/// The prior of one chain solve: none, or a prior with its weight `λ`.
+pub(crate) type ChainPrior = Option<WeightedPrior>;
+
+/// The prior terms of eq. 5 at one `λ`, multiplied out once: `λ·Σ⁻¹` for the matrix and
+/// the products `(λ·Σ⁻¹)_ij · μ_j` for the right-hand side (same values, in the same
+/// order, as forming them in every iteration).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct WeightedPrior {
+    matrix: [[f64; NP]; NP],
+    rhs_terms: [[f64; NP]; NP],
+}
+
+impl WeightedPrior {
+    pub(crate) fn new(prior: &SegmentPrior, lambda: f64) -> Self {
+        let matrix: [[f64; NP]; NP] = std::array::from_fn(|i| std::array::from_fn(|j| lambda * prior.precision[i][j]));
+        let rhs_terms = std::array::from_fn(|i| std::array::from_fn(|j| matrix[i][j] * prior.mean[j]));
+        Self { matrix, rhs_terms }
+    }
+}
+
+/// The partition of one line's p3/p4 region: first p4 sample, plateau reached.
+type PartitionKey = (usize, bool);
+
+/// Reusable buffers of [`evaluate_set`].
+#[derive(Default)]
+pub(crate) struct SetScratch {
+    p1: Vec<(f64, f64)>,
+    data: Vec<LineFit>,
+    initial: Vec<PartitionKey>,
+    keys: Vec<PartitionKey>,
+}
+
+/// Fits one training set (`lines`, all at the same grid pair) once per prior
+/// configuration in `configs`: the pooled p1 law, the initial `c` and bp3, then the
+/// chain solve. Returns the p1 coefficients `(α1, α2)`; `out` receives per configuration
+/// the chain parameters and the training SSE, or `(NaN, ∞)` where the segment equations
+/// are singular (which disqualifies the pair for that configuration only).
+pub(crate) fn evaluate_set<'p, L: Borrow<LineAtPair<'p>>>(
+    lines: &[L],
+    params: &PiecewiseValidParams,
+    set: &mut SetScratch,
+    configs: &[ChainPrior],
+    out: &mut Vec<([f64; NP], f64)>,
+) -> Result<(f64, f64), FitError> {
     let blob = params.has_start_blob();
-    times_and_p1_samples(prepared, r_a, r_f, scratch)?;
+    set.p1.clear();
+    for l in lines.iter().map(Borrow::borrow) {
+        let widths = &l.prep.line.widths_mm;
+        set.p1.extend((0..l.p1_end).map(|i| (l.buf.v[i], widths[i])));
+    }
     let (alpha, sse1) = if blob {
-        fit_p1(&scratch.p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
+        fit_p1(&set.p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
     } else {
         ((0.0, 0.0), 0.0)
     };
     let p1_coef = PiecewiseCoefficients { alpha1: alpha.0, alpha2: alpha.1, ..Default::default() };
-    let c_init = segment_sums(prepared, r_a, r_f, scratch, &p1_coef)?;
-    initial_bp3(prepared, scratch, c_init);
-    let mut per_lambda = Vec::with_capacity(lambdas.len());
-    for &lambda in lambdas {
-        // A singular system disqualifies this pair for this λ only.
-        match solve_chain(scratch, blob, c_init, prior.map(|p| (p, lambda)), params) {
-            Ok(theta) => {
-                let sse = chain_sse(&scratch.data, &scratch.lines, blob, &theta);
-                per_lambda.push((theta, sse + sse1));
-            }
-            Err(_) => per_lambda.push(([f64::NAN; NP], f64::INFINITY)),
-        }
+    let c_init = initial_c(lines);
+    // The data part of the first partition's equations is the same for every prior.
+    let mut first = ([[0.0; NP]; NP], [0.0; NP]);
+    set.data.clear();
+    set.initial.clear();
+    for l in lines.iter().map(Borrow::borrow) {
+        let mut lf = l.fit;
+        lf.w_bp1 = if l.prep.bp1_pos_mm.is_some() { p1_coef.p1_width_mm(l.v_bp1) } else { 0.0 };
+        lf.bp3_init = initial_bp3(&lf, &l.buf, c_init);
+        let key = partition_key(&lf, &l.buf, lf.bp3_init);
+        accumulate_line(&lf, &l.buf, blob, key, &mut first.0, &mut first.1);
+        set.data.push(lf);
+        set.initial.push(key);
     }
-    Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
+    let problem = ChainProblem { data: &set.data, lines, blob, c_init, initial: &set.initial, first };
+    out.clear();
+    for &prior in configs {
+        let solved = solve_chain(&problem, &mut set.keys, prior, params);
+        out.push(solved.map_or(([f64::NAN; NP], f64::INFINITY), |(theta, sse)| (theta, sse + sse1)));
+    }
+    Ok(alpha)
 }
 
-/// Times and speeds of every sample at `(r_a, r_F)`, and the pooled p1 samples
-/// `(v, w)` up to each line's measured bp1.
-fn times_and_p1_samples(prepared: &[PreparedLine], r_a: f64, r_f: f64, scratch: &mut Scratch) -> Result<(), FitError> {
-    scratch.p1.clear();
-    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
-        let kin = p.line.nominal.scaled(r_a, r_f)?;
-        kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
-        if let Some(x1) = p.bp1_pos_mm {
-            let end = p.line.positions_mm.partition_point(|&x| x <= x1);
-            scratch.p1.extend((0..end).map(|i| (ls.v[i], p.line.widths_mm[i])));
-        }
-    }
-    Ok(())
-}
-
-/// Segment sums of every line; returns the initial `c`: the pooled mean width over the
-/// second half of the p3/p4 regions (the overall mean if those are empty).
-fn segment_sums(
-    prepared: &[PreparedLine],
-    r_a: f64,
-    r_f: f64,
-    scratch: &mut Scratch,
-    p1_coef: &PiecewiseCoefficients,
-) -> Result<f64, FitError> {
-    scratch.data.clear();
+/// The initial `c`: the pooled mean width over the second half of the p3/p4 regions (the
+/// mean of the line means if those are empty).
+fn initial_c<'p, L: Borrow<LineAtPair<'p>>>(lines: &[L]) -> f64 {
     let (mut c_sum, mut c_n) = (0.0, 0.0);
-    for (p, ls) in prepared.iter().zip(scratch.lines.iter_mut()) {
-        let kin = p.line.nominal.scaled(r_a, r_f)?;
-        let lf = line_moments(p, &kin, ls, p1_coef);
-        let mid = 0.5 * (lf.start3 + lf.bp4);
-        let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
-        let m = ls.pre3[lf.i4 - lf.i3].minus(&ls.pre3[j - lf.i3]);
-        c_sum += m.sy;
-        c_n += m.n;
-        scratch.data.push(lf);
+    for l in lines.iter().map(Borrow::borrow) {
+        c_sum += l.c_sum;
+        c_n += l.c_n;
     }
     if c_n > 0.0 {
-        return Ok(c_sum / c_n);
+        return c_sum / c_n;
     }
-    let means = prepared.iter().map(|p| p.line.widths_mm.iter().sum::<f64>() / p.line.len() as f64);
-    Ok(means.sum::<f64>() / prepared.len() as f64)
+    let means = lines.iter().map(|l| l.borrow().prep.mean_width_mm);
+    means.sum::<f64>() / lines.len() as f64
 }
 
-/// Initial bp3 of each line: the first sample of its p3/p4 region where the smoothed
-/// measured width reaches `c_init` (bp4 if it never does).
-fn initial_bp3(prepared: &[PreparedLine], scratch: &mut Scratch, c_init: f64) {
-    for (lf, (p, ls)) in scratch.data.iter_mut().zip(prepared.iter().zip(scratch.lines.iter())) {
-        let first = (lf.i3..lf.i4).find(|&i| p.smoothed[i] >= c_init);
-        lf.bp3_init = first.map_or(lf.bp4, |i| ls.t[i]);
+/// Initial bp3 of a line: the first sample of its p3/p4 region where the smoothed
+/// measured width reaches `c_init` (bp4 if it never does), found on the running maximum.
+fn initial_bp3(lf: &LineFit, ls: &LineScratch, c_init: f64) -> f64 {
+    let j = ls.max3.partition_point(|&m| m < c_init);
+    if c_init.is_nan() || j == ls.max3.len() {
+        lf.bp4
+    } else {
+        ls.t[lf.i3 + j]
     }
 }
 
-/// Segment sums of one line at one grid pair (fills the line's scratch prefix sums).
-fn line_moments(p: &PreparedLine, kin: &LineKinematics, ls: &mut LineScratch, p1: &PiecewiseCoefficients) -> LineFit {
+/// Segment sums of one line at one grid pair (fills the line's prefix sums); returns
+/// them with `w_bp1 = 0` and the speed at bp1.
+fn line_moments(p: &PreparedLine, kin: &LineKinematics, ls: &mut LineScratch) -> (LineFit, f64) {
     let (t, v, y) = (&ls.t, &ls.v, &p.line.widths_mm);
     let a = kin.accel_mm_s2;
     let bp2 = kin.accel_end_s();
     let bp4 = kin.decel_start_s();
     let top = kin.peak_speed_mm_s();
-    let (bp1, w_bp1) = match p.bp1_pos_mm {
+    let (bp1, v_bp1) = match p.bp1_pos_mm {
         Some(x1) => {
             let bp1 = kin.time_at_position(x1).min(bp4);
-            (bp1, p1.p1_width_mm(kin.speed_at_time(bp1)))
+            (bp1, kin.speed_at_time(bp1))
         }
         None => (0.0, 0.0),
     };
@@ -402,11 +570,11 @@ fn line_moments(p: &PreparedLine, kin: &LineKinematics, ls: &mut LineScratch, p1
     for i in i4..t.len() {
         p5.add(p5_regressor(v[i], top), y[i]);
     }
-    LineFit {
+    let lf = LineFit {
         start3,
         bp4,
         top,
-        w_bp1,
+        w_bp1: 0.0,
         g_start3: if bp1 < bp2 { p2_regressor(bp2, top, bp1, a) } else { 0.0 },
         s_bp4: p3_regressor(bp4, top, start3),
         p2,
@@ -414,10 +582,11 @@ fn line_moments(p: &PreparedLine, kin: &LineKinematics, ls: &mut LineScratch, p1
         i3,
         i4,
         bp3_init: bp4,
-    }
+    };
+    (lf, v_bp1)
 }
 
-/// Offsets and p3/p4 split of one line for given chain parameters and bp3.
+/// Offsets and p3/p4 split of one line for given chain parameters and partition.
 struct LineState {
     w1: f64,
     w3: f64,
@@ -426,13 +595,13 @@ struct LineState {
     m4: Moments,
 }
 
-fn line_state(lf: &LineFit, ls: &LineScratch, blob: bool, theta: &[f64; NP], bp3: f64) -> LineState {
+fn line_state(lf: &LineFit, ls: &LineScratch, blob: bool, theta: &[f64; NP], key: PartitionKey) -> LineState {
+    let (j3, plateau) = key;
     let w1 = if blob { lf.w_bp1 } else { theta[W_START] };
     let w3 = w1 + theta[BETA] * lf.g_start3;
-    let j3 = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t <= bp3);
     let m3 = ls.pre3[j3 - lf.i3];
     let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
-    let w4 = if bp3 < lf.bp4 { theta[C] } else { w3 + theta[GAMMA] * lf.s_bp4 };
+    let w4 = if plateau { theta[C] } else { w3 + theta[GAMMA] * lf.s_bp4 };
     LineState { w1, w3, w4, m3, m4 }
 }
 
@@ -447,106 +616,164 @@ fn chain_bp3(lf: &LineFit, blob: bool, theta: &[f64; NP]) -> f64 {
     }
 }
 
+/// One training set at one grid pair, ready for [`solve_chain`].
+struct ChainProblem<'a, L> {
+    data: &'a [LineFit],
+    lines: &'a [L],
+    blob: bool,
+    c_init: f64,
+    /// Partition of the initial bp3 of every line.
+    initial: &'a [PartitionKey],
+    /// Data part of the segment equations for that partition.
+    first: ([[f64; NP]; NP], [f64; NP]),
+}
+
+impl<'p, L: Borrow<LineAtPair<'p>>> ChainProblem<'_, L> {
+    fn line<'s>(&'s self, k: usize) -> &'s LineScratch
+    where
+        'p: 's,
+    {
+        &self.lines[k].borrow().buf
+    }
+
+    /// Data part of the segment equations for a partition.
+    fn system(&self, keys: &[PartitionKey]) -> ([[f64; NP]; NP], [f64; NP]) {
+        let (mut a, mut b) = ([[0.0; NP]; NP], [0.0; NP]);
+        for (k, (lf, &key)) in self.data.iter().zip(keys).enumerate() {
+            accumulate_line(lf, self.line(k), self.blob, key, &mut a, &mut b);
+        }
+        (a, b)
+    }
+
+    /// SSE of p2-p5 over all lines for the chain of `theta` with the given partition.
+    fn sse_at(&self, keys: &[PartitionKey], theta: &[f64; NP]) -> f64 {
+        self.data
+            .iter()
+            .zip(keys)
+            .enumerate()
+            .map(|(k, (lf, &key))| {
+                let st = line_state(lf, self.line(k), self.blob, theta, key);
+                lf.p2.sse(st.w1, theta[BETA])
+                    + st.m3.sse(st.w3, theta[GAMMA])
+                    + st.m4.sse(theta[C], 0.0)
+                    + lf.p5.sse(st.w4, theta[RHO])
+            })
+            .sum()
+    }
+
+    /// SSE of p2-p5 for the chain of `theta` (bp3 from the model).
+    fn sse(&self, theta: &[f64; NP]) -> f64 {
+        self.data
+            .iter()
+            .enumerate()
+            .map(|(k, lf)| {
+                let ls = self.line(k);
+                let st = line_state(lf, ls, self.blob, theta, partition_key(lf, ls, chain_bp3(lf, self.blob, theta)));
+                lf.p2.sse(st.w1, theta[BETA])
+                    + st.m3.sse(st.w3, theta[GAMMA])
+                    + st.m4.sse(theta[C], 0.0)
+                    + lf.p5.sse(st.w4, theta[RHO])
+            })
+            .sum()
+    }
+}
+
 /// The per-segment (MAP) least squares with consistent continuity offsets; returns
-/// `(β, γ, c, ρ, w_start)`.
+/// `(β, γ, c, ρ, w_start)` and the training SSE of p2-p5.
 ///
 /// For a fixed partition (bp3 of every line, as a sample index, and whether the plateau
 /// is reached before bp4), the offsets `w(bp2) = w(bp1) + β·g(bp2)` and `w(bp4) = c` or
 /// `w(bp2) + γ·s(bp4)` are linear in the parameters. The parameters are then the fixed
 /// point "θ minimises the segment sums of squares (plus prior) with the offsets held at
 /// their values under θ" (eq. 3 fitted segment by segment, eq. 6's constant offsets),
-/// which is one non-symmetric linear system (`solve_partition`). Without a prior it is
+/// which is one non-symmetric linear system (`solve_system`). Without a prior it is
 /// exactly the paper's sequential per-segment fit. The partition is then updated from
 /// the new bp3 and the solve repeated until the partition no longer changes. Because
 /// bp3 moves in whole samples this can end in a short cycle between neighbouring
 /// partitions; a cycle of up to `HISTORY` steps is detected and its member with the
 /// smallest training SSE is returned (likewise among the last `HISTORY` states if
 /// `max_iterations` is reached, which happens only with a strong prior).
-fn solve_chain(
-    scratch: &mut Scratch,
-    blob: bool,
-    c_init: f64,
-    prior: Option<(&SegmentPrior, f64)>,
+fn solve_chain<'p, L: Borrow<LineAtPair<'p>>>(
+    pb: &ChainProblem<L>,
+    keys: &mut Vec<PartitionKey>,
+    prior: ChainPrior,
     params: &PiecewiseValidParams,
-) -> Result<[f64; NP], FitError> {
+) -> Result<([f64; NP], f64), FitError> {
     const HISTORY: usize = 8;
     let mut theta = [0.0; NP];
-    theta[C] = c_init;
+    theta[C] = pb.c_init;
     let mut history = [[f64::NAN; NP]; HISTORY];
-    scratch.bp3.clear();
-    scratch.bp3.extend(scratch.data.iter().map(|lf| lf.bp3_init));
+    keys.clear();
+    keys.extend_from_slice(pb.initial);
     let p = params.get();
     for it in 0..p.max_iterations {
-        let solved = solve_partition(scratch, blob, &theta, prior)?;
+        let (mut a, mut b) = if it == 0 { pb.first } else { pb.system(keys) };
+        let solved = solve_system(&mut a, &mut b, prior, &theta)?;
         let mut moved = false;
-        for ((lf, ls), bp3) in scratch.data.iter().zip(&scratch.lines).zip(scratch.bp3.iter_mut()) {
-            let new = chain_bp3(lf, blob, &solved);
-            moved |= partition_key(lf, ls, new) != partition_key(lf, ls, *bp3);
-            *bp3 = new;
+        for (k, (lf, key)) in pb.data.iter().zip(keys.iter_mut()).enumerate() {
+            let new = partition_key(lf, pb.line(k), chain_bp3(lf, pb.blob, &solved));
+            moved |= new != *key;
+            *key = new;
         }
         if !moved {
-            return Ok(solved);
+            return Ok((solved, pb.sse_at(keys, &solved)));
         }
         let repeat =
-            (1..HISTORY).find(|&k| it >= k && relative_change(&solved, &history[(it - k) % HISTORY]) < p.tolerance);
+            (1..HISTORY).find(|&k| it >= k && within_tolerance(&solved, &history[(it - k) % HISTORY], p.tolerance));
         if let Some(k) = repeat {
-            let sse = |t: &[f64; NP]| chain_sse(&scratch.data, &scratch.lines, blob, t);
             let cycle = (1..k).map(|j| history[(it - j) % HISTORY]);
-            let best = cycle.fold(solved, |b, t| if sse(&t) < sse(&b) { t } else { b });
-            return Ok(best);
+            let best = cycle.fold(solved, |b, t| if pb.sse(&t) < pb.sse(&b) { t } else { b });
+            return Ok((best, pb.sse(&best)));
         }
         history[it % HISTORY] = solved;
         theta = solved;
     }
     // No fixed point within the budget: the best of the last states visited.
-    let sse = |t: &[f64; NP]| chain_sse(&scratch.data, &scratch.lines, blob, t);
     let recent = history.iter().filter(|t| t.iter().all(|v| v.is_finite()));
-    Ok(recent.fold(theta, |b, t| if sse(t) < sse(&b) { *t } else { b }))
+    let best = recent.fold(theta, |b, t| if pb.sse(t) < pb.sse(&b) { *t } else { b });
+    Ok((best, pb.sse(&best)))
 }
 
 /// The partition of one line's p3/p4 region for a bp3: first p4 sample, plateau reached.
-fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> (usize, bool) {
-    let j3 = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t <= bp3);
+fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> PartitionKey {
+    let j3 = lf.i3 + ls.buckets.count_le(&ls.t[lf.i3..lf.i4], bp3);
     (j3, bp3 < lf.bp4)
 }
 
-/// Solves the offset-consistent segment equations for the current partition.
-fn solve_partition(
-    scratch: &Scratch,
-    blob: bool,
+/// Adds the prior to the data part of the segment equations, pins unidentified
+/// parameters at their current values and solves.
+fn solve_system(
+    a: &mut [[f64; NP]; NP],
+    b: &mut [f64; NP],
+    prior: ChainPrior,
     theta: &[f64; NP],
-    prior: Option<(&SegmentPrior, f64)>,
 ) -> Result<[f64; NP], FitError> {
-    let (mut a, mut b) = ([[0.0; NP]; NP], [0.0; NP]);
-    for ((lf, ls), &bp3) in scratch.data.iter().zip(&scratch.lines).zip(&scratch.bp3) {
-        accumulate_line(lf, ls, blob, bp3, &mut a, &mut b);
+    if let Some(pr) = prior {
+        add_prior(a, b, &pr);
     }
-    if let Some((pr, lambda)) = prior {
-        add_prior(&mut a, &mut b, pr, lambda);
-    }
-    pin_unidentified(&mut a, &mut b, theta);
-    lu_solve(&a, &b).ok_or_else(|| FitError::Singular("segment equations".into()))
+    pin_unidentified(a, b, theta);
+    lu_solve(a, b).ok_or_else(|| FitError::Singular("segment equations".into()))
 }
 
-/// Largest relative difference of two parameter vectors (NaN compares as infinite).
-fn relative_change(a: &[f64; NP], b: &[f64; NP]) -> f64 {
-    (0..NP)
-        .map(|k| {
-            let d = (a[k] - b[k]).abs() / (1.0 + b[k].abs());
-            if d.is_nan() {
-                f64::INFINITY
-            } else {
-                d
-            }
-        })
-        .fold(0.0, f64::max)
+/// Whether every relative difference `|a − b| / (1 + |b|)` of two parameter vectors is
+/// below `tolerance` (NaN is not). Stops at the first that is not: this runs for up to
+/// seven earlier states in every iteration of the chain solve.
+fn within_tolerance(a: &[f64; NP], b: &[f64; NP], tolerance: f64) -> bool {
+    (0..NP).all(|k| (a[k] - b[k]).abs() / (1.0 + b[k].abs()) < tolerance)
 }
 
-/// Adds one line's segment equations for the partition given by `bp3`. Row `k` is the
-/// normal equation of parameter `k` over its own segment; the offsets' dependence on
-/// the other parameters gives the off-diagonal terms (`M[γ][β] = g(bp2)·Σs`, …).
-fn accumulate_line(lf: &LineFit, ls: &LineScratch, blob: bool, bp3: f64, a: &mut [[f64; NP]; NP], b: &mut [f64; NP]) {
-    let (j3, plateau) = partition_key(lf, ls, bp3);
+/// Adds one line's segment equations for a partition. Row `k` is the normal equation of
+/// parameter `k` over its own segment; the offsets' dependence on the other parameters
+/// gives the off-diagonal terms (`M[γ][β] = g(bp2)·Σs`, …).
+fn accumulate_line(
+    lf: &LineFit,
+    ls: &LineScratch,
+    blob: bool,
+    key: PartitionKey,
+    a: &mut [[f64; NP]; NP],
+    b: &mut [f64; NP],
+) {
+    let (j3, plateau) = key;
     let m3 = ls.pre3[j3 - lf.i3];
     let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
     // Constant part of w(bp1): the p1 width at bp1, or 0 when w_start is a parameter.
@@ -580,11 +807,11 @@ fn accumulate_line(lf: &LineFit, ls: &LineScratch, blob: bool, bp3: f64, a: &mut
     }
 }
 
-fn add_prior(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], prior: &SegmentPrior, lambda: f64) {
+fn add_prior(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], prior: &WeightedPrior) {
     for i in 0..NP {
         for j in 0..NP {
-            a[i][j] += lambda * prior.precision[i][j];
-            b[i] += lambda * prior.precision[i][j] * prior.mean[j];
+            a[i][j] += prior.matrix[i][j];
+            b[i] += prior.rhs_terms[i][j];
         }
     }
 }
@@ -601,19 +828,6 @@ fn pin_unidentified(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], theta: &[f64; NP
 }
 
 /// SSE of p2-p5 over all lines for the chain of `theta` (bp3 from the model).
-fn chain_sse(data: &[LineFit], lines: &[LineScratch], blob: bool, theta: &[f64; NP]) -> f64 {
-    data.iter()
-        .zip(lines)
-        .map(|(lf, ls)| {
-            let st = line_state(lf, ls, blob, theta, chain_bp3(lf, blob, theta));
-            lf.p2.sse(st.w1, theta[BETA])
-                + st.m3.sse(st.w3, theta[GAMMA])
-                + st.m4.sse(theta[C], 0.0)
-                + lf.p5.sse(st.w4, theta[RHO])
-        })
-        .sum()
-}
-
 /// Fits `w = 1/(α1 v + α2)` to `(v, w)` pairs: linearised least squares on `1/w`, then
 /// Gauss-Newton on the widths. Returns `((α1, α2), SSE)`.
 pub(crate) fn fit_p1(samples: &[(f64, f64)]) -> Option<((f64, f64), f64)> {
@@ -706,29 +920,41 @@ fn best_fit(
             .find_map(|r| r.as_ref().err().cloned())
             .unwrap_or_else(|| FitError::Singular("no grid pair gave a solvable fit".into())));
     };
-    let theta = o.per_lambda[k].0;
+    let bp1_law = if params.has_start_blob() { Some(fit_bp1_law(prepared, params, o.r_a, o.r_f)?) } else { None };
+    debug_assert!(sse.is_finite());
+    let mut fitted = fitted_model(params, (o.r_a, o.r_f), o.alpha, &o.per_lambda[k].0, bp1_law, lambda);
+    fitted.training_rmse_mm = direct_training_rmse(prepared, &fitted)?;
+    Ok(fitted)
+}
+
+/// The fitted model of a grid pair, its p1 coefficients and chain parameters (training
+/// RMSE left at 0 for the caller to fill in).
+pub(crate) fn fitted_model(
+    params: &PiecewiseValidParams,
+    (r_a, r_f): (f64, f64),
+    alpha: (f64, f64),
+    theta: &[f64; NP],
+    bp1_law: Option<Bp1PowerLaw>,
+    lambda: f64,
+) -> FittedPiecewise {
     let coefficients = PiecewiseCoefficients {
-        alpha1: o.alpha.0,
-        alpha2: o.alpha.1,
+        alpha1: alpha.0,
+        alpha2: alpha.1,
         beta: theta[BETA],
         gamma: theta[GAMMA],
         c_mm: theta[C],
         rho: theta[RHO],
         w_start_mm: theta[W_START],
     };
-    let bp1_law = if params.has_start_blob() { Some(fit_bp1_law(prepared, params, o.r_a, o.r_f)?) } else { None };
-    debug_assert!(sse.is_finite());
-    let mut fitted = FittedPiecewise {
-        r_a: o.r_a,
-        r_f: o.r_f,
+    FittedPiecewise {
+        r_a,
+        r_f,
         coefficients,
         bp1_law,
         has_start_blob: params.has_start_blob(),
         training_rmse_mm: 0.0,
         lambda,
-    };
-    fitted.training_rmse_mm = direct_training_rmse(prepared, &fitted)?;
-    Ok(fitted)
+    }
 }
 
 /// RMSE of eq. 3 evaluated sample by sample on the training lines with their measured
@@ -750,15 +976,15 @@ fn direct_training_rmse(prepared: &[PreparedLine], fitted: &FittedPiecewise) -> 
 }
 
 /// Eq. 2 fitted on the measured bp1 times of the training lines at `(r_a, r_F)`.
-fn fit_bp1_law(
-    prepared: &[PreparedLine],
+pub(crate) fn fit_bp1_law<'a, P: Borrow<PreparedLine<'a>>>(
+    prepared: &[P],
     params: &PiecewiseValidParams,
     r_a: f64,
     r_f: f64,
 ) -> Result<Bp1PowerLaw, FitError> {
     let mut accels = Vec::with_capacity(prepared.len());
     let mut times = Vec::with_capacity(prepared.len());
-    for p in prepared {
+    for p in prepared.iter().map(Borrow::borrow) {
         let kin = p.line.nominal.scaled(r_a, r_f)?;
         if let Some(x1) = p.bp1_pos_mm {
             accels.push(kin.accel_mm_s2);
@@ -873,7 +1099,7 @@ mod tests {
         let params = exact_params(true);
         let prepared = prepare_lines(&lines, &params).unwrap();
         let mut scratch = Scratch::new(&prepared);
-        let o = evaluate_pair(&prepared, &params, 1.02, 0.98, &mut scratch, None, &[0.0]).unwrap();
+        let o = evaluate_pair(&params, 1.02, 0.98, &mut scratch, &[None]).unwrap();
         let n: usize = lines.iter().map(MeasuredLine::len).sum();
         let criterion = (o.per_lambda[0].1 / n as f64).sqrt();
         let fit = fit_at(&lines, &params, 1.02, 0.98).unwrap();

@@ -10,6 +10,8 @@
 //! - [`lag`]: physics baseline: mass conservation with a first-order extrusion lag
 //!   (DESIGN §5.1), not in the paper.
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
+//! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
+//!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
 //!
 //! Architecture invariant: no file I/O and no tables here; functions take slices and
 //! structs and return structs.
@@ -26,6 +28,7 @@ pub mod predict;
 mod small_linalg;
 pub mod synthetic;
 pub mod transfer;
+pub mod transfer_cv;
 
 #[cfg(test)]
 mod test_support;
@@ -44,3 +47,4 @@ pub use transfer::{
     transfer_zero_mean, ConditionSubset, LambdaRule, ParameterCovariance, PriorMean, SourcePrior, TransferFit,
     TransferParams, TransferValidParams,
 };
+pub use transfer_cv::{transfer_cv, TransferCvRow, TransferMethod, MAX_TARGET_LINES};

@@ -24,7 +24,8 @@
 //!   the other source lines, and predicts the remaining source lines; the `λ` with the
 //!   smallest mean RMSE over all those predictions is used.
 //! - Fig. 9 enumerates all training subsets of the nine target conditions:
-//!   [`condition_subsets`], C(9, n) for n = 1..8, 510 in all.
+//!   [`condition_subsets`], C(9, n) for n = 1..8, 510 in all;
+//!   [`transfer_cv`](super::transfer_cv::transfer_cv) runs the whole cross-validation.
 
 use faer::prelude::*;
 use faer::{Mat, MatRef, Side};
@@ -228,7 +229,7 @@ impl SourcePrior {
         })
     }
 
-    fn single_line_lambda(&self, mean: PriorMean) -> f64 {
+    pub(crate) fn single_line_lambda(&self, mean: PriorMean) -> f64 {
         match mean {
             PriorMean::Zero => self.single_line_lambda_zero,
             PriorMean::SourceMean => self.single_line_lambda_source,
@@ -397,12 +398,13 @@ fn mean_rmse_on_others(model: &FittedPiecewise, lines: &[MeasuredLine], skip: us
     Ok(total / (lines.len() - 1) as f64)
 }
 
-fn mean_columns(rows: &[Vec<f64>], n: usize) -> Vec<f64> {
+/// Column means of equally long rows (summed in row order).
+pub(crate) fn mean_columns(rows: &[Vec<f64>], n: usize) -> Vec<f64> {
     (0..n).map(|k| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len() as f64).collect()
 }
 
 /// Index of the smallest finite value (first on ties).
-fn argmin(values: &[f64]) -> usize {
+pub(crate) fn argmin(values: &[f64]) -> usize {
     let mut best = 0;
     for (k, &v) in values.iter().enumerate() {
         if v < values[best] || !values[best].is_finite() {

@@ -1,11 +1,21 @@
-//! Stages of paper 000 (Ren et al. 2021): importing measured line widths and
-//! summarising them; the model stages come with the paper-000 issue.
+//! Stages of paper 000 (Ren et al. 2021): importing and summarising measured line
+//! widths, kinematics, the piecewise model's and the lag baseline's leave-one-out,
+//! transfer learning between printers, and infill nonuniformity.
 
 mod import;
+mod infill;
+mod kinematics;
 mod line_summary;
+mod lines;
+mod loo;
+mod transfer;
 
 pub use import::ImportStage;
+pub use infill::InfillStage;
+pub use kinematics::KinematicsStage;
 pub use line_summary::{summarize_line, LineSummary, LineSummaryStage, SummaryWindows};
+pub use loo::{LagLooStage, PiecewiseLooStage};
+pub use transfer::TransferCvStage;
 
 use pipeline::Registry;
 
@@ -13,4 +23,9 @@ use pipeline::Registry;
 pub fn register(registry: &mut Registry) {
     registry.register(Box::new(ImportStage));
     registry.register(Box::new(LineSummaryStage));
+    registry.register(Box::new(KinematicsStage));
+    registry.register(Box::new(PiecewiseLooStage));
+    registry.register(Box::new(LagLooStage));
+    registry.register(Box::new(TransferCvStage));
+    registry.register(Box::new(InfillStage));
 }

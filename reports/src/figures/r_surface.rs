@@ -1,0 +1,344 @@
+//! `figure.fdm_r_surface`: the training RMSE of the piecewise width model (paper 000
+//! eqs 2-3) over the grid of speed-deviation factors r_a × r_F of eq. (1), one heat map
+//! per printer. Not a figure of the paper: it shows whether the grid-search optimum the
+//! paper reports is sharp or sits in a flat valley. Reads `r_surface.parquet`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+
+use crate::read::{f64s, no_rows, read_parquet, strs};
+use crate::style::{draw_png_and_svg, text};
+
+/// The `figure.fdm_r_surface` stage kind.
+pub struct RSurfaceFigure;
+
+/// Pixels per printer panel (heat map and its colour bar).
+const PANEL_PX: (u32, u32) = (700, 700);
+/// Width of the colour bar strip of each panel, in pixels.
+const COLOUR_BAR_PX: u32 = 110;
+/// A grid point within this relative distance of the minimum counts as "as good".
+const NEAR_OPTIMUM_REL: f64 = 0.01;
+/// An optimum is called sharp when at most this fraction of the grid is as good.
+const SHARP_MAX_FRACTION: f64 = 0.05;
+
+/// Matplotlib's viridis at nine equally spaced stops (perceptually uniform, readable in
+/// grey scale and by colour-blind readers); values between stops are interpolated.
+const VIRIDIS: [(u8, u8, u8); 9] = [
+    (68, 1, 84),
+    (71, 44, 122),
+    (59, 81, 139),
+    (44, 113, 142),
+    (33, 145, 140),
+    (39, 173, 129),
+    (92, 200, 99),
+    (170, 220, 50),
+    (253, 231, 37),
+];
+
+/// One printer's RMSE surface.
+#[derive(Debug)]
+pub struct Surface {
+    /// Printer name.
+    pub printer: String,
+    /// Grid points (r_a, r_F, training RMSE in mm).
+    pub cells: Vec<(f64, f64, f64)>,
+}
+
+impl StageKind for RSurfaceFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_r_surface"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Heat map per printer of the piecewise model's training RMSE over r_a × r_F, minimum marked → r_surface.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "not in paper 000: the r_a × r_F grid search of eq. (1), §II-A"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        &[]
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let surfaces = load(&ctx.inputs[0].dir)?;
+        let stem = ctx.output_path("r_surface")?;
+        let size = figure_size_px(surfaces.len());
+        draw_png_and_svg(&stem, size, |a| draw(a, &surfaces), |a| draw(a, &surfaces))
+    }
+}
+
+/// Reads every printer's surface from `<dir>/r_surface.parquet`, by printer name.
+pub fn load(dir: &Path) -> Result<Vec<Surface>, StageError> {
+    let path = dir.join("r_surface.parquet");
+    let df = read_parquet(&path)?;
+    let printers = strs(&df, "printer", &path)?;
+    let (r_a, r_f, rmse) = (f64s(&df, "r_a", &path)?, f64s(&df, "r_f", &path)?, f64s(&df, "training_rmse_mm", &path)?);
+    let mut by_printer: BTreeMap<String, Vec<(f64, f64, f64)>> = BTreeMap::new();
+    for i in (0..df.height()).filter(|&i| rmse[i].is_finite()) {
+        by_printer.entry(printers[i].clone()).or_default().push((r_a[i], r_f[i], rmse[i]));
+    }
+    if by_printer.is_empty() {
+        return Err(no_rows(&path, "training_rmse_mm", "a finite training RMSE"));
+    }
+    Ok(by_printer.into_iter().map(|(printer, cells)| Surface { printer, cells }).collect())
+}
+
+/// The figure size for `n_printers` panels side by side.
+pub fn figure_size_px(n_printers: usize) -> (u32, u32) {
+    (PANEL_PX.0 * n_printers.max(1) as u32, PANEL_PX.1)
+}
+
+/// Viridis at `t` in [0, 1] (clamped; NaN maps to the low end).
+pub fn viridis(t: f64) -> RGBColor {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let scaled = t * (VIRIDIS.len() - 1) as f64;
+    let i = (scaled.floor() as usize).min(VIRIDIS.len() - 2);
+    let frac = scaled - i as f64;
+    let mix = |a: u8, b: u8| (a as f64 + frac * (b as f64 - a as f64)).round() as u8;
+    let (lo, hi) = (VIRIDIS[i], VIRIDIS[i + 1]);
+    RGBColor(mix(lo.0, hi.0), mix(lo.1, hi.1), mix(lo.2, hi.2))
+}
+
+/// The grid spacing of `values`: the smallest gap between distinct values (1 when
+/// there is a single value, so a one-point grid still draws a cell).
+pub fn grid_step(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 1e-12).fold(f64::INFINITY, f64::min).min(1.0)
+}
+
+/// The fraction of grid points whose RMSE is within `rel` of the minimum: small when
+/// the optimum is sharp, large when the surface is a flat valley.
+pub fn near_optimum_fraction(rmse_mm: &[f64], rel: f64) -> f64 {
+    let min = rmse_mm.iter().copied().fold(f64::INFINITY, f64::min);
+    let near = rmse_mm.iter().filter(|r| **r <= min * (1.0 + rel)).count();
+    near as f64 / rmse_mm.len().max(1) as f64
+}
+
+/// Draws one heat map per printer side by side.
+pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, surfaces: &[Surface]) -> Result<(), String> {
+    let title = "Training RMSE of the piecewise model over r_a × r_F (not in the paper: is the optimum sharp?)";
+    let area = area.margin(12, 6, 6, 10).titled(title, text(22.0)).map_err(|e| e.to_string())?;
+    let panels = area.split_evenly((1, surfaces.len().max(1)));
+    for (panel, surface) in panels.iter().zip(surfaces) {
+        draw_panel(panel, surface).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// The grid point with the lowest RMSE.
+fn minimum(cells: &[(f64, f64, f64)]) -> (f64, f64, f64) {
+    cells.iter().copied().min_by(|a, b| a.2.total_cmp(&b.2)).unwrap_or((1.0, 1.0, f64::NAN))
+}
+
+fn rmse_range_mm(cells: &[(f64, f64, f64)]) -> (f64, f64) {
+    let lo = cells.iter().map(|c| c.2).fold(f64::INFINITY, f64::min);
+    let hi = cells.iter().map(|c| c.2).fold(f64::NEG_INFINITY, f64::max);
+    if hi > lo {
+        (lo, hi)
+    } else {
+        (lo, lo + 1e-6)
+    }
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    surface: &Surface,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let rmse: Vec<f64> = surface.cells.iter().map(|c| c.2).collect();
+    let fraction = near_optimum_fraction(&rmse, NEAR_OPTIMUM_REL);
+    let verdict = if fraction <= SHARP_MAX_FRACTION { "sharp" } else { "flat" };
+    let caption = format!(
+        "{}: optimum {verdict} ({:.1} % of grid within {:.0} % of min)",
+        surface.printer,
+        100.0 * fraction,
+        100.0 * NEAR_OPTIMUM_REL
+    );
+    let area = area.titled(&caption, text(18.0))?;
+    let (map, bar) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(COLOUR_BAR_PX));
+    let range = rmse_range_mm(&surface.cells);
+    draw_heat_map(&map, surface, range)?;
+    draw_colour_bar(&bar, range)
+}
+
+fn draw_heat_map<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    surface: &Surface,
+    (lo, hi): (f64, f64),
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let half_a = grid_step(surface.cells.iter().map(|c| c.0)) / 2.0;
+    let half_f = grid_step(surface.cells.iter().map(|c| c.1)) / 2.0;
+    let span = |pick: fn(&(f64, f64, f64)) -> f64, half: f64| {
+        let lo = surface.cells.iter().map(pick).fold(f64::INFINITY, f64::min);
+        let hi = surface.cells.iter().map(pick).fold(f64::NEG_INFINITY, f64::max);
+        (lo - half)..(hi + half)
+    };
+    let mut chart = ChartBuilder::on(area)
+        .margin(10)
+        .x_label_area_size(44)
+        .y_label_area_size(60)
+        .build_cartesian_2d(span(|c| c.0, half_a), span(|c| c.1, half_f))?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("r_a (acceleration factor)")
+        .y_desc("r_F (feed factor)")
+        .label_style(text(14.0))
+        .axis_desc_style(text(15.0))
+        .x_label_formatter(&|x| format!("{x:.2}"))
+        .y_label_formatter(&|y| format!("{y:.2}"))
+        .draw()?;
+    let cell = |&(a, f, r): &(f64, f64, f64)| {
+        Rectangle::new([(a - half_a, f - half_f), (a + half_a, f + half_f)], viridis((r - lo) / (hi - lo)).filled())
+    };
+    chart.draw_series(surface.cells.iter().map(cell))?;
+    mark_minimum(&mut chart, surface, (half_a, half_f))
+}
+
+fn mark_minimum<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    surface: &Surface,
+    (half_a, half_f): (f64, f64),
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let (a, f, rmse) = minimum(&surface.cells);
+    chart.draw_series([Cross::new((a, f), 9, WHITE.stroke_width(3))])?;
+    // Write the value on the side of the cross facing the middle of the grid, so it
+    // stays inside the map even when the optimum sits on an edge.
+    let (x_range, y_range) = (chart.x_range(), chart.y_range());
+    let right = a < (x_range.start + x_range.end) / 2.0;
+    let up = f < (y_range.start + y_range.end) / 2.0;
+    let pos = Pos::new(if right { HPos::Left } else { HPos::Right }, if up { VPos::Bottom } else { VPos::Top });
+    let anchor = (a + if right { 2.0 } else { -2.0 } * half_a, f + if up { 2.0 } else { -2.0 } * half_f);
+    let label = format!("min {rmse:.4} mm at ({a:.2}, {f:.2})");
+    let style = text(15.0).color(&WHITE).pos(pos);
+    chart.draw_series([Text::new(label, anchor, style)])?;
+    Ok(())
+}
+
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    (lo, hi): (f64, f64),
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    const SLICES: usize = 120;
+    let decimals = label_decimals(hi - lo);
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(10)
+        .margin_bottom(54)
+        .margin_left(4)
+        .margin_right(14)
+        .right_y_label_area_size(62)
+        .build_cartesian_2d(0.0..1.0, lo..hi)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc("training RMSE (mm)")
+        .label_style(text(13.0))
+        .axis_desc_style(text(14.0))
+        .y_label_formatter(&|y| format!("{y:.decimals$}"))
+        .draw()?;
+    let step = (hi - lo) / SLICES as f64;
+    let slice = |k: usize| {
+        let y = lo + k as f64 * step;
+        Rectangle::new([(0.0, y), (1.0, y + step)], viridis(k as f64 / (SLICES - 1) as f64).filled())
+    };
+    chart.draw_series((0..SLICES).map(slice))?;
+    Ok(())
+}
+
+/// Decimals that resolve a fifth of `span_mm` on an axis label.
+fn label_decimals(span_mm: f64) -> usize {
+    if span_mm > 0.0 {
+        (-(span_mm / 5.0).log10()).ceil().clamp(0.0, 6.0) as usize
+    } else {
+        3
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_util::{assert_drawn, write_table};
+    use polars::df;
+
+    #[test]
+    fn viridis_ends_are_the_table_ends_and_out_of_range_clamps() {
+        assert_eq!(viridis(0.0), RGBColor(68, 1, 84));
+        assert_eq!(viridis(1.0), RGBColor(253, 231, 37));
+        assert_eq!(viridis(-3.0), viridis(0.0));
+        assert_eq!(viridis(7.0), viridis(1.0));
+        assert_eq!(viridis(f64::NAN), viridis(0.0));
+        // Halfway between stops 4 (0.5) and 5 (0.625): the rounded mean of the two.
+        assert_eq!(viridis(0.5625), RGBColor(36, 159, 135));
+    }
+
+    #[test]
+    fn viridis_gets_lighter_along_the_scale() {
+        let luma = |c: RGBColor| 0.299 * c.0 as f64 + 0.587 * c.1 as f64 + 0.114 * c.2 as f64;
+        let lumas: Vec<f64> = (0..=20).map(|k| luma(viridis(k as f64 / 20.0))).collect();
+        assert!(lumas.windows(2).all(|w| w[1] > w[0]), "{lumas:?}");
+    }
+
+    #[test]
+    fn near_optimum_fraction_counts_points_within_tolerance_of_min() {
+        let rmse = [1.0, 1.005, 1.02, 2.0];
+        assert_eq!(near_optimum_fraction(&rmse, 0.01), 0.5);
+        assert_eq!(near_optimum_fraction(&rmse, 0.0), 0.25);
+    }
+
+    #[test]
+    fn grid_step_is_the_smallest_gap() {
+        assert!((grid_step([1.1, 0.9, 1.0, 1.0].into_iter()) - 0.1).abs() < 1e-12);
+        assert_eq!(grid_step([1.0].into_iter()), 1.0);
+    }
+
+    /// Two printers on the paper's 21 × 21 grid: taz5 a narrow bowl (sharp optimum at
+    /// 0.97, 1.02), taz6 a long valley along r_a (flat).
+    fn surface_table() -> polars::prelude::DataFrame {
+        let r: Vec<f64> = (0..21).map(|k| 0.90 + 0.01 * k as f64).collect();
+        let (mut printer, mut r_a, mut r_f, mut rmse) = (vec![], vec![], vec![], vec![]);
+        for (name, k_a, k_f) in [("taz5", 8.0, 12.0), ("taz6", 0.005, 2.0)] {
+            for &a in &r {
+                for &f in &r {
+                    printer.push(name);
+                    r_a.push(a);
+                    r_f.push(f);
+                    rmse.push(0.04 + k_a * (a - 0.97).powi(2) + k_f * (f - 1.02).powi(2));
+                }
+            }
+        }
+        df!("printer" => printer, "r_a" => r_a, "r_f" => r_f, "training_rmse_mm" => rmse).expect("frame")
+    }
+
+    #[test]
+    fn draws_one_heat_map_per_printer() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        write_table(dir.path(), "r_surface", surface_table());
+        let surfaces = load(dir.path()).expect("loads");
+        assert_eq!(surfaces.len(), 2);
+        assert!(surfaces.iter().all(|s| s.cells.len() == 441));
+        let (a, f, _) = minimum(&surfaces[0].cells);
+        assert!((a - 0.97).abs() < 1e-9 && (f - 1.02).abs() < 1e-9);
+        let fraction = |s: &Surface| near_optimum_fraction(&s.cells.iter().map(|c| c.2).collect::<Vec<_>>(), 0.01);
+        assert!(fraction(&surfaces[0]) <= SHARP_MAX_FRACTION, "the narrow bowl is sharp");
+        assert!(fraction(&surfaces[1]) > SHARP_MAX_FRACTION, "the long valley is flat");
+        let stem = dir.path().join("r_surface");
+        let size = figure_size_px(surfaces.len());
+        draw_png_and_svg(&stem, size, |a| draw(a, &surfaces), |a| draw(a, &surfaces)).expect("draws");
+        assert_drawn(&stem);
+    }
+}
