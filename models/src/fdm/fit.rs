@@ -247,14 +247,17 @@ impl Moments {
     }
 }
 
-/// Per-line buffers of one grid pair: nominal times and speeds of every sample, the
-/// prefix sums of the p3 regressor over the region `(start3, bp4]`, the running maximum
-/// of the smoothed widths over that region (for the initial bp3), and a bucket index of
-/// the region's times (for the partition lookups of the chain solve).
+/// Per-line buffers of one grid pair: nominal times and speeds of every sample and the
+/// prefix sums of the p3 regressor over the region `(start3, bp4]`. When `indexed`, also
+/// the running maximum of the smoothed widths over that region (for the initial bp3)
+/// and a bucket index of the region's times (for the partition lookups of the chain
+/// solve). Both cost O(n) per pair and save a scan or a binary search per lookup: worth
+/// it when many training sets and priors share the line, not in a single fit.
 struct LineScratch {
     t: Vec<f64>,
     v: Vec<f64>,
     pre3: Vec<Moments>,
+    indexed: bool,
     max3: Vec<f64>,
     buckets: TimeBuckets,
 }
@@ -337,14 +340,25 @@ pub(crate) struct LineAtPair<'p> {
 }
 
 impl<'p> LineAtPair<'p> {
-    /// Buffers for one line; call [`Self::update`] before use.
+    /// Buffers for one line in one fit; call [`Self::update`] before use.
     pub(crate) fn new(prep: &'p PreparedLine<'p>) -> Self {
+        Self::with_index(prep, false)
+    }
+
+    /// Buffers for a line shared by many training sets and priors, with the lookup
+    /// indices of `LineScratch` (same results, faster repeated lookups).
+    pub(crate) fn indexed(prep: &'p PreparedLine<'p>) -> Self {
+        Self::with_index(prep, true)
+    }
+
+    fn with_index(prep: &'p PreparedLine<'p>, indexed: bool) -> Self {
         let n = prep.line.len();
         let buf = LineScratch {
             t: vec![0.0; n],
             v: vec![0.0; n],
             pre3: Vec::with_capacity(n + 1),
-            max3: Vec::with_capacity(n),
+            indexed,
+            max3: Vec::new(),
             buckets: TimeBuckets::default(),
         };
         Self { prep, buf, fit: LineFit::default(), v_bp1: 0.0, c_sum: 0.0, c_n: 0.0, p1_end: 0 }
@@ -362,13 +376,15 @@ impl<'p> LineAtPair<'p> {
         let mid = 0.5 * (lf.start3 + lf.bp4);
         let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
         let m = ls.pre3[lf.i4 - lf.i3].minus(&ls.pre3[j - lf.i3]);
-        let mut run = f64::NEG_INFINITY;
-        ls.max3.clear();
-        ls.max3.extend(p.smoothed[lf.i3..lf.i4].iter().map(|&s| {
-            run = run.max(s);
-            run
-        }));
-        ls.buckets.build(&ls.t[lf.i3..lf.i4]);
+        if ls.indexed {
+            let mut run = f64::NEG_INFINITY;
+            ls.max3.clear();
+            ls.max3.extend(p.smoothed[lf.i3..lf.i4].iter().map(|&s| {
+                run = run.max(s);
+                run
+            }));
+            ls.buckets.build(&ls.t[lf.i3..lf.i4]);
+        }
         (self.fit, self.v_bp1, self.c_sum, self.c_n) = (lf, v_bp1, m.sy, m.n);
         Ok(())
     }
@@ -491,7 +507,7 @@ pub(crate) fn evaluate_set<'p, L: Borrow<LineAtPair<'p>>>(
     for l in lines.iter().map(Borrow::borrow) {
         let mut lf = l.fit;
         lf.w_bp1 = if l.prep.bp1_pos_mm.is_some() { p1_coef.p1_width_mm(l.v_bp1) } else { 0.0 };
-        lf.bp3_init = initial_bp3(&lf, &l.buf, c_init);
+        lf.bp3_init = initial_bp3(&lf, &l.buf, &l.prep.smoothed, c_init);
         let key = partition_key(&lf, &l.buf, lf.bp3_init);
         accumulate_line(&lf, &l.buf, blob, key, &mut first.0, &mut first.1);
         set.data.push(lf);
@@ -522,14 +538,16 @@ fn initial_c<'p, L: Borrow<LineAtPair<'p>>>(lines: &[L]) -> f64 {
 }
 
 /// Initial bp3 of a line: the first sample of its p3/p4 region where the smoothed
-/// measured width reaches `c_init` (bp4 if it never does), found on the running maximum.
-fn initial_bp3(lf: &LineFit, ls: &LineScratch, c_init: f64) -> f64 {
-    let j = ls.max3.partition_point(|&m| m < c_init);
-    if c_init.is_nan() || j == ls.max3.len() {
-        lf.bp4
+/// measured width reaches `c_init` (bp4 if it never does); with the index, found on the
+/// running maximum.
+fn initial_bp3(lf: &LineFit, ls: &LineScratch, smoothed: &[f64], c_init: f64) -> f64 {
+    let first = if ls.indexed {
+        let j = ls.max3.partition_point(|&m| m < c_init);
+        (j < ls.max3.len() && !c_init.is_nan()).then_some(lf.i3 + j)
     } else {
-        ls.t[lf.i3 + j]
-    }
+        (lf.i3..lf.i4).find(|&i| smoothed[i] >= c_init)
+    };
+    first.map_or(lf.bp4, |i| ls.t[i])
 }
 
 /// Segment sums of one line at one grid pair (fills the line's prefix sums); returns
@@ -736,7 +754,9 @@ fn solve_chain<'p, L: Borrow<LineAtPair<'p>>>(
 
 /// The partition of one line's p3/p4 region for a bp3: first p4 sample, plateau reached.
 fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> PartitionKey {
-    let j3 = lf.i3 + ls.buckets.count_le(&ls.t[lf.i3..lf.i4], bp3);
+    let region = &ls.t[lf.i3..lf.i4];
+    let count = if ls.indexed { ls.buckets.count_le(region, bp3) } else { region.partition_point(|&t| t <= bp3) };
+    let j3 = lf.i3 + count;
     (j3, bp3 < lf.bp4)
 }
 

@@ -249,7 +249,7 @@ struct PairWork<'p> {
 impl<'p> PairWork<'p> {
     fn new(prepared: &'p [PreparedLine<'p>]) -> Self {
         Self {
-            lines: prepared.iter().map(LineAtPair::new).collect(),
+            lines: prepared.iter().map(LineAtPair::indexed).collect(),
             status: vec![Ok(()); prepared.len()],
             set: SetScratch::default(),
             out: Vec::new(),
@@ -716,49 +716,6 @@ mod tests {
         let (one, two) = (with(1), with(2));
         assert_eq!(one, two);
         assert_eq!(one, with(3));
-    }
-
-    #[test]
-    fn tmp_compare_real_with_original_dump() {
-        let (Some(s), Some(t)) = (real_lines("taz5"), real_lines("taz6")) else { return };
-        let sp = PiecewiseParams::paper_defaults().check().unwrap();
-        let tp = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
-        let tr = TransferParams::paper_defaults().check().unwrap();
-        let start = std::time::Instant::now();
-        let rows = transfer_cv(&s, &t, &sp, &tp, &tr).unwrap();
-        eprintln!("transfer_cv real took {:.2} s", start.elapsed().as_secs_f64());
-        let out: String = rows
-            .iter()
-            .map(|r| {
-                format!(
-                    "{} {} {} {:?} {:016x} {:016x}\n",
-                    r.n_train,
-                    r.subset,
-                    r.test_index,
-                    r.method,
-                    r.rmse_mm.to_bits(),
-                    r.lambda.to_bits()
-                )
-            })
-            .collect();
-        std::fs::write("/tmp/tcv/new_real.txt", &out).unwrap();
-        for n in 1..=8 {
-            let mut line = format!("n={n}:");
-            for m in TransferMethod::ALL {
-                let mut v: Vec<f64> =
-                    rows.iter().filter(|r| r.n_train == n && r.method == m).map(|r| r.rmse_mm).collect();
-                v.sort_by(f64::total_cmp);
-                let k = v.len();
-                let med = if k % 2 == 1 { v[k / 2] } else { 0.5 * (v[k / 2 - 1] + v[k / 2]) };
-                let mut l: Vec<f64> =
-                    rows.iter().filter(|r| r.n_train == n && r.method == m).map(|r| r.lambda).collect();
-                l.sort_by(f64::total_cmp);
-                line += &format!("  {} {:.4} (rows {k}, median lambda {:.1e})", m.name(), med, l[l.len() / 2]);
-            }
-            eprintln!("{line}");
-        }
-        let reference = std::fs::read_to_string("/tmp/tcv/ref_real.txt").unwrap();
-        assert!(out == reference, "differs from the original dump");
     }
 
     #[test]
