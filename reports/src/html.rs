@@ -13,8 +13,10 @@ use polars::prelude::{AnyValue, DataFrame};
 
 use crate::read::read_parquet;
 
-/// Rows of a published table shown in the report (the file has them all).
+/// Tables up to this many rows are shown whole.
 const MAX_ROWS: usize = 40;
+/// Rows shown of a longer table (the file has them all).
+const PREVIEW_ROWS: usize = 8;
 
 const CSS: &str = "body{font-family:DejaVu Sans,Helvetica,Arial,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}\
 h1{border-bottom:2px solid #0072b2}h2{margin-top:2em;border-bottom:1px solid #ccc}\
@@ -27,6 +29,7 @@ pub fn write_report(out_dir: &Path) -> Result<PathBuf, StageError> {
     let manifests = Manifest::read_all(out_dir).map_err(|e| StageError::io(out_dir.join("runs"), e))?;
     let mut html = format!("<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>amrepro report</title><style>{CSS}</style></head><body>\n<h1>amrepro report</h1>\n");
     let _ = writeln!(html, "<p>Runs found under <code>{}</code>: {}. Every number below names the run and stage it comes from; the published tables are the Parquet files listed (see docs/OUTPUTS.md).</p>", escape(&out_dir.display().to_string()), manifests.len());
+    html += &contents(&manifests);
     for manifest in &manifests {
         html += &run_section(out_dir, manifest)?;
     }
@@ -34,6 +37,20 @@ pub fn write_report(out_dir: &Path) -> Result<PathBuf, StageError> {
     let path = out_dir.join("report").join("index.html");
     write_atomic(&path, html.as_bytes())?;
     Ok(path)
+}
+
+fn contents(manifests: &[Manifest]) -> String {
+    let items: String = manifests
+        .iter()
+        .map(|m| {
+            format!(
+                "<li><a href=\"#{0}\">{1}</a> <span class=\"run\">({0})</span></li>",
+                escape(&m.run),
+                escape(if m.title.is_empty() { &m.run } else { &m.title })
+            )
+        })
+        .collect();
+    format!("<ul>{items}</ul>\n")
 }
 
 fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
@@ -119,7 +136,11 @@ fn published_table(
     );
     s += &frame_html(&df);
     if df.height() > MAX_ROWS {
-        let _ = writeln!(s, "<p class=\"run\">First {MAX_ROWS} of {} rows shown.</p>", df.height());
+        let _ = writeln!(
+            s,
+            "<p class=\"run\">First {PREVIEW_ROWS} of {} rows shown; query the file for the rest.</p>",
+            df.height()
+        );
     }
     Ok(s)
 }
@@ -140,7 +161,8 @@ pub fn frame_html(df: &DataFrame) -> String {
         let _ = write!(s, "<th>{}</th>", escape(name));
     }
     s += "</tr>\n";
-    for row in 0..df.height().min(MAX_ROWS) {
+    let shown = if df.height() > MAX_ROWS { PREVIEW_ROWS } else { df.height() };
+    for row in 0..shown {
         s += "<tr>";
         for col in df.columns() {
             let value = col.get(row).map(|v| cell(&v)).unwrap_or_default();
