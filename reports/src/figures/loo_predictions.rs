@@ -15,7 +15,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
-use crate::style::{draw_png_and_svg, text, PALETTE};
+use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_loo_predictions` stage kind.
 pub struct LooPredictionsFigure;
@@ -246,15 +246,11 @@ fn draw_panel<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(56)
         .build_cartesian_2d(x_min..x_max, 0.0..width_max_mm)?;
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart)
         .x_desc("position along the line (mm)")
         .y_desc("width (mm)")
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y:.1}"))
-        .light_line_style(WHITE)
         .draw()?;
     draw_lines(&mut chart, line, model)?;
     chart

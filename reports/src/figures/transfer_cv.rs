@@ -15,7 +15,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
-use crate::style::{draw_png_and_svg, text, PALETTE};
+use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_transfer_cv` stage kind.
 pub struct TransferCvFigure;
@@ -225,17 +225,13 @@ fn draw_boxes<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(cv.x_range(), 0.0..top_mm)?;
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart)
         .disable_x_mesh()
         .x_desc("target-printer lines in training (n)")
         .y_desc("held-out RMSE (mm)")
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
         .x_labels(cv.n_train.len() + 2)
         .x_label_formatter(&integer_label)
         .y_label_formatter(&|y| format!("{y:.3}"))
-        .light_line_style(WHITE)
         .bold_line_style(BLACK.mix(0.08))
         .draw()?;
     let half_width = SLOT_WIDTH / cv.methods.len() as f64 * 0.4;
@@ -344,17 +340,13 @@ fn draw_improvement<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(cv.x_range(), (lo - pad)..(hi + pad))?;
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart)
         .disable_x_mesh()
         .x_desc("target-printer lines in training (n)")
         .y_desc("median RMSE improvement (%)")
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
         .x_labels(cv.n_train.len() + 2)
         .x_label_formatter(&integer_label)
         .y_label_formatter(&|y| format!("{y:.0}"))
-        .light_line_style(WHITE)
         .bold_line_style(BLACK.mix(0.08))
         .draw()?;
     let (x_range, zero) = (cv.x_range(), BLACK.stroke_width(1));

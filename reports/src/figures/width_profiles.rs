@@ -14,7 +14,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, read_parquet, strs};
-use crate::style::{draw_png_and_svg, text, PALETTE};
+use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_width_profiles` stage kind.
 pub struct WidthProfilesFigure;
@@ -146,15 +146,11 @@ fn draw_panel<DB: DrawingBackend>(
         .x_label_area_size(36)
         .y_label_area_size(52)
         .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart)
         .x_desc("position along the line (mm)")
         .y_desc("width (mm)")
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y:.1}"))
-        .light_line_style(WHITE)
         .draw()?;
     chart.draw_series(LineSeries::new(p.points.iter().copied(), color.stroke_width(2)))?;
     if let Some(steady) = p.steady_width_mm {
