@@ -30,7 +30,7 @@ def check_tables(out_dir: pathlib.Path) -> int:
         assert rows_duckdb == frame.height > 0, f"{path}: duckdb {rows_duckdb} rows, polars {frame.height}"
         meta = duckdb.sql(f"select key::varchar, value::varchar from parquet_kv_metadata('{path}')").fetchall()
         keys = {k for k, _ in meta}
-        assert {"amrepro_tool_version", "amrepro_stage", "amrepro_schema_version"} <= keys, f"{path}: metadata {keys}"
+        assert {"amrepro_tool_version", "amrepro_stage", "amrepro_stage_hash", "amrepro_params_hash", "amrepro_schema_version"} <= keys, f"{path}: metadata {keys}"
         print(f"ok  {path.relative_to(out_dir)}  {rows_duckdb} rows  (run {run}, stage {stage})")
         count += 1
     assert count > 0, f"no published tables under {out_dir}"

@@ -21,6 +21,8 @@ pub struct TableMeta {
     pub stage: String,
     /// The stage's cache key.
     pub stage_hash: String,
+    /// Hash of the stage's checked parameters.
+    pub params_hash: String,
     /// Version of the table's column contract.
     pub schema_version: u32,
 }
@@ -31,6 +33,7 @@ pub fn write_parquet(path: &Path, df: &mut DataFrame, meta: &TableMeta) -> Resul
         ("amrepro_tool_version".into(), TOOL_VERSION.into()),
         ("amrepro_stage".into(), meta.stage.clone()),
         ("amrepro_stage_hash".into(), meta.stage_hash.clone()),
+        ("amrepro_params_hash".into(), meta.params_hash.clone()),
         ("amrepro_schema_version".into(), meta.schema_version.to_string()),
     ]);
     write_atomic_with(path, |file| {

@@ -263,6 +263,7 @@ impl Executor<'_> {
             inputs: self.input_artifacts(stage),
             seed,
             stage_hash: key_hash.clone(),
+            params_hash: sha256_hex(serde_json::to_string(&stage.params).expect("serialisable").as_bytes()),
             out_dir: staged.clone(),
             rows: 0,
             progress: self.progress.clone(),

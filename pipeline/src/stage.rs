@@ -75,6 +75,8 @@ pub struct StageContext {
     pub seed: u64,
     /// Hash of the stage's cache key, written into table metadata.
     pub stage_hash: String,
+    /// Hash of the checked parameters alone, written into table metadata.
+    pub params_hash: String,
     pub(crate) out_dir: PathBuf,
     pub(crate) rows: u64,
     pub(crate) progress: Option<indicatif::MultiProgress>,
@@ -99,8 +101,12 @@ impl StageContext {
     /// Writes `df` as Parquet `name.parquet` with the run's key/value metadata.
     pub fn write_table(&mut self, name: &str, df: &mut DataFrame) -> Result<PathBuf, StageError> {
         let path = self.output_path(&format!("{name}.parquet"))?;
-        let meta =
-            artifact::TableMeta { stage: self.stage.clone(), stage_hash: self.stage_hash.clone(), schema_version: 1 };
+        let meta = artifact::TableMeta {
+            stage: self.stage.clone(),
+            stage_hash: self.stage_hash.clone(),
+            params_hash: self.params_hash.clone(),
+            schema_version: 1,
+        };
         artifact::write_parquet(&path, df, &meta)?;
         self.rows += df.height() as u64;
         Ok(path)

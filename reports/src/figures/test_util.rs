@@ -13,7 +13,7 @@ const MIN_PNG_BYTES: u64 = 20_000;
 
 /// Writes `df` as `<dir>/<name>.parquet` through the pipeline's Parquet writer.
 pub fn write_table(dir: &Path, name: &str, mut df: DataFrame) {
-    let meta = TableMeta { stage: "test".into(), stage_hash: "0".into(), schema_version: 1 };
+    let meta = TableMeta { stage: "test".into(), stage_hash: "0".into(), params_hash: "0".into(), schema_version: 1 };
     write_parquet(&dir.join(format!("{name}.parquet")), &mut df, &meta).expect("test table is written");
 }
 
