@@ -53,6 +53,11 @@ fn only_and_force_rerun_one_stage() {
     let forced = ok(tmp.path(), &["run", "--only", "line_summary", "--force", spec.to_str().unwrap()]);
     assert!(forced.contains("ran      line_summary") && forced.contains("--force"), "{forced}");
     assert!(forced.contains("cached   import_taz5") && !forced.contains("profiles_taz5"), "{forced}");
+    let manifest = std::fs::read_to_string(tmp.path().join("out/runs/fsu_linewidth/manifest.json")).unwrap();
+    assert!(
+        manifest.contains("\"profiles_taz5\"") && manifest.contains("not selected by --only"),
+        "the manifest still covers every stage"
+    );
     let err = fails(tmp.path(), &["run", "--only", "line_sumary", spec.to_str().unwrap()]);
     assert!(err.contains("no such stage"), "{err}");
 }

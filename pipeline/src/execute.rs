@@ -114,6 +114,9 @@ pub fn run_plan(
             outcomes[i] = Some(outcome);
         }
     }
+    if !opts.dry_run {
+        keep_unselected(plan, &run_dir, &mut outcomes);
+    }
     let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
     let manifest_path = if opts.dry_run {
         None
@@ -122,6 +125,18 @@ pub fn run_plan(
     };
     let stages = outcomes.into_iter().map(|o| o.line).collect();
     Ok(RunSummary { run_dir, manifest_path, stages })
+}
+
+/// Stages left out by `--only` keep their last outputs: record those in the manifest
+/// too, so the manifest (and the report drawn from it) always covers the whole spec.
+fn keep_unselected(plan: &Plan, run_dir: &Path, outcomes: &mut [Option<Outcome>]) {
+    for (stage, slot) in plan.stages.iter().zip(outcomes.iter_mut()).filter(|(_, o)| o.is_none()) {
+        if let Some(record) = read_record(&run_dir.join(&stage.name)) {
+            let published = stage.publish.iter().cloned().collect();
+            let line = line(stage, Status::Cached, "not selected by --only".into(), 0.0);
+            *slot = Some(Outcome { line, record: Some(record), published });
+        }
+    }
 }
 
 /// Marks the stages to consider: all, or the `--only` stage and its upstream.
