@@ -2,14 +2,14 @@
 //! half-written file), Parquet tables with key/value metadata, atomic replacement of
 //! a stage's whole output folder, and publishing to the stable analyst paths.
 //!
-//! This is the one place that calls polars' Parquet writer: its API moves between
-//! releases, so it is wrapped here once.
+//! This is the one place that calls polars' Parquet writer and reader: their API moves
+//! between releases, so it is wrapped here once.
 
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use polars::prelude::{DataFrame, KeyValueMetadata, ParquetCompression, ParquetWriter};
+use polars::prelude::{DataFrame, KeyValueMetadata, ParquetCompression, ParquetReader, ParquetWriter, SerReader};
 
 use crate::error::StageError;
 use crate::TOOL_VERSION;
@@ -45,6 +45,12 @@ pub fn write_parquet(path: &Path, df: &mut DataFrame, meta: &TableMeta) -> Resul
             .map(|_| ())
             .map_err(|source| StageError::Table { path: path.to_path_buf(), source })
     })
+}
+
+/// Reads a Parquet file; errors name the file.
+pub fn read_parquet(path: &Path) -> Result<DataFrame, StageError> {
+    let file = fs::File::open(path).map_err(|e| StageError::io(path, e))?;
+    ParquetReader::new(file).finish().map_err(|source| StageError::Table { path: path.to_path_buf(), source })
 }
 
 /// Writes `bytes` to `path` atomically.

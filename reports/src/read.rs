@@ -2,16 +2,11 @@
 
 use std::path::Path;
 
+pub use pipeline::artifact::read_parquet;
 use pipeline::StageError;
-use polars::prelude::{DataFrame, ParquetReader, SerReader};
+use polars::prelude::DataFrame;
 
-/// Reads a Parquet file.
-pub fn read_parquet(path: &Path) -> Result<DataFrame, StageError> {
-    let file = std::fs::File::open(path).map_err(|e| StageError::io(path, e))?;
-    ParquetReader::new(file).finish().map_err(|source| StageError::Table { path: path.to_path_buf(), source })
-}
-
-/// Column `name` as floats (nulls are an error).
+/// Column `name` as floats (nulls become NaN).
 pub fn f64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
     let col = df.column(name).map_err(bad)?;

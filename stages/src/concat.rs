@@ -2,10 +2,11 @@
 //! (e.g. the per-printer, per-model leave-one-out tables into `loo.parquet`). Tables
 //! must have the same columns in the same order; rows keep input order.
 
+use pipeline::artifact::read_parquet;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
-use polars::prelude::{DataFrame, ParquetReader, SerReader};
+use polars::prelude::DataFrame;
 
 /// The `table.concat` stage kind.
 pub struct ConcatStage;
@@ -54,9 +55,7 @@ fn stack(ctx: &StageContext, name: &str) -> Result<DataFrame, StageError> {
         if !path.exists() {
             continue;
         }
-        let file = std::fs::File::open(&path).map_err(|e| StageError::io(&path, e))?;
-        let df =
-            ParquetReader::new(file).finish().map_err(|source| StageError::Table { path: path.clone(), source })?;
+        let df = read_parquet(&path)?;
         stacked = Some(match stacked {
             None => df,
             Some(mut acc) => {
