@@ -1,6 +1,6 @@
 //! Analysts' contract: DuckDB and Polars (Python, installed by `make test` into a
 //! venv from PyPI) read every published table of a full run, and the example queries
-//! of docs/OUTPUTS.md run on them, for both shipped specs.
+//! of docs/OUTPUTS.md run on them, for every shipped spec.
 
 mod common;
 
@@ -14,7 +14,8 @@ fn duckdb_and_polars_read_every_published_table() {
     let python = std::env::var("AMREPRO_PYTHON").unwrap_or_else(|_| "python3".into());
     let tmp = tempfile::tempdir().unwrap();
     let raw = data_root().join("fsu-linewidth");
-    for name in ["fsu_linewidth", "ren2021"] {
+    for name in shipped_spec_names() {
+        let name = name.as_str();
         let spec = shipped_spec(tmp.path(), name, &raw);
         ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
     }
@@ -35,4 +36,5 @@ fn duckdb_and_polars_read_every_published_table() {
     );
     assert!(text.contains("ok  fdm/line_summary.parquet  18 rows"), "{text}");
     assert!(text.contains("ok  fdm/loo.parquet  36 rows"), "2 printers × 9 lines × 2 models: {text}");
+    assert!(text.contains("ok  inkjet/recovery.parquet  50 rows"), "{text}");
 }

@@ -6,6 +6,7 @@
 
 pub mod concat;
 pub mod fdm;
+pub mod inkjet;
 pub mod table;
 
 use pipeline::Registry;
@@ -13,5 +14,6 @@ use pipeline::Registry;
 /// Registers every domain stage kind.
 pub fn register(registry: &mut Registry) {
     fdm::register(registry);
+    inkjet::register(registry);
     registry.register(Box::new(concat::ConcatStage));
 }

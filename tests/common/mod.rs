@@ -52,16 +52,31 @@ fn text(out: &Output) -> String {
 /// The shipped FSU spec with its dataset path pointed at `raw` (a folder holding
 /// taz5/ and taz6/), written into `dir`.
 pub fn fsu_spec(dir: &Path, raw: &Path) -> PathBuf {
-    shipped_spec(dir, "fsu_linewidth", raw)
+    let path = shipped_spec(dir, "fsu_linewidth", raw);
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(!text.contains("${AMREPRO_DATA"), "the shipped spec's dataset path changed; update shipped_spec");
+    path
 }
 
-/// The shipped `specs/<name>.toml` with its FSU dataset path pointed at `raw`,
-/// written into `dir`.
+/// Names of every shipped spec (`specs/*.toml`), sorted.
+pub fn shipped_spec_names() -> Vec<String> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs");
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().to_string())
+        .collect();
+    names.sort();
+    names
+}
+
+/// The shipped `specs/<name>.toml` with its FSU dataset path (if it has one) pointed
+/// at `raw`, written into `dir`.
 pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
     let file = format!("specs/{name}.toml");
     let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
     let text = shipped.replace("${AMREPRO_DATA:-../../shared/data}/fsu-linewidth", &raw.display().to_string());
-    assert_ne!(text, shipped, "{file}: dataset path changed; update this helper");
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path
