@@ -61,7 +61,7 @@ fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
     );
     let _ = writeln!(
         s,
-        "<p class=\"run\">spec <code>{}</code> (sha256 {}…), amrepro {}, total wall time {:.2} s</p>",
+        "<p class=\"run\">spec <code>{}</code> (sha256 {}…), amrepro {}, wall time of the last invocation {:.2} s</p>",
         escape(&m.spec_file.display().to_string()),
         &m.spec_sha256[..12.min(m.spec_sha256.len())],
         escape(&m.tool_version),
