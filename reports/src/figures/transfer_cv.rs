@@ -7,6 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -225,15 +226,7 @@ fn draw_boxes<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(cv.x_range(), 0.0..top_mm)?;
-    house_mesh(&mut chart)
-        .disable_x_mesh()
-        .x_desc("target-printer lines in training (n)")
-        .y_desc("held-out RMSE (mm)")
-        .x_labels(cv.n_train.len() + 2)
-        .x_label_formatter(&integer_label)
-        .y_label_formatter(&|y| format!("{y:.3}"))
-        .bold_line_style(BLACK.mix(0.08))
-        .draw()?;
+    draw_n_mesh(&mut chart, cv, "held-out RMSE (mm)", &|y| format!("{y:.3}"))?;
     let half_width = SLOT_WIDTH / cv.methods.len() as f64 * 0.4;
     for method in &cv.methods {
         let (label, colour, _) = method_label(method);
@@ -281,6 +274,25 @@ type BoxChart<'a, DB> =
     ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>;
 
 /// Labels whole numbers only: n_train is a count, ticks between counts stay unlabelled.
+/// The mesh both panels share: n on x (whole numbers only), `y_desc` and `y_format`
+/// on y, faint major grid lines across.
+fn draw_n_mesh<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    cv: &TransferCv,
+    y_desc: &str,
+    y_format: &dyn Fn(&f64) -> String,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    house_mesh(chart)
+        .disable_x_mesh()
+        .x_desc("target-printer lines in training (n)")
+        .y_desc(y_desc)
+        .x_labels(cv.n_train.len() + 2)
+        .x_label_formatter(&integer_label)
+        .y_label_formatter(y_format)
+        .bold_line_style(BLACK.mix(0.08))
+        .draw()
+}
+
 fn integer_label(x: &f64) -> String {
     if (x - x.round()).abs() < 1e-9 {
         format!("{x:.0}")
@@ -340,15 +352,7 @@ fn draw_improvement<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(cv.x_range(), (lo - pad)..(hi + pad))?;
-    house_mesh(&mut chart)
-        .disable_x_mesh()
-        .x_desc("target-printer lines in training (n)")
-        .y_desc("median RMSE improvement (%)")
-        .x_labels(cv.n_train.len() + 2)
-        .x_label_formatter(&integer_label)
-        .y_label_formatter(&|y| format!("{y:.0}"))
-        .bold_line_style(BLACK.mix(0.08))
-        .draw()?;
+    draw_n_mesh(&mut chart, cv, "median RMSE improvement (%)", &|y| format!("{y:.0}"))?;
     let (x_range, zero) = (cv.x_range(), BLACK.stroke_width(1));
     chart.draw_series(DashedLineSeries::new([(x_range.start, 0.0), (x_range.end, 0.0)], 6, 4, zero))?;
     for (method, points) in series {
