@@ -47,4 +47,11 @@ fn reproduces_the_cylinder_cuboid_and_recovery_targets() {
     let recovery = read(&tmp.path().join("out/inkjet/recovery.parquet"));
     let recovered = recovery.column("recovered").unwrap().bool().unwrap().iter().filter(|v| *v == Some(true)).count();
     assert_eq!((recovery.height(), recovered), (50, 50));
+    let comparison = read(&tmp.path().join("out/inkjet/paper_comparison.parquet"));
+    assert_eq!(comparison.height(), 13, "12 numbers of Figs 11-12 and Table II, plus the recovery count");
+    for figure in ["fig11", "fig12"] {
+        assert!(tmp.path().join("out/runs/lu2015").join(figure).join("inkjet_height_maps.png").is_file(), "{figure}");
+    }
+    let report = std::fs::read_to_string(tmp.path().join("out/report/index.html")).unwrap();
+    assert!(report.contains("Paper 002 vs ours") && report.contains("Where and why ours differs"));
 }

@@ -2,6 +2,7 @@
 //! figure as PNG and SVG, in the style of the paper it reproduces.
 
 mod infill;
+mod inkjet_height_maps;
 mod loo_predictions;
 mod r_surface;
 #[cfg(test)]
@@ -10,6 +11,7 @@ mod transfer_cv;
 mod width_profiles;
 
 pub use infill::InfillFigure;
+pub use inkjet_height_maps::InkjetHeightMapsFigure;
 pub use loo_predictions::LooPredictionsFigure;
 pub use r_surface::RSurfaceFigure;
 pub use transfer_cv::TransferCvFigure;
@@ -24,4 +26,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(RSurfaceFigure));
     registry.register(Box::new(TransferCvFigure));
     registry.register(Box::new(InfillFigure));
+    registry.register(Box::new(InkjetHeightMapsFigure));
 }

@@ -2,13 +2,43 @@
 //! writes `section.html` (embedded in the report) and `comparison.parquet` (paper's
 //! number beside ours, with where ours came from).
 
+mod lu2015;
 mod ren2021;
+
+pub use lu2015::Lu2015Section;
 
 pub use ren2021::Ren2021Section;
 
-use pipeline::Registry;
+use pipeline::{Registry, StageError};
+use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
 
 /// Registers every report-section kind.
 pub fn register(registry: &mut Registry) {
     registry.register(Box::new(Ren2021Section));
+    registry.register(Box::new(Lu2015Section));
+}
+
+/// One comparison row.
+pub(crate) struct Row {
+    pub(crate) section: &'static str,
+    pub(crate) item: String,
+    pub(crate) paper: Option<f64>,
+    pub(crate) ours: f64,
+    pub(crate) unit: &'static str,
+    pub(crate) source: String,
+}
+
+/// The long comparison table: section, item, paper_value (null where the paper has
+/// none), our_value, unit, source.
+pub(crate) fn comparison_frame(rows: &[Row]) -> Result<DataFrame, StageError> {
+    let str_col = |name: &str, v: Vec<String>| -> Column { Series::new(name.into(), v).into_column() };
+    let columns = vec![
+        str_col("section", rows.iter().map(|r| r.section.to_string()).collect()),
+        str_col("item", rows.iter().map(|r| r.item.clone()).collect()),
+        Series::new("paper_value".into(), rows.iter().map(|r| r.paper).collect::<Vec<Option<f64>>>()).into_column(),
+        Series::new("our_value".into(), rows.iter().map(|r| r.ours).collect::<Vec<f64>>()).into_column(),
+        str_col("unit", rows.iter().map(|r| r.unit.to_string()).collect()),
+        str_col("source", rows.iter().map(|r| r.source.clone()).collect()),
+    ];
+    DataFrame::new(rows.len(), columns).map_err(|source| StageError::Table { path: "comparison".into(), source })
 }

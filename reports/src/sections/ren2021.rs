@@ -12,8 +12,8 @@ use std::path::Path;
 
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
-use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
 
+use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
 use crate::read::{f64s, read_parquet, strs};
 
@@ -35,16 +35,6 @@ pub const TABLE_II: [(&str, f64, f64, f64); 9] = [
 
 /// Paper 000 Fig. 9 / Sec. IV: the largest median improvement with 1-2 lines (%).
 pub const PAPER_MAX_IMPROVEMENT_PCT: f64 = 24.0;
-
-/// One comparison row.
-struct Row {
-    section: &'static str,
-    item: String,
-    paper: Option<f64>,
-    ours: f64,
-    unit: &'static str,
-    source: String,
-}
 
 /// Leave-one-out results keyed by (printer, model, condition) → (rmse, r_a, r_f).
 type LooMap = BTreeMap<(String, String, String), (f64, f64, f64)>;
@@ -291,19 +281,6 @@ fn extremes(loo: &LooMap, printer: &str, model: &str) -> (String, String) {
     v.sort_by(|a, b| a.1.total_cmp(&b.1));
     let fmt = |x: Option<&(&String, f64)>| x.map_or("—".into(), |(c, r)| format!("{c} ({r:.3} mm)"));
     (fmt(v.last()), fmt(v.first()))
-}
-
-fn comparison_frame(rows: &[Row]) -> Result<DataFrame, StageError> {
-    let str_col = |name: &str, v: Vec<String>| -> Column { Series::new(name.into(), v).into_column() };
-    let columns = vec![
-        str_col("section", rows.iter().map(|r| r.section.to_string()).collect()),
-        str_col("item", rows.iter().map(|r| r.item.clone()).collect()),
-        Series::new("paper_value".into(), rows.iter().map(|r| r.paper).collect::<Vec<Option<f64>>>()).into_column(),
-        Series::new("our_value".into(), rows.iter().map(|r| r.ours).collect::<Vec<f64>>()).into_column(),
-        str_col("unit", rows.iter().map(|r| r.unit.to_string()).collect()),
-        str_col("source", rows.iter().map(|r| r.source.clone()).collect()),
-    ];
-    DataFrame::new(rows.len(), columns).map_err(|source| StageError::Table { path: "comparison".into(), source })
 }
 
 #[cfg(test)]
