@@ -5,8 +5,9 @@
 use std::path::Path;
 use std::sync::Once;
 
-use plotters::chart::{ChartContext, MeshStyle};
+use plotters::chart::{ChartContext, MeshStyle, SeriesLabelPosition};
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
+use plotters::coord::CoordTranslate;
 use plotters::coord::{cartesian::Cartesian2d, Shift};
 use plotters::prelude::*;
 
@@ -87,4 +88,23 @@ where
     let mut mesh = chart.configure_mesh();
     mesh.label_style(text(14.0)).axis_desc_style(text(15.0)).light_line_style(WHITE);
     mesh
+}
+
+/// Draws the series legend of `chart` at `position` in the house style: the embedded
+/// font at 14 px on a translucent white box with a faint border.
+pub fn draw_house_legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(text(14.0))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.4))
+        .draw()
 }

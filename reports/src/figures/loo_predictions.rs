@@ -15,7 +15,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
-use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
+use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_loo_predictions` stage kind.
 pub struct LooPredictionsFigure;
@@ -253,13 +253,7 @@ fn draw_panel<DB: DrawingBackend>(
         .y_label_formatter(&|y| format!("{y:.1}"))
         .draw()?;
     draw_lines(&mut chart, line, model)?;
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .label_font(text(14.0))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .draw()
+    draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)
 }
 
 fn draw_lines<DB: DrawingBackend>(

@@ -16,7 +16,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
-use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
+use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_transfer_cv` stage kind.
 pub struct TransferCvFigure;
@@ -242,13 +242,7 @@ fn draw_boxes<DB: DrawingBackend>(
             draw_box_lines(&mut chart, *x, half_width, s, colour, top_mm)?;
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(text(14.0))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .draw()
+    draw_house_legend(&mut chart, SeriesLabelPosition::UpperRight)
 }
 
 /// Every (box centre x, method, stats) to draw, methods in legend order.
@@ -364,13 +358,7 @@ fn draw_improvement<DB: DrawingBackend>(
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
         chart.draw_series(points.iter().map(|&p| Circle::new(p, 4, colour.filled())))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(text(14.0))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK.mix(0.4))
-        .draw()
+    draw_house_legend(&mut chart, SeriesLabelPosition::UpperRight)
 }
 
 #[cfg(test)]
