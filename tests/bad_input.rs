@@ -153,3 +153,19 @@ fn spec_typos_name_the_field() {
         assert!(!tmp.path().join("out").exists(), "nothing written for an invalid spec");
     }
 }
+
+/// Parameters valid one by one but not together fail when the stage runs, naming
+/// the stage and what was expected, and publish nothing.
+#[test]
+fn steady_window_that_ends_before_it_starts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = fsu_spec(tmp.path(), &data_root().join("fsu-linewidth"));
+    let text = std::fs::read_to_string(&spec).unwrap().replace("steady_from_mm = 50.0", "steady_from_mm = 90.0");
+    std::fs::write(&spec, text).unwrap();
+    let err = fails(tmp.path(), &["run", spec.to_str().unwrap()]);
+    assert!(
+        err.contains("stage `line_summary` params: expected steady_from_mm < steady_to_mm, got 90 and 80"),
+        "{err}"
+    );
+    assert!(!tmp.path().join("out/fdm/line_summary.parquet").exists());
+}

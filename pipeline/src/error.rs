@@ -36,6 +36,15 @@ pub enum StageError {
         /// What was expected there.
         expected: String,
     },
+    /// Parameters that pass their one-by-one checks but not a check across them
+    /// (e.g. a window's start after its end), found when the stage runs.
+    #[error("stage `{stage}` params: {message}")]
+    Params {
+        /// The stage name in the spec.
+        stage: String,
+        /// What was wrong and what was expected.
+        message: String,
+    },
     /// A file could not be read or written.
     #[error("{}: {source}", path.display())]
     Io {

@@ -119,7 +119,7 @@ impl StageKind for InfillStage {
         let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
         let params = PiecewiseParams { has_start_blob: p.bool("start_blob"), ..PiecewiseParams::paper_defaults() }
             .check()
-            .map_err(|e| fit_failed("piecewise parameters", e))?;
+            .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
         let model = models::fdm::fit(&printer.lines, &params).map_err(|e| fit_failed("piecewise fit", e))?;
         let mut stats = StatsRows::default();
         let mut map = MapRows::default();

@@ -155,13 +155,9 @@ fn check_windows(ctx: &StageContext) -> Result<SummaryWindows, StageError> {
         end_window_mm: p.f64("end_window_mm"),
     };
     if w.steady_from_mm >= w.steady_to_mm {
-        return Err(StageError::BadInput {
-            file: format!("stage {} params", ctx.stage).into(),
-            location: Some("steady_from_mm".into()),
-            expected: format!(
-                "expected steady_from_mm < steady_to_mm, got {} and {}",
-                w.steady_from_mm, w.steady_to_mm
-            ),
+        return Err(StageError::Params {
+            stage: ctx.stage.clone(),
+            message: format!("expected steady_from_mm < steady_to_mm, got {} and {}", w.steady_from_mm, w.steady_to_mm),
         });
     }
     Ok(w)

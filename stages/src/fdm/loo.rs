@@ -158,7 +158,7 @@ impl StageKind for LagLooStage {
             ..LagParams::paper_defaults()
         }
         .check()
-        .map_err(|e| fit_failed("lag parameters", e))?;
+        .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
         let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
         let folds = run_folds(&printer.lines, |train, test, _| {
             let model = fit_lag(train, &params)?;
@@ -182,11 +182,7 @@ fn piecewise_params(ctx: &StageContext) -> Result<PiecewiseValidParams, StageErr
         ..PiecewiseParams::paper_defaults()
     }
     .check()
-    .map_err(|e| StageError::BadInput {
-        file: format!("stage {} params", ctx.stage).into(),
-        location: None,
-        expected: e.to_string(),
-    })
+    .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })
 }
 
 fn write_loo(ctx: &mut StageContext, printer: &PrinterLines, model: &str, folds: &[Fold]) -> Result<(), StageError> {
