@@ -15,7 +15,9 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
-use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
+use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
+
+use super::draw_width_profile_mesh;
 
 /// The `figure.fdm_loo_predictions` stage kind.
 pub struct LooPredictionsFigure;
@@ -246,12 +248,7 @@ fn draw_panel<DB: DrawingBackend>(
         .x_label_area_size(40)
         .y_label_area_size(56)
         .build_cartesian_2d(x_min..x_max, 0.0..width_max_mm)?;
-    house_mesh(&mut chart)
-        .x_desc("position along the line (mm)")
-        .y_desc("width (mm)")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.1}"))
-        .draw()?;
+    draw_width_profile_mesh(&mut chart)?;
     draw_lines(&mut chart, line, model)?;
     draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)
 }

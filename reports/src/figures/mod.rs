@@ -18,6 +18,11 @@ pub use transfer_cv::TransferCvFigure;
 pub use width_profiles::WidthProfilesFigure;
 
 use pipeline::Registry;
+use plotters::coord::cartesian::Cartesian2d;
+use plotters::coord::types::RangedCoordf64;
+use plotters::prelude::{ChartContext, DrawingAreaErrorKind, DrawingBackend};
+
+use crate::style::house_mesh;
 
 /// Registers every figure kind.
 pub fn register(registry: &mut Registry) {
@@ -27,4 +32,17 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(TransferCvFigure));
     registry.register(Box::new(InfillFigure));
     registry.register(Box::new(InkjetHeightMapsFigure));
+}
+
+/// The axes of a line-width profile (paper 000 Figs 3, 6): position along the line
+/// (mm, whole numbers) against width (mm, one decimal).
+fn draw_width_profile_mesh<DB: DrawingBackend>(
+    chart: &mut ChartContext<DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    house_mesh(chart)
+        .x_desc("position along the line (mm)")
+        .y_desc("width (mm)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .draw()
 }

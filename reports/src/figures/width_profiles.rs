@@ -14,7 +14,9 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::read::{f64s, read_parquet, strs};
-use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
+use crate::style::{draw_png_and_svg, text, PALETTE};
+
+use super::draw_width_profile_mesh;
 
 /// The `figure.fdm_width_profiles` stage kind.
 pub struct WidthProfilesFigure;
@@ -146,12 +148,7 @@ fn draw_panel<DB: DrawingBackend>(
         .x_label_area_size(36)
         .y_label_area_size(52)
         .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
-    house_mesh(&mut chart)
-        .x_desc("position along the line (mm)")
-        .y_desc("width (mm)")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y:.1}"))
-        .draw()?;
+    draw_width_profile_mesh(&mut chart)?;
     chart.draw_series(LineSeries::new(p.points.iter().copied(), color.stroke_width(2)))?;
     if let Some(steady) = p.steady_width_mm {
         let dashed = DashedLineSeries::new([(0.0, steady), (x_max, steady)], 6, 4, BLACK.stroke_width(1));
