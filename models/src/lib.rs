@@ -11,3 +11,4 @@
 
 pub mod fdm;
 pub mod inkjet;
+pub mod thermal;

@@ -1,0 +1,49 @@
+//! Parameter errors of the paper-003 models (Chen et al.).
+
+use thiserror::Error;
+
+/// An input of the thermal-monitoring models that cannot be used.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ThermalError {
+    /// A parameter that must be positive and finite is not.
+    #[error("{name} must be positive and finite, got {value}")]
+    NotPositive {
+        /// Parameter name with unit.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// A path needs at least three distinct vertices to be closed.
+    #[error("a closed path needs at least 3 vertices, got {found}")]
+    TooFewVertices {
+        /// Number of vertices given.
+        found: usize,
+    },
+    /// A corner's blend does not fit between its neighbours.
+    #[error(
+        "corner {corner}: blending needs {needed_mm:.3} mm of each edge, the shorter edge has {available_mm:.3} mm"
+    )]
+    BlendDoesNotFit {
+        /// Vertex index.
+        corner: usize,
+        /// Tangent length the blend needs.
+        needed_mm: f64,
+        /// Half the shorter adjacent edge.
+        available_mm: f64,
+    },
+    /// Two samples of a trajectory table disagree in length or spacing.
+    #[error("trajectory table: {message}")]
+    BadTrajectory {
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Checks that a value is positive and finite.
+pub(crate) fn positive(name: &'static str, value: f64) -> Result<f64, ThermalError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        Err(ThermalError::NotPositive { name, value })
+    }
+}

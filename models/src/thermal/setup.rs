@@ -1,0 +1,141 @@
+//! The printing parameters of paper 003 (Table 1) and the corner test path (Fig. 7a).
+//!
+//! The paper does not give the test path's coordinates, only that it has "different
+//! angles of corners" (Fig. 7a, "4 types of corners", Sec. 3.3). Ours is a closed,
+//! counter-clockwise path: a 37 mm base and a zig-zag top of four teeth with apex
+//! angles of 45°, 60°, 90° and 120°, so that the valleys between them add corners of
+//! 52.5°, 75° and 105° and the path has eleven corners in all. Teeth 5 mm high keep
+//! four or more corners within the camera's field of view (about 20 mm wide at
+//! 14.5 mm and 45°) over most of the top, which the homography needs (eq. 27).
+
+use super::errors::{positive, ThermalError};
+
+/// The process parameters the planner, the deposition model and the virtual printer share.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrintSetup {
+    /// Programmed feed (mm/s), Table 1: 20 mm/s.
+    pub feed_mm_s: f64,
+    /// Acceleration limit (mm/s²), Table 1: 500 mm/s².
+    pub accel_mm_s2: f64,
+    /// Corner blending tolerance (mm), Table 1: 0.05 mm.
+    pub blend_tol_mm: f64,
+    /// Layer height h (mm), Table 1: 0.25 mm.
+    pub layer_height_mm: f64,
+    /// Nozzle diameter (mm), Table 1: 0.4 mm.
+    pub nozzle_mm: f64,
+    /// Nominal bead width 2·w0 of a straight line (mm). Not in the paper, whose w0
+    /// depends on its feed-to-deposition ratio (Sec. 3.2); 0.45 mm is the usual
+    /// extrusion width for a 0.4 mm nozzle (1.125 × nozzle).
+    pub bead_width_mm: f64,
+    /// Deposition time constant τ of eq. 34 (s), Sec. 3.2: 0.0873 s.
+    pub tau_s: f64,
+    /// Nozzle temperature (°C), Table 1: 230 °C.
+    pub nozzle_temp_c: f64,
+    /// Bed temperature (°C), Table 1: 60 °C.
+    pub bed_temp_c: f64,
+    /// Number of layers of the test part (Fig. 7b): 20.
+    pub layers: usize,
+    /// Sampling period T_s of the trajectory (s). The paper leaves it open (eq. 20);
+    /// 1 ms resolves a 20 mm/s path to 0.02 mm, a tenth of the blend radius of a 90° corner.
+    pub sample_period_s: f64,
+}
+
+impl PrintSetup {
+    /// Table 1 of the paper, with the choices above where it is silent.
+    pub fn paper_defaults() -> Self {
+        Self {
+            feed_mm_s: 20.0,
+            accel_mm_s2: 500.0,
+            blend_tol_mm: 0.05,
+            layer_height_mm: 0.25,
+            nozzle_mm: 0.4,
+            bead_width_mm: 0.45,
+            tau_s: 0.0873,
+            nozzle_temp_c: 230.0,
+            bed_temp_c: 60.0,
+            layers: 20,
+            sample_period_s: 0.001,
+        }
+    }
+
+    /// Checks that every quantity is positive and finite.
+    pub fn check(self) -> Result<Self, ThermalError> {
+        positive("feed_mm_s", self.feed_mm_s)?;
+        positive("accel_mm_s2", self.accel_mm_s2)?;
+        positive("blend_tol_mm", self.blend_tol_mm)?;
+        positive("layer_height_mm", self.layer_height_mm)?;
+        positive("nozzle_mm", self.nozzle_mm)?;
+        positive("bead_width_mm", self.bead_width_mm)?;
+        positive("tau_s", self.tau_s)?;
+        positive("sample_period_s", self.sample_period_s)?;
+        if self.layers == 0 {
+            return Err(ThermalError::NotPositive { name: "layers", value: 0.0 });
+        }
+        Ok(self)
+    }
+
+    /// Steady commanded flow E for a straight line at speed `speed_mm_s` (mm³/s):
+    /// the bead cross-section (width × layer height) times the speed, paper eq. 3
+    /// with w = w0 (E = 2·h·|v|·w0).
+    pub fn nominal_flow_mm3_s(&self, speed_mm_s: f64) -> f64 {
+        self.bead_width_mm * self.layer_height_mm * speed_mm_s
+    }
+}
+
+/// Height of each tooth of the test path's zig-zag top (mm).
+pub const TOOTH_HEIGHT_MM: f64 = 5.0;
+/// Height of the straight sides below the zig-zag (mm).
+pub const BASE_HEIGHT_MM: f64 = 8.0;
+/// Apex angles of the four teeth, right to left in print order (degrees).
+pub const TOOTH_APEX_DEG: [f64; 4] = [120.0, 90.0, 60.0, 45.0];
+
+/// Vertices of the corner test path (mm), counter-clockwise, starting at the
+/// bottom-left corner. The path is closed: the last vertex joins the first.
+pub fn corner_test_path() -> Vec<[f64; 2]> {
+    let half_bases: Vec<f64> =
+        TOOTH_APEX_DEG.iter().map(|deg| TOOTH_HEIGHT_MM * (deg.to_radians() / 2.0).tan()).collect();
+    let width_mm: f64 = 2.0 * half_bases.iter().sum::<f64>();
+    let mut vertices = vec![[0.0, 0.0], [width_mm, 0.0], [width_mm, BASE_HEIGHT_MM]];
+    let mut x = width_mm;
+    for half in &half_bases {
+        vertices.push([x - half, BASE_HEIGHT_MM + TOOTH_HEIGHT_MM]);
+        x -= 2.0 * half;
+        vertices.push([x, BASE_HEIGHT_MM]);
+    }
+    // The last valley is the top-left corner itself: (0, BASE_HEIGHT_MM).
+    vertices
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn interior_angle_deg(prev: [f64; 2], at: [f64; 2], next: [f64; 2]) -> f64 {
+        let a = [prev[0] - at[0], prev[1] - at[1]];
+        let b = [next[0] - at[0], next[1] - at[1]];
+        let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
+        cos.acos().to_degrees()
+    }
+
+    #[test]
+    fn test_path_has_the_stated_corner_angles() {
+        let v = corner_test_path();
+        let n = v.len();
+        let angles: Vec<f64> = (0..n).map(|i| interior_angle_deg(v[(i + n - 1) % n], v[i], v[(i + 1) % n])).collect();
+        // Apexes are at vertices 3, 5, 7, 9; valleys at 4, 6, 8.
+        for (k, apex) in TOOTH_APEX_DEG.iter().enumerate() {
+            assert!((angles[3 + 2 * k] - apex).abs() < 1e-9, "apex {k}: {}", angles[3 + 2 * k]);
+        }
+        for (k, pair) in TOOTH_APEX_DEG.windows(2).enumerate() {
+            let valley = (pair[0] + pair[1]) / 2.0;
+            assert!((angles[4 + 2 * k] - valley).abs() < 1e-9, "valley {k}: {}", angles[4 + 2 * k]);
+        }
+        assert_eq!(n, 11);
+        assert!(v[10][0].abs() < 1e-12 && (v[10][1] - BASE_HEIGHT_MM).abs() < 1e-12);
+    }
+
+    #[test]
+    fn paper_defaults_are_valid() {
+        assert!(PrintSetup::paper_defaults().check().is_ok());
+    }
+}
