@@ -31,6 +31,14 @@ pub enum ThermalError {
         /// Half the shorter adjacent edge.
         available_mm: f64,
     },
+    /// The deposition direction allocation could not place a span's rotation (Sec. 2.2).
+    #[error("deposition direction allocation: the span at t = {t_s:.4} s leaves {residual_rad} rad unplaced")]
+    DirectionAllocation {
+        /// Start time of the violating span (s).
+        t_s: f64,
+        /// Rotation left over (rad); NaN when the span limit was reached.
+        residual_rad: f64,
+    },
     /// Two samples of a trajectory table disagree in length or spacing.
     #[error("trajectory table: {message}")]
     BadTrajectory {
