@@ -39,6 +39,20 @@ pub enum ThermalError {
         /// Rotation left over (rad); NaN when the span limit was reached.
         residual_rad: f64,
     },
+    /// Compensation bounds that exclude zero (the fixed end control points of eq. 39).
+    #[error("compensation bounds must satisfy min <= 0 <= max, got [{min}, {max}] mm/s")]
+    BadBounds {
+        /// ΔV_min (mm/s).
+        min: f64,
+        /// ΔV_max (mm/s).
+        max: f64,
+    },
+    /// The bounded least-squares solve of eq. 39 failed (singular basis or no convergence).
+    #[error("bounded least squares with {unknowns} unknowns did not converge or is singular")]
+    BoundedLeastSquares {
+        /// Number of free control values.
+        unknowns: usize,
+    },
     /// Two samples of a trajectory table disagree in length or spacing.
     #[error("trajectory table: {message}")]
     BadTrajectory {

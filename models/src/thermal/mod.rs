@@ -11,11 +11,14 @@
 //!   left/right half widths of a curved bead (eqs 8-11) and the slender condition (eq. 12).
 //! - [`dda`]: the deposition direction allocation of Sec. 2.2 (eqs 13-26) and the bead
 //!   boundary points of Fig. 3.
+//! - [`compensation`]: the width error, compensation spans and the filtered B-spline
+//!   compensation of Sec. 2.4 (eqs 31-39).
 //!
 //! Architecture Invariant: pure numerics: no I/O; the planner and the dynamics are
 //! shared by the virtual printer (`datasets`) and the analysis stages, so both see the
 //! same commanded trajectory.
 
+pub mod compensation;
 pub mod dda;
 pub mod deposit;
 pub mod dynamics;
