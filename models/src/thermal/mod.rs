@@ -13,6 +13,8 @@
 //!   boundary points of Fig. 3.
 //! - [`compensation`]: the width error, compensation spans and the filtered B-spline
 //!   compensation of Sec. 2.4 (eqs 31-39).
+//! - [`metrics`]: the ideal (CAD) bead, the over-deposition index (eq. 40) and the
+//!   contour error (eq. 41) on deposited layers.
 //!
 //! Architecture Invariant: pure numerics: no I/O; the planner and the dynamics are
 //! shared by the virtual printer (`datasets`) and the analysis stages, so both see the
@@ -24,6 +26,7 @@ pub mod deposit;
 pub mod dynamics;
 pub mod errors;
 pub mod geometry;
+pub mod metrics;
 pub mod setup;
 pub mod trajectory;
 
