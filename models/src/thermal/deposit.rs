@@ -40,7 +40,7 @@ impl DepositGrid {
         let fx = (point_mm[0] - self.origin_mm[0]) / self.cell_mm;
         let fy = (point_mm[1] - self.origin_mm[1]) / self.cell_mm;
         let inside = fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64;
-        inside.then(|| (fx as usize, fy as usize))
+        inside.then_some((fx as usize, fy as usize))
     }
 
     /// Deposited area (mm²): the fill fractions times the cell area.

@@ -31,6 +31,28 @@ pub enum ThermalError {
         /// Half the shorter adjacent edge.
         available_mm: f64,
     },
+    /// The deposition direction allocation could not place a span's rotation (Sec. 2.2).
+    #[error("deposition direction allocation: the span at t = {t_s:.4} s leaves {residual_rad} rad unplaced")]
+    DirectionAllocation {
+        /// Start time of the violating span (s).
+        t_s: f64,
+        /// Rotation left over (rad); NaN when the span limit was reached.
+        residual_rad: f64,
+    },
+    /// Compensation bounds that exclude zero (the fixed end control points of eq. 39).
+    #[error("compensation bounds must satisfy min <= 0 <= max, got [{min}, {max}] mm/s")]
+    BadBounds {
+        /// ΔV_min (mm/s).
+        min: f64,
+        /// ΔV_max (mm/s).
+        max: f64,
+    },
+    /// The bounded least-squares solve of eq. 39 failed (singular basis or no convergence).
+    #[error("bounded least squares with {unknowns} unknowns did not converge or is singular")]
+    BoundedLeastSquares {
+        /// Number of free control values.
+        unknowns: usize,
+    },
     /// Two samples of a trajectory table disagree in length or spacing.
     #[error("trajectory table: {message}")]
     BadTrajectory {
