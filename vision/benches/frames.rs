@@ -1,0 +1,2 @@
+//! Placeholder until the frame benches land.
+fn main() {}
