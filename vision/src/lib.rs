@@ -11,6 +11,10 @@
 #![deny(missing_docs)]
 
 pub mod camera;
+pub mod corners;
 pub mod frame;
 pub mod homography;
 pub mod localize;
+pub mod matching;
+pub mod synth;
+pub mod widths;
