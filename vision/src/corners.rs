@@ -58,7 +58,7 @@ impl CornerParams {
             band_hi_c: 150.0,
             sigma_px: 1.0,
             nms_radius_px: 3,
-            min_eigen_ratio: 0.15,
+            min_eigen_ratio: 0.05,
             min_curvature_c_px2: 0.05,
             edge_margin_frac: 0.05,
         }

@@ -16,5 +16,6 @@ pub mod frame;
 pub mod homography;
 pub mod localize;
 pub mod matching;
+pub mod pipeline;
 pub mod synth;
 pub mod widths;
