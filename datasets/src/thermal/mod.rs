@@ -1,0 +1,8 @@
+//! The virtual extrusion printer with a nozzle-mounted thermal camera (DESIGN §5.3,
+//! paper 003: Chen, Yang, Liu, Duan), writing `thermal-sequence` datasets (DESIGN §4).
+//!
+//! Code map, one file per step:
+//! - [`effects`]: the named, switchable extra effects and their strengths.
+//! - [`deposition`]: v_e → E = G(s)·E_cmd (eq. 34) → material on a fine grid by mass conservation.
+pub mod deposition;
+pub mod effects;
