@@ -105,9 +105,11 @@ pub fn print_part<R: Rng>(
 pub fn grid_for(trajectory: &Trajectory) -> DepositGrid {
     let fold = |v: &[f64], f: fn(f64, f64) -> f64, init: f64| v.iter().copied().fold(init, f);
     let min = [fold(&trajectory.x_mm, f64::min, f64::INFINITY), fold(&trajectory.y_mm, f64::min, f64::INFINITY)];
-    let max = [fold(&trajectory.x_mm, f64::max, f64::NEG_INFINITY), fold(&trajectory.y_mm, f64::max, f64::NEG_INFINITY)];
+    let max =
+        [fold(&trajectory.x_mm, f64::max, f64::NEG_INFINITY), fold(&trajectory.y_mm, f64::max, f64::NEG_INFINITY)];
     // Snap the origin to the cell lattice so that grids of the same path coincide.
-    let origin = [((min[0] - MARGIN_MM) / CELL_MM).floor() * CELL_MM, ((min[1] - MARGIN_MM) / CELL_MM).floor() * CELL_MM];
+    let origin =
+        [((min[0] - MARGIN_MM) / CELL_MM).floor() * CELL_MM, ((min[1] - MARGIN_MM) / CELL_MM).floor() * CELL_MM];
     DepositGrid::covering(origin, [max[0] + MARGIN_MM, max[1] + MARGIN_MM], CELL_MM)
 }
 

@@ -77,9 +77,7 @@ impl Effects {
             "heat_diffusion_widening" => {
                 (&mut self.heat_diffusion_widening, (0.0..=20.0).contains(&strength), "[0, 20]")
             }
-            "layer_heat_accumulation" => {
-                (&mut self.layer_heat_accumulation, (0.0..=1.0).contains(&strength), "[0, 1]")
-            }
+            "layer_heat_accumulation" => (&mut self.layer_heat_accumulation, (0.0..=1.0).contains(&strength), "[0, 1]"),
             _ => return Err(EffectError::Unknown { name: name.to_string() }),
         };
         if !(strength.is_finite() && ok) {

@@ -4,5 +4,7 @@
 //! Code map, one file per step:
 //! - [`effects`]: the named, switchable extra effects and their strengths.
 //! - [`deposition`]: v_e → E = G(s)·E_cmd (eq. 34) → material on a fine grid by mass conservation.
+//! - [`heat`]: the temperature field: Newton cooling plus lateral diffusion (exact Green's function, binned).
 pub mod deposition;
 pub mod effects;
+pub mod heat;
