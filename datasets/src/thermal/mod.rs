@@ -5,6 +5,8 @@
 //! - [`effects`]: the named, switchable extra effects and their strengths.
 //! - [`deposition`]: v_e → E = G(s)·E_cmd (eq. 34) → material on a fine grid by mass conservation.
 //! - [`heat`]: the temperature field: Newton cooling plus lateral diffusion (exact Green's function, binned).
+//! - [`camera`]: the nozzle-mounted Lepton: mount, distortion, rendering, capture schedule (eq. 28).
+pub mod camera;
 pub mod deposition;
 pub mod effects;
 pub mod heat;
