@@ -292,7 +292,7 @@ fn write_description(
     staged.write("process.toml", sequence::to_toml(&process_file(setup, config.layers.max(1))).as_bytes())?;
     let mut path = String::from("vertex,x_mm,y_mm\n");
     for (i, v) in corner_test_path().iter().enumerate() {
-        let _ = writeln!(path, "{i},{:.6},{:.6}", v[0], v[1]);
+        let _ = writeln!(path, "{i},{},{}", v[0], v[1]);
     }
     staged.write("path.csv", path.as_bytes())?;
     let mut table = String::from("t_s,x_mm,y_mm,e_mm3_s\n");
@@ -402,4 +402,157 @@ fn write_truth(
         widths.push_str(rows);
     }
     staged.write(dir.join("widths.csv"), widths.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn generated(config: &GenerateConfig) -> (tempfile::TempDir, PathBuf, GenerateSummary) {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("thermal");
+        let summary = generate(config, &out).unwrap();
+        (dir, out, summary)
+    }
+
+    fn all_files(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+        let mut out = BTreeMap::new();
+        let mut stack = vec![root.to_path_buf()];
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else {
+                    out.insert(path.strip_prefix(root).unwrap().to_path_buf(), std::fs::read(&path).unwrap());
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn written_dataset_reads_back() {
+        let effects = Effects::from_pairs([("tau_mismatch", 0.5)]).unwrap();
+        let (_tmp, out, summary) = generated(&GenerateConfig { seed: 5, effects, ..GenerateConfig::default() });
+        let seq = ThermalSequence::open(&out).unwrap();
+        assert_eq!(seq.frames.len(), summary.frames);
+        assert!(summary.frames >= 40 && summary.corners_in_view > 0);
+        assert!(seq.frames.iter().all(|f| seq.frame_path(f).is_file()));
+        let Provenance::Virtual { generator, seed, effects: recorded, .. } = &seq.manifest.provenance else {
+            panic!("virtual provenance expected")
+        };
+        assert_eq!((generator.as_str(), *seed, recorded.get("tau_mismatch")), (GENERATOR, 5, Some(&0.5)));
+        assert_eq!(seq.trajectory.t_s.len(), Trajectory::corner_test(&PrintSetup::paper_defaults()).unwrap().len());
+        assert_eq!(seq.path_mm, corner_test_path());
+        let [u, v] = seq.camera.nozzle_px;
+        assert!((u - 79.5).abs() < 10.0 && (v - 59.5).abs() < 10.0, "nozzle near the image centre: {u} {v}");
+        let truth = ThermalTruth::open(&out).unwrap();
+        assert!((truth.truth.tau_s - 0.0873 * 1.5).abs() < 1e-12);
+        assert_eq!(truth.frames.len(), summary.frames);
+        assert_eq!(truth.widths.len(), seq.trajectory.t_s.len());
+        // The decoded deposit holds the extruded volume ∫E dt, E = G(s)·E_cmd with the true
+        // τ times the layer's flow factor, to the PNG's 1/65535 quantisation.
+        let deposit = truth.deposit(0).unwrap();
+        let volume = deposit.area_mm2() * seq.process.layer_height_mm;
+        let dt = seq.process.sample_period_s;
+        let flow = models::thermal::dynamics::first_order_lag(&seq.trajectory.e_mm3_s, dt, truth.truth.tau_s, 0.0);
+        let expected = flow.iter().sum::<f64>() * dt * truth.truth.flow_factor[0];
+        assert!((volume - expected).abs() < 1e-4 * expected, "{volume} vs {expected}");
+    }
+
+    #[test]
+    fn output_is_byte_identical_whatever_the_thread_count() {
+        let config = GenerateConfig {
+            seed: 11,
+            layers: 2,
+            lepton_habits: LeptonHabits { repeated_frames: true, shutter_freeze: true },
+            ..GenerateConfig::default()
+        };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let (tmp, out, _) = pool.install(|| generated(&config));
+            (tmp, all_files(&out))
+        };
+        let ((_a, one), (_b, two)) = (run(1), run(2));
+        assert_eq!(one.keys().collect::<Vec<_>>(), two.keys().collect::<Vec<_>>());
+        for (name, bytes) in &one {
+            assert!(bytes == &two[name], "{} differs", name.display());
+        }
+    }
+
+    #[test]
+    fn fresh_sharp_corners_are_local_temperature_maxima() {
+        // Where the bulge of a corner of 90° or less lies, the frame is hottest: the
+        // brightest pixel within 6 px of the true corner pixel lies within ~2 px of it.
+        let (_tmp, out, _) = generated(&GenerateConfig::default());
+        let (seq, truth) = (ThermalSequence::open(&out).unwrap(), ThermalTruth::open(&out).unwrap());
+        let tr = Trajectory::corner_test(&PrintSetup::paper_defaults()).unwrap();
+        let sharp: Vec<usize> = tr.corners.iter().filter(|c| c.interior_angle_deg <= 90.0).map(|c| c.vertex).collect();
+        let mut distances = Vec::new();
+        for c in truth.corners.iter().filter(|c| sharp.contains(&c.vertex) && c.age_s > 0.1 && c.age_s < 0.8) {
+            let entry = seq.frames.iter().find(|f| f.layer == c.layer && f.frame == c.frame).unwrap();
+            let (w, h, pixels) = sequence::read_png16(&seq.frame_path(entry)).unwrap();
+            distances.push(distance_to_local_max(&pixels, w, h, c.pixel, 6));
+        }
+        distances.sort_by(f64::total_cmp);
+        assert!(distances.len() >= 20, "{} fresh sharp corners in view", distances.len());
+        let median = distances[distances.len() / 2];
+        assert!(median <= 2.0 && *distances.last().unwrap() <= 3.0, "{distances:?}");
+    }
+
+    #[test]
+    fn frames_decode_to_the_rendered_temperatures() {
+        // Rendered °C → centi-kelvin PNG → °C again: exact to the 0.005 K quantisation
+        // without noise; with the 50 mK noise the mean absolute difference is ≈ 0.04 K.
+        let setup = PrintSetup::paper_defaults();
+        let tr = Trajectory::corner_test(&setup).unwrap();
+        let deposits =
+            deposition::print_part(&setup, &tr, &tr.speed_mm_s(), 1, &Effects::none(), &mut stream(1, 1)).unwrap();
+        let heat = &layer_heats(&setup, &tr, &deposits, &Effects::none())[0];
+        let rays = camera::pixel_rays(&Intrinsics::lepton35(), &Distortion::lepton35());
+        let pose = Mount::nominal().pose(nozzle_at(&tr, 3.0));
+        let (min, max) = camera::footprint_mm(&pose, &rays);
+        let temps_c = camera::render_temperatures_c(&heat.field(3.0, min, max), &pose, &rays);
+        let decode = |pixels: &[u16]| {
+            let png = sequence::encode_png16(WIDTH_PX, HEIGHT_PX, pixels);
+            let dir = tempfile::tempdir().unwrap();
+            std::fs::write(dir.path().join("f.png"), png).unwrap();
+            let (_, _, back) = sequence::read_png16(&dir.path().join("f.png")).unwrap();
+            back.iter().map(|v| f64::from(*v) / 100.0 - camera::KELVIN_AT_ZERO_C).collect::<Vec<f64>>()
+        };
+        let exact: Vec<u16> = temps_c.iter().map(|t| camera::to_centikelvin(*t)).collect();
+        let back = decode(&exact);
+        assert!(temps_c.iter().zip(&back).all(|(a, b)| (a - b).abs() <= 0.005 + 1e-9));
+        let noisy = decode(&camera::to_radiometric(&temps_c, &mut stream(1, 9)));
+        let mean_abs = temps_c.iter().zip(&noisy).map(|(a, b)| (a - b).abs()).sum::<f64>() / temps_c.len() as f64;
+        assert!((mean_abs - 0.05 * (2.0 / std::f64::consts::PI).sqrt()).abs() < 0.005, "{mean_abs}");
+        assert!(temps_c.iter().cloned().fold(0.0, f64::max) > 200.0, "fresh material is in view");
+    }
+
+    #[test]
+    fn unknown_effects_never_reach_the_generator() {
+        let err = Effects::from_pairs([("nozzle_wobble", 1.0)]).unwrap_err().to_string();
+        assert!(err.contains("nozzle_wobble") && err.contains("camera_latency"), "{err}");
+    }
+
+    /// Distance (px) from `at` to the brightest pixel within `radius` of it.
+    fn distance_to_local_max(pixels: &[u16], w: usize, h: usize, at: [f64; 2], radius: i64) -> f64 {
+        let (cu, cv) = (at[0].round() as i64, at[1].round() as i64);
+        let mut best = (0u16, cu, cv);
+        for dv in -radius..=radius {
+            for du in -radius..=radius {
+                let (u, v) = (cu + du, cv + dv);
+                if u < 0 || v < 0 || u >= w as i64 || v >= h as i64 || du * du + dv * dv > radius * radius {
+                    continue;
+                }
+                let value = pixels[v as usize * w + u as usize];
+                if value > best.0 {
+                    best = (value, u, v);
+                }
+            }
+        }
+        (best.1 as f64 - at[0]).hypot(best.2 as f64 - at[1])
+    }
 }

@@ -396,8 +396,11 @@ fn columns(table: &CsvTable, names: &[&str]) -> Result<Vec<Vec<f64>>, DatasetErr
     table.rows.iter().map(|row| cols.iter().map(|&c| table.number(row, c)).collect()).collect()
 }
 
+/// A row as (non-negative integer fields, numeric fields).
+type MixedRow = (Vec<usize>, Vec<f64>);
+
 /// Rows as (non-negative integer columns, numeric columns).
-fn integer_led(table: &CsvTable, ints: &[&str], nums: &[&str]) -> Result<Vec<(Vec<usize>, Vec<f64>)>, DatasetError> {
+fn integer_led(table: &CsvTable, ints: &[&str], nums: &[&str]) -> Result<Vec<MixedRow>, DatasetError> {
     let int_cols: Vec<usize> = ints.iter().map(|n| table.column(n)).collect::<Result<_, _>>()?;
     let num_cols: Vec<usize> = nums.iter().map(|n| table.column(n)).collect::<Result<_, _>>()?;
     table
