@@ -12,5 +12,6 @@ pub mod error;
 pub mod fdm_widths;
 pub mod fsu;
 pub mod manifest;
+pub mod thermal;
 
 pub use error::DatasetError;
