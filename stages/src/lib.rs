@@ -8,6 +8,7 @@ pub mod concat;
 pub mod fdm;
 pub mod inkjet;
 pub mod table;
+pub mod thermal;
 
 use pipeline::Registry;
 
@@ -15,5 +16,6 @@ use pipeline::Registry;
 pub fn register(registry: &mut Registry) {
     fdm::register(registry);
     inkjet::register(registry);
+    thermal::register(registry);
     registry.register(Box::new(concat::ConcatStage));
 }

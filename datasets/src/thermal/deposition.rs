@@ -1,7 +1,11 @@
 //! Deposition of the virtual thermal printer (DESIGN §5.3 "Deposition"; paper 003
-//! Sec. 2.1 and eq. 34): commanded deposition velocity v_e(t) → commanded flow
-//! E_cmd = w_bead·h·v_e → actual flow E = G(s)·E_cmd with G(s) = 1/(τs+1) → material
-//! on a fine [`DepositGrid`] by mass conservation.
+//! Sec. 2.1 and eq. 34): commanded deposition velocity v_e(t) (the extruder's E-axis
+//! velocity, mm/s of filament) → commanded flow E_cmd = A_fil·v_e → melt pressure
+//! state G(s)·E_cmd with G(s) = 1/(τs+1) → actual flow E = max(0, state) → material on
+//! a fine [`DepositGrid`] by mass conservation. A negative command is a retraction: it
+//! pulls the pressure state down faster than letting it decay, and the nozzle only
+//! extrudes while the state is positive (it cannot suck deposited material back), so
+//! a retracted extruder must be primed again before material flows.
 //!
 //! The paper's geometric model (eqs 5-11) assumes a slender bead whose material goes
 //! perpendicular to the path, and patches corners with the deposition direction
@@ -63,7 +67,8 @@ pub struct LayerDeposit {
 }
 
 /// Prints `layers` layers of `trajectory` with the commanded deposition velocity
-/// `deposition_velocity_mm_s` (one value per sample; the conventional print uses |v|),
+/// `deposition_velocity_mm_s` (E-axis, mm/s of filament, one value per sample; the
+/// conventional print uses [`PrintSetup::nominal_deposition_velocity_mm_s`] of |v|),
 /// through the actual τ of `effects`. This is what a re-print with a compensated v_e calls.
 pub fn print_part<R: Rng>(
     setup: &PrintSetup,
@@ -84,9 +89,9 @@ pub fn print_part<R: Rng>(
         });
     }
     let tau_s = effects.actual_tau_s(setup.tau_s);
-    let command: Vec<f64> =
-        deposition_velocity_mm_s.iter().map(|v| setup.bead_width_mm * setup.layer_height_mm * v.max(0.0)).collect();
-    let nominal_flow = first_order_lag(&command, trajectory.dt_s, tau_s, 0.0);
+    let command: Vec<f64> = deposition_velocity_mm_s.iter().map(|v| setup.filament_area_mm2() * v).collect();
+    let mut nominal_flow = first_order_lag(&command, trajectory.dt_s, tau_s, 0.0);
+    nominal_flow.iter_mut().for_each(|e| *e = e.max(0.0));
     let offsets = spread_offsets(CELL_MM, MAX_SPREAD_MM);
     let normal = Normal::new(1.0, FLOW_FACTOR_SD).expect("valid normal");
     let factors: Vec<f64> = (0..layers).map(|_| normal.sample(rng).clamp(0.97, 1.03)).collect();
@@ -99,6 +104,12 @@ pub fn print_part<R: Rng>(
         })
         .collect();
     Ok(layers)
+}
+
+/// The conventional print's command: at every sample the deposition velocity that
+/// gives the nominal bead at the commanded path speed (flow ∝ speed, DESIGN §5.3).
+pub fn conventional_command(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<f64> {
+    trajectory.speed_mm_s().iter().map(|v| setup.nominal_deposition_velocity_mm_s(*v)).collect()
 }
 
 /// An empty deposit grid covering the trajectory with [`MARGIN_MM`] around it.
@@ -278,7 +289,7 @@ mod tests {
     fn conventional() -> (PrintSetup, Trajectory, LayerDeposit) {
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = trajectory.speed_mm_s();
+        let v_e = conventional_command(&setup, &trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let mut layers = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap();
         (setup, trajectory, layers.remove(0))

@@ -339,7 +339,7 @@ fn convolve_at(line: &[f32], at: usize, kernel: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::thermal::deposition::print_part;
+    use crate::thermal::deposition::{conventional_command, print_part};
     use models::thermal::{PrintSetup, Trajectory};
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
@@ -347,7 +347,7 @@ mod tests {
     fn heat_of_conventional_layer() -> (Trajectory, LayerDeposit, LayerHeat) {
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = trajectory.speed_mm_s();
+        let v_e = conventional_command(&setup, &trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let deposit = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap().remove(0);
         let heat =

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 use crate::error::DatasetError;
 use crate::manifest::{DatasetManifest, Provenance, MANIFEST_FILE};
 use camera::{Distortion, FrameCapture, Intrinsics, Mount, Pose, HEIGHT_PX, WIDTH_PX};
-use deposition::LayerDeposit;
+use deposition::{conventional_command, LayerDeposit};
 use heat::{HeatParams, LayerHeat};
 use sequence::{CameraFile, ProcessFile, StagedDir, TruthFile};
 
@@ -98,7 +98,7 @@ pub fn generate(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSumma
     let layers = config.layers.max(1);
     let setup = PrintSetup::paper_defaults();
     let trajectory = Trajectory::corner_test(&setup).map_err(model_error)?;
-    let v_e = trajectory.speed_mm_s();
+    let v_e = conventional_command(&setup, &trajectory);
     let mut rng_print = stream(config.seed, 1);
     let deposits = deposition::print_part(&setup, &trajectory, &v_e, layers, &config.effects, &mut rng_print)
         .map_err(model_error)?;
@@ -316,6 +316,7 @@ fn process_file(setup: &PrintSetup, layers: usize) -> ProcessFile {
         tau_s: setup.tau_s,
         nozzle_temp_c: setup.nozzle_temp_c,
         bed_temp_c: setup.bed_temp_c,
+        filament_diameter_mm: setup.filament_diameter_mm,
         layers_printed: layers,
         sample_period_s: setup.sample_period_s,
     }
@@ -509,7 +510,7 @@ mod tests {
         let setup = PrintSetup::paper_defaults();
         let tr = Trajectory::corner_test(&setup).unwrap();
         let deposits =
-            deposition::print_part(&setup, &tr, &tr.speed_mm_s(), 1, &Effects::none(), &mut stream(1, 1)).unwrap();
+            deposition::print_part(&setup, &tr, &conventional_command(&setup, &tr), 1, &Effects::none(), &mut stream(1, 1)).unwrap();
         let heat = &layer_heats(&setup, &tr, &deposits, &Effects::none())[0];
         let rays = camera::pixel_rays(&Intrinsics::lepton35(), &Distortion::lepton35());
         let pose = Mount::nominal().pose(nozzle_at(&tr, 3.0));

@@ -77,10 +77,32 @@ pub struct ProcessFile {
     pub nozzle_temp_c: f64,
     /// Bed temperature (°C).
     pub bed_temp_c: f64,
+    /// Filament diameter (mm): E = A_fil·v_e for the deposition velocity v_e.
+    pub filament_diameter_mm: f64,
     /// Layers printed (and filmed).
     pub layers_printed: usize,
     /// Trajectory sampling period (s).
     pub sample_period_s: f64,
+}
+
+impl ProcessFile {
+    /// The print settings as the models take them.
+    pub fn print_setup(&self) -> models::thermal::PrintSetup {
+        models::thermal::PrintSetup {
+            feed_mm_s: self.feed_mm_s,
+            accel_mm_s2: self.accel_mm_s2,
+            blend_tol_mm: self.blend_tol_mm,
+            layer_height_mm: self.layer_height_mm,
+            nozzle_mm: self.nozzle_mm,
+            bead_width_mm: self.bead_width_mm,
+            tau_s: self.tau_s,
+            nozzle_temp_c: self.nozzle_temp_c,
+            bed_temp_c: self.bed_temp_c,
+            layers: self.layers_printed,
+            filament_diameter_mm: self.filament_diameter_mm,
+            sample_period_s: self.sample_period_s,
+        }
+    }
 }
 
 /// `truth/truth.toml`.

@@ -35,6 +35,10 @@ pub struct PrintSetup {
     pub bed_temp_c: f64,
     /// Number of layers of the test part (Fig. 7b): 20.
     pub layers: usize,
+    /// Filament diameter (mm). Not in Table 1; the Flashforge Creator 3 takes 1.75 mm
+    /// filament. It turns the extruder's (E-axis) velocity, the paper's "deposition
+    /// velocity" v_e (Sec. 2.4, eqs 36-39), into a volumetric flow E = A_fil·v_e.
+    pub filament_diameter_mm: f64,
     /// Sampling period T_s of the trajectory (s). The paper leaves it open (eq. 20);
     /// 1 ms resolves a 20 mm/s path to 0.02 mm, a tenth of the blend radius of a 90° corner.
     pub sample_period_s: f64,
@@ -54,6 +58,7 @@ impl PrintSetup {
             nozzle_temp_c: 230.0,
             bed_temp_c: 60.0,
             layers: 20,
+            filament_diameter_mm: 1.75,
             sample_period_s: 0.001,
         }
     }
@@ -67,6 +72,7 @@ impl PrintSetup {
         positive("nozzle_mm", self.nozzle_mm)?;
         positive("bead_width_mm", self.bead_width_mm)?;
         positive("tau_s", self.tau_s)?;
+        positive("filament_diameter_mm", self.filament_diameter_mm)?;
         positive("sample_period_s", self.sample_period_s)?;
         if self.layers == 0 {
             return Err(ThermalError::NotPositive { name: "layers", value: 0.0 });
@@ -79,6 +85,17 @@ impl PrintSetup {
     /// with w = w0 (E = 2·h·|v|·w0).
     pub fn nominal_flow_mm3_s(&self, speed_mm_s: f64) -> f64 {
         self.bead_width_mm * self.layer_height_mm * speed_mm_s
+    }
+
+    /// Cross-section of the filament (mm²).
+    pub fn filament_area_mm2(&self) -> f64 {
+        std::f64::consts::PI * self.filament_diameter_mm * self.filament_diameter_mm / 4.0
+    }
+
+    /// Deposition (extruder, E-axis) velocity that gives the nominal bead at path speed
+    /// `speed_mm_s` (mm/s of filament): the nominal flow over the filament area.
+    pub fn nominal_deposition_velocity_mm_s(&self, speed_mm_s: f64) -> f64 {
+        self.nominal_flow_mm3_s(speed_mm_s) / self.filament_area_mm2()
     }
 }
 

@@ -10,7 +10,7 @@
 //! backward passes over a fine arc-length grid). The path starts and ends at the middle
 //! of the first edge so that no corner is printed from rest.
 
-use super::errors::ThermalError;
+use super::errors::{positive, ThermalError};
 use super::setup::PrintSetup;
 
 /// Arc-length step of the speed-profile passes (mm).
@@ -106,6 +106,45 @@ impl Trajectory {
         let trajectory = sample_uniformly(&pieces, &lengths, &speeds, &times, total_mm, setup.sample_period_s);
         fill_corner_times(&mut corners, &pieces, &lengths, &times);
         Ok(Self { corners, ..trajectory })
+    }
+
+    /// A trajectory from a commanded table (t, x, y) sampled every `dt_s`, as a dataset
+    /// gives it (DESIGN §4): velocity by central differences (eq. 1), curvature by eq. 4,
+    /// arc length by summing the steps. The table carries no corner list, so `corners`
+    /// is empty; errors if the columns differ in length or the times are not `k·dt_s`.
+    pub fn from_samples(t_s: &[f64], x_mm: &[f64], y_mm: &[f64]) -> Result<Self, ThermalError> {
+        let bad = |message: String| ThermalError::BadTrajectory { message };
+        if t_s.len() != x_mm.len() || t_s.len() != y_mm.len() || t_s.len() < 3 {
+            return Err(bad(format!(
+                "{} times, {} x, {} y: need equal lengths of 3 or more",
+                t_s.len(),
+                x_mm.len(),
+                y_mm.len()
+            )));
+        }
+        let dt_s = t_s[1] - t_s[0];
+        if let Some(k) =
+            (1..t_s.len()).find(|&k| ((t_s[k] - t_s[0]) - k as f64 * dt_s).abs() > 1e-6 * dt_s.max(1e-9) + 1e-9)
+        {
+            return Err(bad(format!("sample {k} at t = {} s breaks the uniform period {dt_s} s", t_s[k])));
+        }
+        positive("sample period", dt_s)?;
+        let (vx_mm_s, vy_mm_s) = super::geometry::velocity_mm_s(x_mm, y_mm, dt_s);
+        let mut s_mm = vec![0.0; t_s.len()];
+        for k in 1..t_s.len() {
+            s_mm[k] = s_mm[k - 1] + (x_mm[k] - x_mm[k - 1]).hypot(y_mm[k] - y_mm[k - 1]);
+        }
+        Ok(Self {
+            dt_s,
+            t_s: t_s.to_vec(),
+            x_mm: x_mm.to_vec(),
+            y_mm: y_mm.to_vec(),
+            vx_mm_s,
+            vy_mm_s,
+            s_mm,
+            path_curvature_per_mm: super::geometry::curvature_per_mm(x_mm, y_mm, dt_s),
+            corners: Vec::new(),
+        })
     }
 
     /// The corner test path of [`super::setup::corner_test_path`] with `setup`.
@@ -384,6 +423,21 @@ mod tests {
                 c.vertex, c.interior_angle_deg, c.radius_mm, c.arc_start_s, c.arc_end_s
             );
         }
+    }
+
+    #[test]
+    fn a_trajectory_rebuilt_from_its_samples_agrees_with_the_plan() {
+        // What a stage reads back from trajectory.csv: positions identical, velocities
+        // within the central-difference error, curvature equal away from arc ends.
+        let tr = test_trajectory();
+        let back = Trajectory::from_samples(&tr.t_s, &tr.x_mm, &tr.y_mm).unwrap();
+        assert_eq!(back.dt_s, tr.dt_s);
+        for k in 1..tr.len() - 1 {
+            assert!((back.vx_mm_s[k] - tr.vx_mm_s[k]).abs() < 0.3 && (back.vy_mm_s[k] - tr.vy_mm_s[k]).abs() < 0.3);
+        }
+        assert!((back.s_mm.last().unwrap() - tr.s_mm.last().unwrap()).abs() < 1e-3);
+        assert!(Trajectory::from_samples(&[0.0, 0.001, 0.003], &[0.0; 3], &[0.0; 3]).is_err());
+        assert!(Trajectory::from_samples(&[0.0, 0.001], &[0.0; 2], &[0.0; 2]).is_err());
     }
 
     #[test]

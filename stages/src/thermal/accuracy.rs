@@ -1,0 +1,309 @@
+//! `thermal.accuracy_evaluate`: the frame pipeline of `thermal.monitor` against the
+//! virtual printer's ground truth (`truth/` of the dataset; only evaluation stages read
+//! it, ARCHITECTURE.md). Paper 003 reports the detector's mAP (99.5 %, Sec. 3.2) and no
+//! localisation or width accuracy; DESIGN §5.3 asks for precision and recall of our
+//! classical detector instead of mAP, and the issue for capture-time, homography and
+//! width errors.
+//!
+//! Metrics (`accuracy.parquet`, one row each, long format):
+//! - capture time (eq. 30): |t̂_c − t_c| over the localised frames, median and 90th
+//!   percentile, beside the baseline |t_r − t_c| of taking the recorded time as is;
+//! - homography (eq. 27): every true corner in a localised frame mapped through the
+//!   frame's estimated H onto the plane, distance to its CAD vertex (mm);
+//! - widths (Sec. 2.4): measured w_l + w_r against the true deposit's width along the
+//!   same deposition direction (fill level 0.5), median absolute error and bias (mm);
+//! - corner detection: detections against the true corners whose temperature is in
+//!   the detector's band (the "newly printed corners" of Sec. 3.2), within 3 px;
+//! - frames used and skipped.
+
+use std::path::Path;
+
+use datasets::thermal::deposition::fill_at;
+use datasets::thermal::sequence::ThermalTruth;
+use models::thermal::DepositGrid;
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use vision::camera::Undistorter;
+use vision::corners::{precision_recall, CornerDetection};
+use vision::homography::Homography;
+
+use super::common::{camera_model, f64_column, i64_column, open_sequence, read_table};
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The `thermal.accuracy_evaluate` stage kind.
+pub struct AccuracyEvaluateStage;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "match_radius_px",
+        ty: ParamType::Float { min: 0.5, max: 20.0 },
+        default: ParamDefault::Float(3.0),
+        doc: "A detection within this distance of a true corner (raw pixels) is a true positive.",
+    },
+    ParamSpec {
+        name: "band_low_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(140.0),
+        doc: "True corners at or above this temperature count as positives (°C); the detector's band, Sec. 3.2.",
+    },
+    ParamSpec {
+        name: "band_high_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(150.0),
+        doc: "True corners at or below this temperature count as positives (°C).",
+    },
+];
+
+impl StageKind for AccuracyEvaluateStage {
+    fn name(&self) -> &'static str {
+        "thermal.accuracy_evaluate"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 003 eqs 27-32 and Sec. 3.2 (mAP → precision/recall), DESIGN §5.3 (evaluation: reads truth/)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(2)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let seq = open_sequence(&ctx.inputs[0].dir)?;
+        let truth = ThermalTruth::open(&ctx.inputs[0].dir).map_err(StageError::domain)?;
+        let monitor = ctx.inputs[1].dir.clone();
+        let frames = FrameRows::read(&monitor)?;
+        let undistorter = Undistorter::new(&camera_model(&seq.camera)).map_err(StageError::domain)?;
+        let mut metrics = Metrics::default();
+        capture_time_metrics(&frames, &truth, &mut metrics);
+        homography_metrics(&frames, &truth, &seq.path_mm, &undistorter, &mut metrics);
+        width_metrics(&monitor, &truth, &mut metrics)?;
+        let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
+        detection_metrics(&monitor, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
+        let used = frames.used.iter().filter(|u| **u).count();
+        metrics.push("frames_used", used as f64, "frames", used, "frames localised (≥ 4 matched corners, homography found)");
+        let skipped = frames.used.len() - used;
+        metrics.push("frames_skipped", skipped as f64, "frames", skipped, "bad, out-of-order or corner-poor frames (see frames.parquet skip_reason)");
+        ctx.write_table("accuracy", &mut metrics.into_frame()?)?;
+        Ok(())
+    }
+}
+
+/// The long metric table.
+#[derive(Default)]
+struct Metrics {
+    metric: Vec<String>,
+    value: Vec<f64>,
+    unit: Vec<String>,
+    n: Vec<i64>,
+    note: Vec<String>,
+}
+
+impl Metrics {
+    fn push(&mut self, metric: &str, value: f64, unit: &str, n: usize, note: &str) {
+        self.metric.push(metric.into());
+        self.value.push(value);
+        self.unit.push(unit.into());
+        self.n.push(n as i64);
+        self.note.push(note.into());
+    }
+
+    fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
+        frame(vec![
+            str_col("metric", self.metric),
+            f64_col("value", self.value),
+            str_col("unit", self.unit),
+            i64_col("n", self.n),
+            str_col("note", self.note),
+        ])
+    }
+}
+
+/// The columns of `frames.parquet` this stage needs.
+struct FrameRows {
+    layer: Vec<i64>,
+    frame: Vec<i64>,
+    recorded_s: Vec<f64>,
+    estimated_s: Vec<f64>,
+    used: Vec<bool>,
+    homography: Vec<Option<Homography>>,
+}
+
+impl FrameRows {
+    fn read(dir: &Path) -> Result<Self, StageError> {
+        let file = dir.join("frames.parquet");
+        let df = read_table(dir, "frames.parquet")?;
+        let h: Vec<Vec<f64>> = (0..9)
+            .map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1)))
+            .collect::<Result<_, _>>()?;
+        let estimated_s = f64_column(&df, &file, "estimated_time_s")?;
+        let homography = (0..estimated_s.len())
+            .map(|r| {
+                let m = [[h[0][r], h[1][r], h[2][r]], [h[3][r], h[4][r], h[5][r]], [h[6][r], h[7][r], h[8][r]]];
+                m.iter().flatten().all(|v| v.is_finite()).then_some(Homography { m })
+            })
+            .collect();
+        Ok(Self {
+            layer: i64_column(&df, &file, "layer")?,
+            frame: i64_column(&df, &file, "frame")?,
+            recorded_s: f64_column(&df, &file, "recorded_time_s")?,
+            used: estimated_s.iter().map(|t| t.is_finite()).collect(),
+            estimated_s,
+            homography,
+        })
+    }
+}
+
+fn truth_frame<'a>(truth: &'a ThermalTruth, layer: i64, frame: i64) -> Option<&'a datasets::thermal::sequence::TruthFrame> {
+    truth.frames.iter().find(|f| f.layer as i64 == layer && f.frame as i64 == frame)
+}
+
+fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
+    let (mut ours, mut baseline) = (Vec::new(), Vec::new());
+    for i in (0..frames.used.len()).filter(|&i| frames.used[i]) {
+        if let Some(t) = truth_frame(truth, frames.layer[i], frames.frame[i]) {
+            ours.push(1e3 * (frames.estimated_s[i] - t.capture_time_s).abs());
+            baseline.push(1e3 * (frames.recorded_s[i] - t.capture_time_s).abs());
+        }
+    }
+    let n = ours.len();
+    metrics.push("capture_time_err_median_ms", quantile(&mut ours, 0.5), "ms", n, "|t̂_c − t_c|, eq. 30");
+    metrics.push("capture_time_err_p90_ms", quantile(&mut ours, 0.9), "ms", n, "90th percentile of |t̂_c − t_c|");
+    metrics.push(
+        "capture_time_err_baseline_median_ms",
+        quantile(&mut baseline, 0.5),
+        "ms",
+        n,
+        "|t_r − t_c|: the recorded time taken as the capture time",
+    );
+}
+
+fn homography_metrics(
+    frames: &FrameRows,
+    truth: &ThermalTruth,
+    path_mm: &[[f64; 2]],
+    undistorter: &Undistorter,
+    metrics: &mut Metrics,
+) {
+    let mut errors = Vec::new();
+    for i in (0..frames.used.len()).filter(|&i| frames.used[i]) {
+        let Some(h) = frames.homography[i] else { continue };
+        let in_frame = truth.corners.iter().filter(|c| c.layer as i64 == frames.layer[i] && c.frame as i64 == frames.frame[i]);
+        for corner in in_frame {
+            let plane = h.apply(undistorter.undistort_px(corner.pixel));
+            let cad = path_mm[corner.vertex];
+            errors.push((plane[0] - cad[0]).hypot(plane[1] - cad[1]));
+        }
+    }
+    let n = errors.len();
+    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n.max(1) as f64).sqrt();
+    metrics.push("homography_err_median_mm", quantile(&mut errors, 0.5), "mm", n, "true corner pixels through the estimated H, to their CAD vertex");
+    metrics.push("reprojection_rms_mm", rms, "mm", n, "RMS of the same distances");
+}
+
+fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -> Result<(), StageError> {
+    let file = monitor.join("widths.parquet");
+    let df = read_table(monitor, "widths.parquet")?;
+    let dirs_file = monitor.join("directions.parquet");
+    let dirs = read_table(monitor, "directions.parquet")?;
+    let (dep_x, dep_y) = (f64_column(&dirs, &dirs_file, "dep_x")?, f64_column(&dirs, &dirs_file, "dep_y")?);
+    let layer = i64_column(&df, &file, "layer")?;
+    let sample = i64_column(&df, &file, "sample")?;
+    let (x, y) = (f64_column(&df, &file, "x_mm")?, f64_column(&df, &file, "y_mm")?);
+    let (wl, wr) = (f64_column(&df, &file, "w_left_mm")?, f64_column(&df, &file, "w_right_mm")?);
+    let mut deposits: Vec<Option<DepositGrid>> = Vec::new();
+    let (mut abs_err, mut signed) = (Vec::new(), Vec::new());
+    for i in (0..layer.len()).filter(|&i| wl[i].is_finite() && wr[i].is_finite()) {
+        let l = layer[i] as usize;
+        if deposits.len() <= l {
+            deposits.resize(l + 1, None);
+        }
+        if deposits[l].is_none() {
+            deposits[l] = Some(truth.deposit(l).map_err(StageError::domain)?);
+        }
+        let grid = deposits[l].as_ref().expect("just loaded");
+        let k = sample[i] as usize;
+        let d = [dep_x[k], dep_y[k]];
+        let true_width = edge_mm(grid, [x[i], y[i]], d) + edge_mm(grid, [x[i], y[i]], [-d[0], -d[1]]);
+        let err = wl[i] + wr[i] - true_width;
+        abs_err.push(err.abs());
+        signed.push(err);
+    }
+    let n = abs_err.len();
+    metrics.push("width_err_median_mm", quantile(&mut abs_err, 0.5), "mm", n, "|(w_l + w_r) − true width| along the deposition direction");
+    metrics.push("width_bias_median_mm", quantile(&mut signed, 0.5), "mm", n, "median of the signed width error");
+    Ok(())
+}
+
+/// Distance from `p` along `dir` to where the true fill drops below one half.
+fn edge_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
+    const STEP_MM: f64 = 0.005;
+    let mut prev = fill_at(grid, p);
+    if prev < 0.5 {
+        return 0.0;
+    }
+    let mut r = 0.0;
+    while r < 3.0 {
+        let f = fill_at(grid, [p[0] + (r + STEP_MM) * dir[0], p[1] + (r + STEP_MM) * dir[1]]);
+        if f < 0.5 {
+            return r + STEP_MM * (prev - 0.5) / (prev - f);
+        }
+        prev = f;
+        r += STEP_MM;
+    }
+    r
+}
+
+fn detection_metrics(
+    monitor: &Path,
+    truth: &ThermalTruth,
+    band_c: (f64, f64),
+    radius_px: f64,
+    metrics: &mut Metrics,
+) -> Result<(), StageError> {
+    let file = monitor.join("detections.parquet");
+    let df = read_table(monitor, "detections.parquet")?;
+    let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
+    let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
+    let mut keys: Vec<(i64, i64)> = truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let (mut tp, mut detections, mut positives) = (0usize, 0usize, 0usize);
+    for (l, f) in keys {
+        let dets: Vec<CornerDetection> = (0..layer.len())
+            .filter(|&i| layer[i] == l && frame_no[i] == f)
+            .map(|i| CornerDetection { u_px: u[i], v_px: v[i], temp_c: f32::NAN, score: 0.0 })
+            .collect();
+        let truth_px: Vec<[f64; 2]> = truth
+            .corners
+            .iter()
+            .filter(|c| c.layer as i64 == l && c.frame as i64 == f && c.temp_c >= band_c.0 && c.temp_c <= band_c.1)
+            .map(|c| c.pixel)
+            .collect();
+        let counts = precision_recall(&dets, &truth_px, radius_px);
+        tp += counts.true_positives;
+        detections += counts.detections;
+        positives += counts.truths;
+    }
+    let ratio = |num: usize, den: usize| if den == 0 { f64::NAN } else { num as f64 / den as f64 };
+    metrics.push("corner_precision", ratio(tp, detections), "fraction", detections, "detections within the radius of a true in-band corner");
+    metrics.push("corner_recall", ratio(tp, positives), "fraction", positives, "true in-band corners with a detection within the radius");
+    Ok(())
+}
+
+/// The `q` quantile (nearest rank) of `values`; NaN when empty.
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
+    values[rank - 1]
+}

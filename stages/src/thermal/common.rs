@@ -1,0 +1,128 @@
+//! What the paper-003 stages share: opening a `thermal-sequence` input, the commanded
+//! trajectory rebuilt from its table (eq. 1, eq. 4), the deposition directions the
+//! analysis assumes (eqs 13-26 with the nominal lagged flow), and the camera model
+//! converted from `camera.toml` to the vision crate's types.
+
+use std::path::Path;
+
+use datasets::thermal::sequence::{CameraFile, ThermalSequence};
+use models::thermal::dda::{allocate_directions, without_allocation, DdaParams, DepositionDirections};
+use models::thermal::dynamics::first_order_lag;
+use models::thermal::{PrintSetup, Trajectory};
+use pipeline::StageError;
+use polars::prelude::DataFrame;
+use vision::camera::{CameraModel, Distortion, Intrinsics, Mount};
+
+/// Opens the `thermal-sequence` dataset in `dir`.
+pub fn open_sequence(dir: &Path) -> Result<ThermalSequence, StageError> {
+    ThermalSequence::open(dir).map_err(StageError::domain)
+}
+
+/// The commanded trajectory of one layer, from `trajectory.csv`.
+pub fn trajectory_of(seq: &ThermalSequence) -> Result<Trajectory, StageError> {
+    let table = &seq.trajectory;
+    Trajectory::from_samples(&table.t_s, &table.x_mm, &table.y_mm).map_err(|e| bad_input(seq, "trajectory.csv", e))
+}
+
+/// The deposition the analysis expects: the commanded flow of `trajectory.csv`
+/// through the nominal first-order dynamics (eq. 34), what actually leaves the nozzle.
+pub fn expected_flow_mm3_s(seq: &ThermalSequence, setup: &PrintSetup) -> Vec<f64> {
+    first_order_lag(&seq.trajectory.e_mm3_s, setup.sample_period_s, setup.tau_s, 0.0)
+}
+
+/// Deposition directions with and without the allocation of Sec. 2.2.
+pub fn deposition_directions(
+    seq: &ThermalSequence,
+    trajectory: &Trajectory,
+    setup: &PrintSetup,
+) -> Result<(DepositionDirections, DepositionDirections), StageError> {
+    let flow = expected_flow_mm3_s(seq, setup);
+    let with = allocate_directions(trajectory, &flow, setup.layer_height_mm, &DdaParams::default())
+        .map_err(|e| bad_input(seq, "trajectory.csv", e))?;
+    let without = without_allocation(trajectory, &flow, setup.layer_height_mm)
+        .map_err(|e| bad_input(seq, "trajectory.csv", e))?;
+    Ok((with, without))
+}
+
+/// The left deposition direction (unit) at each sample: the normal of the deposition heading.
+pub fn left_directions(directions: &DepositionDirections) -> Vec<[f64; 2]> {
+    directions.deposition_heading_rad.iter().map(|th| [-th.sin(), th.cos()]).collect()
+}
+
+/// The nominal camera of `camera.toml` in the vision crate's types.
+pub fn camera_model(camera: &CameraFile) -> CameraModel {
+    let (i, d, m) = (&camera.intrinsics, &camera.distortion, &camera.mount);
+    CameraModel {
+        intrinsics: Intrinsics { fx_px: i.fx_px, fy_px: i.fy_px, cx_px: i.cx_px, cy_px: i.cy_px },
+        distortion: Distortion { k1: d.k1, k2: d.k2, p1: d.p1, p2: d.p2 },
+        mount: Mount { tilt_deg: m.tilt_deg, height_mm: m.height_mm, look_at_mm: m.look_at_mm },
+        width_px: camera.width_px,
+        height_px: camera.height_px,
+    }
+}
+
+/// Time at which the trajectory passes closest to each CAD vertex (s).
+pub fn vertex_passage_times(seq: &ThermalSequence, trajectory: &Trajectory) -> Vec<f64> {
+    seq.path_mm
+        .iter()
+        .map(|v| {
+            let k = nearest_sample(trajectory, *v);
+            trajectory.t_s[k]
+        })
+        .collect()
+}
+
+/// Index of the trajectory sample nearest to `p_mm`.
+pub fn nearest_sample(trajectory: &Trajectory, p_mm: [f64; 2]) -> usize {
+    (0..trajectory.len())
+        .min_by(|&a, &b| {
+            let da = (trajectory.x_mm[a] - p_mm[0]).hypot(trajectory.y_mm[a] - p_mm[1]);
+            let db = (trajectory.x_mm[b] - p_mm[0]).hypot(trajectory.y_mm[b] - p_mm[1]);
+            da.total_cmp(&db)
+        })
+        .unwrap_or(0)
+}
+
+/// Interior angle of the CAD polygon at each vertex (degrees).
+pub fn interior_angles_deg(path_mm: &[[f64; 2]]) -> Vec<f64> {
+    let n = path_mm.len();
+    (0..n)
+        .map(|i| {
+            let (prev, at, next) = (path_mm[(i + n - 1) % n], path_mm[i], path_mm[(i + 1) % n]);
+            let a = [prev[0] - at[0], prev[1] - at[1]];
+            let b = [next[0] - at[0], next[1] - at[1]];
+            let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
+            cos.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect()
+}
+
+/// Reads a Parquet table an upstream stage wrote into `dir`.
+pub fn read_table(dir: &Path, file: &str) -> Result<DataFrame, StageError> {
+    pipeline::artifact::read_parquet(&dir.join(file))
+}
+
+/// A column of floats of `df` (read from `file`), nulls as NaN.
+pub fn f64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<f64>, StageError> {
+    let series = df.column(name).map_err(|source| StageError::Table { path: file.into(), source })?;
+    let cast = series
+        .cast(&polars::prelude::DataType::Float64)
+        .map_err(|source| StageError::Table { path: file.into(), source })?;
+    let values = cast.f64().map_err(|source| StageError::Table { path: file.into(), source })?;
+    Ok(values.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect())
+}
+
+/// A column of integers of `df` (read from `file`).
+pub fn i64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<i64>, StageError> {
+    let series = df.column(name).map_err(|source| StageError::Table { path: file.into(), source })?;
+    let cast = series
+        .cast(&polars::prelude::DataType::Int64)
+        .map_err(|source| StageError::Table { path: file.into(), source })?;
+    let values = cast.i64().map_err(|source| StageError::Table { path: file.into(), source })?;
+    Ok(values.into_iter().map(|v| v.unwrap_or(-1)).collect())
+}
+
+/// A domain error about one file of the sequence.
+pub fn bad_input(seq: &ThermalSequence, file: &str, err: impl std::fmt::Display) -> StageError {
+    StageError::BadInput { file: seq.dir.join(file), location: None, expected: err.to_string() }
+}

@@ -1,0 +1,31 @@
+//! Paper 003 (Chen, Yang, Liu, Duan): in-situ thermal-camera monitoring and
+//! filtered-B-spline deposition compensation of a material-extrusion printer, as
+//! stages over the `thermal-sequence` dataset format (DESIGN §4, §5.3).
+//!
+//! - [`generate`]: `thermal.generate_sequence`, the virtual printer with its camera,
+//!   writing a `thermal-sequence` dataset as the stage's output folder.
+//! - [`monitor`]: `thermal.monitor`, deposition directions (eqs 1-26), frame
+//!   localisation (eqs 27-30) and width extraction (Sec. 2.4, eqs 31-32).
+//! - [`compensate`]: `thermal.compensate`, the compensation of eqs 33-39.
+//! - [`reprint`]: `thermal.reprint_evaluate`, re-print with and without it and measure
+//!   eqs 40-41 (evaluation: uses the virtual printer's effects).
+//! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`.
+//! - [`common`]: what the stages share (reading a sequence, the trajectory, the camera).
+
+pub mod accuracy;
+pub mod common;
+pub mod compensate;
+pub mod generate;
+pub mod monitor;
+pub mod reprint;
+
+use pipeline::Registry;
+
+/// Registers the paper-003 stage kinds.
+pub fn register(registry: &mut Registry) {
+    registry.register(Box::new(generate::GenerateSequenceStage));
+    registry.register(Box::new(monitor::MonitorStage));
+    registry.register(Box::new(compensate::CompensateStage));
+    registry.register(Box::new(reprint::ReprintEvaluateStage));
+    registry.register(Box::new(accuracy::AccuracyEvaluateStage));
+}

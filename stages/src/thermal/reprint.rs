@@ -1,0 +1,246 @@
+//! `thermal.reprint_evaluate`: paper 003 Sec. 3.3. Prints the test part again on the
+//! virtual printer that made the dataset (same effects, read from its `dataset.toml`
+//! provenance: this is an evaluation stage), once with the conventional command and
+//! once with the compensated one from `thermal.compensate`, with the same per-layer
+//! flow draws (paired comparison), and measures both against the CAD part:
+//!
+//! - Over-deposition index per corner (eq. 40), O_E = A_o / A_c on the first layer.
+//!   A_c, "the perfect corner polytope area in a corner": the rhombus where the two
+//!   edges' ideal beads (width W) overlap, area W²/sin θ for interior angle θ. A_o: the
+//!   deposited area outside the ideal bead (the CAD polygon swept by W with mitred
+//!   corners) within the corner window, a disc of radius `corner_radius_mm` around the
+//!   vertex. The window must hold the whole corner bulge; A_c does not depend on it, so
+//!   O_E is the bulge measured in corner polytopes.
+//! - Contour error (eq. 41, Table 3): every CAD contour point (both offset polygons at
+//!   ±W/2, every 0.05 mm) to the nearest point of the printed footprint's boundary
+//!   (fill level 0.5, marching squares), on every layer; max and RMS over all.
+//!
+//! Also writes the first layer's deposit classes near the corners (Fig. 10) and the
+//! CAD polygon.
+
+use datasets::manifest::Provenance;
+use datasets::thermal::deposition::print_part;
+use datasets::thermal::effects::Effects;
+use datasets::thermal::sequence::ThermalSequence;
+use models::thermal::metrics::{contour_errors, corner_deposition, summarize, ContourPoint, IdealBead};
+use models::thermal::{DepositGrid, PrintSetup};
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::common::{f64_column, interior_angles_deg, open_sequence, read_table, trajectory_of};
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The `thermal.reprint_evaluate` stage kind.
+pub struct ReprintEvaluateStage;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 1, max: 50 },
+        default: ParamDefault::Int(20),
+        doc: "Layers of the evaluation part (Fig. 7b, Table 3: 20).",
+    },
+    ParamSpec {
+        name: "corner_radius_mm",
+        ty: ParamType::Float { min: 0.1, max: 5.0 },
+        default: ParamDefault::Float(1.0),
+        doc: "Radius of the corner window around each vertex in which A_o is counted (mm); must hold the corner bulge (about twice the bead width).",
+    },
+    ParamSpec {
+        name: "contour_spacing_mm",
+        ty: ParamType::Float { min: 0.005, max: 1.0 },
+        default: ParamDefault::Float(0.05),
+        doc: "Spacing of the CAD contour points of eq. 41 (mm); the paper's profiler samples every 0.5 mm in z, we sample the contour finely.",
+    },
+];
+
+impl StageKind for ReprintEvaluateStage {
+    fn name(&self) -> &'static str {
+        "thermal.reprint_evaluate"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 003 Sec. 3.3, eqs 40-41, Table 3 (evaluation: reads the printer's effects)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(2)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let seq = open_sequence(&ctx.inputs[0].dir)?;
+        let setup = seq.process.print_setup();
+        let trajectory = trajectory_of(&seq)?;
+        let effects = printer_effects(&seq)?;
+        let commands = read_commands(&ctx.inputs[1].dir, trajectory.len())?;
+        let layers = ctx.params.i64("layers") as usize;
+        let print = |command: &[f64]| -> Result<Vec<DepositGrid>, StageError> {
+            let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
+            let printed = print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
+            Ok(printed.into_iter().map(|l| l.grid).collect())
+        };
+        let (before, after) = (print(&commands.0)?, print(&commands.1)?);
+        let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
+        let radius_mm = ctx.params.f64("corner_radius_mm");
+        let mut corners = corners_frame(&seq, &setup, &bead, radius_mm, &before[0], &after[0])?;
+        ctx.write_table("corners", &mut corners)?;
+        let cad = bead.contour_points(ctx.params.f64("contour_spacing_mm"));
+        let errors_before: Vec<Vec<ContourPoint>> = before.iter().map(|g| contour_errors(g, &cad)).collect();
+        let errors_after: Vec<Vec<ContourPoint>> = after.iter().map(|g| contour_errors(g, &cad)).collect();
+        let mut contour = contour_frame(&errors_before, &errors_after)?;
+        ctx.write_table("contour", &mut contour)?;
+        let mut points = contour_points_frame(&errors_before, &errors_after)?;
+        ctx.write_table("contour_points", &mut points)?;
+        let mut regions = regions_frame(&seq.path_mm, &bead, radius_mm, &before[0], &after[0])?;
+        ctx.write_table("deposit_regions", &mut regions)?;
+        let path = &seq.path_mm;
+        let mut path_table = frame(vec![
+            i64_col("vertex", (0..path.len() as i64).collect()),
+            f64_col("x_mm", path.iter().map(|p| p[0]).collect()),
+            f64_col("y_mm", path.iter().map(|p| p[1]).collect()),
+        ])?;
+        ctx.write_table("path", &mut path_table)
+    }
+}
+
+/// The extra effects of the printer that made the dataset.
+fn printer_effects(seq: &ThermalSequence) -> Result<Effects, StageError> {
+    match &seq.manifest.provenance {
+        Provenance::Virtual { effects, .. } => Effects::from_pairs(effects.iter().map(|(k, v)| (k.as_str(), *v)))
+            .map_err(|e| super::common::bad_input(seq, "dataset.toml", e)),
+        Provenance::Measured { .. } => Err(super::common::bad_input(
+            seq,
+            "dataset.toml",
+            "a virtual dataset: re-printing needs the virtual printer that made it (provenance type = \"virtual\")",
+        )),
+    }
+}
+
+/// The conventional and the compensated command (mm/s of filament) per sample.
+fn read_commands(dir: &std::path::Path, samples: usize) -> Result<(Vec<f64>, Vec<f64>), StageError> {
+    let file = dir.join("command.parquet");
+    let df = read_table(dir, "command.parquet")?;
+    let (v_e, v_ef) = (f64_column(&df, &file, "v_e_mm_s")?, f64_column(&df, &file, "v_ef_mm_s")?);
+    if v_e.len() != samples {
+        return Err(StageError::BadInput {
+            file,
+            location: None,
+            expected: format!("{samples} rows, one per trajectory sample; found {}", v_e.len()),
+        });
+    }
+    Ok((v_e, v_ef))
+}
+
+/// `corners.parquet`: eq. 40 per CAD vertex, before and after.
+fn corners_frame(
+    seq: &ThermalSequence,
+    setup: &PrintSetup,
+    bead: &IdealBead,
+    radius_mm: f64,
+    before: &DepositGrid,
+    after: &DepositGrid,
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let angles = interior_angles_deg(&seq.path_mm);
+    let width = setup.bead_width_mm;
+    let polytope: Vec<f64> = angles.iter().map(|a| width * width / a.to_radians().sin()).collect();
+    let b: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(before, bead, *v, radius_mm)).collect();
+    let a: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(after, bead, *v, radius_mm)).collect();
+    frame(vec![
+        i64_col("vertex", (0..angles.len() as i64).collect()),
+        f64_col("angle_deg", angles),
+        f64_col("oe_before_pct", b.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
+        f64_col("oe_after_pct", a.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
+        f64_col("a_c_mm2", polytope.clone()),
+        f64_col("a_o_before_mm2", b.iter().map(|c| c.over_area_mm2).collect()),
+        f64_col("a_o_after_mm2", a.iter().map(|c| c.over_area_mm2).collect()),
+        f64_col("a_u_before_mm2", b.iter().map(|c| c.under_area_mm2).collect()),
+        f64_col("a_u_after_mm2", a.iter().map(|c| c.under_area_mm2).collect()),
+        f64_col("window_ideal_mm2", b.iter().map(|c| c.ideal_area_mm2).collect()),
+    ])
+}
+
+/// `contour.parquet`: Table 3's max and RMS per variant over all layers.
+fn contour_frame(
+    before: &[Vec<ContourPoint>],
+    after: &[Vec<ContourPoint>],
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let (b, a) = (summarize(before), summarize(after));
+    frame(vec![
+        str_col("variant", vec!["conventional".into(), "compensated".into()]),
+        f64_col("max_mm", vec![b.max_mm, a.max_mm]),
+        f64_col("rms_mm", vec![b.rms_mm, a.rms_mm]),
+        i64_col("points", vec![b.points as i64, a.points as i64]),
+    ])
+}
+
+/// `contour_points.parquet`: e_t of eq. 41 per CAD point and layer (Fig. 11).
+fn contour_points_frame(
+    before: &[Vec<ContourPoint>],
+    after: &[Vec<ContourPoint>],
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let mut cols = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (variant, layers) in [("conventional", before), ("compensated", after)] {
+        for (layer, points) in layers.iter().enumerate() {
+            for p in points {
+                cols.0.push(variant.to_string());
+                cols.1.push(layer as i64);
+                cols.2.push(p.x_mm);
+                cols.3.push(p.y_mm);
+                cols.4.push(p.error_mm);
+            }
+        }
+    }
+    frame(vec![
+        str_col("variant", cols.0),
+        i64_col("layer", cols.1),
+        f64_col("x_mm", cols.2),
+        f64_col("y_mm", cols.3),
+        f64_col("error_mm", cols.4),
+    ])
+}
+
+/// `deposit_regions.parquet`: the first layer's cells near the corners as desired
+/// (ideal and filled), over (filled outside the ideal bead) or under (ideal, empty).
+fn regions_frame(
+    path_mm: &[[f64; 2]],
+    bead: &IdealBead,
+    radius_mm: f64,
+    before: &DepositGrid,
+    after: &DepositGrid,
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let reach = radius_mm * 1.2;
+    let mut cols = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (variant, grid) in [("conventional", before), ("compensated", after)] {
+        for iy in 0..grid.ny {
+            for ix in 0..grid.nx {
+                let p = grid.cell_center_mm(ix, iy);
+                if !path_mm.iter().any(|v| (v[0] - p[0]).hypot(v[1] - p[1]) <= reach) {
+                    continue;
+                }
+                let filled = grid.fill[grid.index(ix, iy)] >= 0.5;
+                let class = match (filled, bead.contains(p)) {
+                    (true, true) => "desired",
+                    (true, false) => "over",
+                    (false, true) => "under",
+                    (false, false) => continue,
+                };
+                cols.0.push(variant.to_string());
+                cols.1.push(p[0]);
+                cols.2.push(p[1]);
+                cols.3.push(class.to_string());
+            }
+        }
+    }
+    frame(vec![str_col("variant", cols.0), f64_col("x_mm", cols.1), f64_col("y_mm", cols.2), str_col("class", cols.3)])
+}
+
