@@ -86,14 +86,22 @@ pub fn plane_chart<'a, DB: DrawingBackend>(
     decimals: usize,
 ) -> Result<PlaneChart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
     let mut chart = equal_aspect_chart(area, xs, ys)?;
+    let (w_px, h_px) = chart.plotting_area().dim_in_pixel();
     house_mesh(&mut chart)
         .disable_mesh()
+        .x_labels(label_count(w_px))
+        .y_labels(label_count(h_px))
         .x_desc("x (mm)")
         .y_desc("y (mm)")
         .x_label_formatter(&|x| format!("{x:.decimals$}"))
         .y_label_formatter(&|y| format!("{y:.decimals$}"))
         .draw()?;
     Ok(chart)
+}
+
+/// How many tick labels fit along an axis of `px` pixels (one per 70 px, at least 3).
+pub fn label_count(px: u32) -> usize {
+    (px as usize / 70).max(3)
 }
 
 /// Builds an equal-aspect chart of at least `xs` × `ys` on `area` (no mesh drawn):
@@ -175,9 +183,8 @@ pub fn level_colour(level: usize) -> RGBColor {
 
 /// The smallest and largest finite value (0..1 when there is none, widened when equal).
 pub fn finite_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = values
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let (lo, hi) =
+        values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
     match (lo.is_finite(), hi > lo) {
         (false, _) => (0.0, 1.0),
         (true, false) => (lo - 0.5, lo + 0.5),
@@ -217,6 +224,53 @@ pub fn draw_colour_bar<DB: DrawingBackend>(
     Ok(())
 }
 
+/// Clips the segment `a`-`b` to the box `xs` × `ys` (Liang-Barsky); None when it
+/// lies wholly outside. Plotters does not clip elements to the plotting area, so
+/// anything drawn on a zoomed chart goes through this.
+pub fn clip_segment(
+    a: (f64, f64),
+    b: (f64, f64),
+    xs: &Range<f64>,
+    ys: &Range<f64>,
+) -> Option<((f64, f64), (f64, f64))> {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut t0, mut t1) = (0.0_f64, 1.0_f64);
+    let edges = [(-dx, a.0 - xs.start), (dx, xs.end - a.0), (-dy, a.1 - ys.start), (dy, ys.end - a.1)];
+    for (p, q) in edges {
+        if p == 0.0 {
+            if q < 0.0 {
+                return None;
+            }
+        } else if p < 0.0 {
+            t0 = t0.max(q / p);
+        } else {
+            t1 = t1.min(q / p);
+        }
+    }
+    (t0 <= t1).then_some(((a.0 + t0 * dx, a.1 + t0 * dy), (a.0 + t1 * dx, a.1 + t1 * dy)))
+}
+
+/// Clips a polyline to the box `xs` × `ys`: the pieces that lie inside it.
+pub fn clip_polyline(points: &[(f64, f64)], xs: &Range<f64>, ys: &Range<f64>) -> Vec<Vec<(f64, f64)>> {
+    let mut pieces: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut open = false;
+    for w in points.windows(2) {
+        match clip_segment(w[0], w[1], xs, ys) {
+            Some((p, q)) => {
+                let joins = open && pieces.last().and_then(|l| l.last()).is_some_and(|l| *l == p);
+                if !joins {
+                    pieces.push(vec![p]);
+                }
+                pieces.last_mut().expect("pushed").push(q);
+                // The piece continues only if the segment ended inside the box.
+                open = q == w[1];
+            }
+            None => open = false,
+        }
+    }
+    pieces
+}
+
 /// How a key entry is drawn.
 #[derive(Debug, Clone, Copy)]
 pub enum KeySwatch {
@@ -224,6 +278,16 @@ pub enum KeySwatch {
     Fill(RGBColor),
     /// A line.
     Line(RGBColor),
+    /// A square of the first colour outlined in the second.
+    Outlined(RGBColor, RGBColor),
+    /// A line of the second colour across a square of the first.
+    LineOn(RGBColor, RGBColor),
+    /// A circle outline.
+    Circle(RGBColor),
+    /// A cross.
+    Cross(RGBColor),
+    /// A filled triangle.
+    Triangle(RGBColor),
 }
 
 /// Draws a one-line key of `items` centred on `area` (for small multiples, where one
@@ -244,6 +308,17 @@ pub fn draw_key<DB: DrawingBackend>(
         match swatch {
             KeySwatch::Fill(c) => area.draw(&Rectangle::new([(x, y - 9), (x + 18, y + 9)], c.filled()))?,
             KeySwatch::Line(c) => area.draw(&PathElement::new([(x - 4, y), (x + 22, y)], c.stroke_width(2)))?,
+            KeySwatch::Outlined(fill, line) => {
+                area.draw(&Rectangle::new([(x, y - 9), (x + 18, y + 9)], fill.filled()))?;
+                area.draw(&Rectangle::new([(x, y - 9), (x + 18, y + 9)], line.stroke_width(2)))?
+            }
+            KeySwatch::LineOn(fill, line) => {
+                area.draw(&Rectangle::new([(x, y - 9), (x + 18, y + 9)], fill.filled()))?;
+                area.draw(&PathElement::new([(x, y), (x + 18, y)], line.stroke_width(2)))?
+            }
+            KeySwatch::Circle(c) => area.draw(&Circle::new((x + 9, y), 7, c.stroke_width(3)))?,
+            KeySwatch::Cross(c) => area.draw(&Cross::new((x + 9, y), 7, c.stroke_width(3)))?,
+            KeySwatch::Triangle(c) => area.draw(&TriangleMarker::new((x + 9, y), 8, c.filled()))?,
         }
         area.draw(&Text::new(label.clone(), (x + 28, y - 9), style.clone()))?;
         x += width;
@@ -310,5 +385,17 @@ mod tests {
         assert_eq!(level_colour(0), viridis(0.0));
         assert_eq!(finite_range([f64::NAN, 3.0, 1.0].into_iter()), (1.0, 3.0));
         assert_eq!(finite_range([f64::NAN].into_iter()), (0.0, 1.0));
+    }
+    #[test]
+    fn clipping_keeps_the_part_inside_the_box() {
+        let (xs, ys) = (0.0..1.0, 0.0..1.0);
+        // A diagonal from (-1, -1) to (2, 2) enters at (0, 0) and leaves at (1, 1).
+        assert_eq!(clip_segment((-1.0, -1.0), (2.0, 2.0), &xs, &ys), Some(((0.0, 0.0), (1.0, 1.0))));
+        assert_eq!(clip_segment((2.0, 0.5), (3.0, 0.5), &xs, &ys), None);
+        assert_eq!(clip_segment((0.2, 0.2), (0.4, 0.6), &xs, &ys), Some(((0.2, 0.2), (0.4, 0.6))));
+        // A polyline that leaves and re-enters the box gives two pieces.
+        let line = [(0.5, 0.5), (1.5, 0.5), (1.5, 0.8), (0.5, 0.8)];
+        let pieces = clip_polyline(&line, &xs, &ys);
+        assert_eq!(pieces, vec![vec![(0.5, 0.5), (1.0, 0.5)], vec![(1.0, 0.8), (0.5, 0.8)]]);
     }
 }

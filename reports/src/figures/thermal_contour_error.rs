@@ -45,7 +45,12 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(-1),
         doc: "Layer to draw; −1: the layer with the largest max error over both prints; −2: every layer overlaid.",
     },
-    ParamSpec { name: "title", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "Figure title (default: a generic description)." },
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description).",
+    },
 ];
 
 /// One contour point.
@@ -102,9 +107,16 @@ impl StageKind for ThermalContourErrorFigure {
             -1 => Some(worst_layer(&points)),
             l => Some(l),
         };
-        let plot = Plot { points, summary_mm: load_summary(&dir.join("contour.parquet"))?, polygon: load_polygon(dir)?, layer };
+        let plot = Plot {
+            points,
+            summary_mm: load_summary(&dir.join("contour.parquet"))?,
+            polygon: load_polygon(dir)?,
+            layer,
+        };
         let title = match ctx.params.str("title") {
-            "" => "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".into(),
+            "" => {
+                "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".into()
+            }
             t => t.to_string(),
         };
         let stem = ctx.output_path("thermal_contour_error")?;
@@ -198,7 +210,8 @@ fn draw_panel<DB: DrawingBackend>(
     let pad = 0.04 * (x1 - x0).max(y1 - y0);
     let mut chart = plane_chart(&area, (x0 - pad)..(x1 + pad), (y0 - pad)..(y1 + pad), 0)?;
     chart.draw_series(LineSeries::new(closed_outline(polygon), RGBColor(200, 200, 200).stroke_width(1)))?;
-    let dot = |p: &Point| Circle::new((p.x_mm, p.y_mm), 3, level_colour(colour_level(p.error_mm, (0.0, max_mm))).filled());
+    let dot =
+        |p: &Point| Circle::new((p.x_mm, p.y_mm), 3, level_colour(colour_level(p.error_mm, (0.0, max_mm))).filled());
     chart.draw_series(points.iter().map(dot))?;
     Ok(())
 }

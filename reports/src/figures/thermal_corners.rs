@@ -71,7 +71,12 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(4.0),
         doc: "Upper bound ΔV_max of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: 4 mm/s.",
     },
-    ParamSpec { name: "title", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "Figure title (default: a generic description)." },
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description).",
+    },
 ];
 
 /// One compensated span (a row of `spans.parquet`).
@@ -200,7 +205,8 @@ pub fn figure_size_px(rows: usize) -> (u32, u32) {
 /// Reads `widths.parquet`.
 pub fn load_widths(path: &Path) -> Result<Widths, StageError> {
     let df = read_parquet(path)?;
-    let (wl, wr, wd) = (f64s(&df, "w_left_mm", path)?, f64s(&df, "w_right_mm", path)?, f64s(&df, "w_desired_mm", path)?);
+    let (wl, wr, wd) =
+        (f64s(&df, "w_left_mm", path)?, f64s(&df, "w_right_mm", path)?, f64s(&df, "w_desired_mm", path)?);
     let widths = Widths {
         layer: ints(&df, "layer", path)?,
         t_s: f64s(&df, "t_s", path)?,
@@ -221,7 +227,8 @@ pub fn load_spans(dir: &Path, wanted: &[i64]) -> Result<Vec<(Span, Sequence)>, S
     let df = read_parquet(&path)?;
     let f = |name: &str| f64s(&df, name, &path);
     let (span, vertex) = (ints(&df, "span", &path)?, ints(&df, "vertex", &path)?);
-    let (angle, t0, t1, e0, e1) = (f("angle_deg")?, f("t_start_s")?, f("t_end_s")?, f("t_ext_start_s")?, f("t_ext_end_s")?);
+    let (angle, t0, t1, e0, e1) =
+        (f("angle_deg")?, f("t_start_s")?, f("t_end_s")?, f("t_ext_start_s")?, f("t_ext_end_s")?);
     let (temp, gain, dw, solve) = (f("corner_temp_c")?, f("gain_ke")?, f("max_dw_mm")?, f("solve_ms")?);
     let spans: Vec<Span> = (0..df.height())
         .map(|i| Span {
@@ -256,7 +263,10 @@ fn load_sequences(path: &Path, spans: &[Span]) -> Result<Vec<Sequence>, StageErr
     for i in 0..df.height() {
         if let Some(k) = spans.iter().position(|s| s.span == id[i]) {
             let q = &mut sequences[k];
-            (q.t_s.push(t[i]), q.desired_mm_s.push(want[i]), q.input_mm_s.push(input[i]), q.output_mm_s.push(output[i]));
+            q.t_s.push(t[i]);
+            q.desired_mm_s.push(want[i]);
+            q.input_mm_s.push(input[i]);
+            q.output_mm_s.push(output[i]);
         }
     }
     if let Some(k) = sequences.iter().position(|q| q.t_s.is_empty()) {
@@ -271,7 +281,8 @@ impl Widths {
     pub fn in_window(&self, window: &Range<f64>, layer: Option<i64>) -> Vec<usize> {
         let inside = |i: &usize| window.contains(&self.t_s[*i]);
         let layer = layer.or_else(|| (0..self.t_s.len()).filter(inside).map(|i| self.layer[i]).min());
-        let mut picked: Vec<usize> = (0..self.t_s.len()).filter(|i| inside(i) && Some(self.layer[*i]) == layer).collect();
+        let mut picked: Vec<usize> =
+            (0..self.t_s.len()).filter(|i| inside(i) && Some(self.layer[*i]) == layer).collect();
         picked.sort_by(|a, b| self.t_s[*a].total_cmp(&self.t_s[*b]));
         picked
     }
@@ -302,7 +313,8 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
         let window = (span.t_ext_s.0 - plot.pad_s)..(span.t_ext_s.1 + plot.pad_s);
         let xs = (window.start - t0)..(window.end - t0);
         let picked = plot.widths.in_window(&window, plot.layer);
-        let series = |v: &[f64]| -> Vec<(f64, f64)> { picked.iter().map(|&i| (plot.widths.t_s[i] - t0, v[i])).collect() };
+        let series =
+            |v: &[f64]| -> Vec<(f64, f64)> { picked.iter().map(|&i| (plot.widths.t_s[i] - t0, v[i])).collect() };
         let legend = k == 0;
         let (temp, width, desired) =
             (series(&plot.widths.temp_c), series(&plot.widths.width_mm), series(&plot.widths.desired_mm));
@@ -333,21 +345,27 @@ fn time_chart<'a, DB: DrawingBackend>(
     house_mesh(&mut chart)
         .x_desc("Δt from span start (s)")
         .y_desc(y_desc)
-        .x_label_formatter(&|x| format!("{x:.2}"))
+        .x_label_formatter(&|x| format!("{:.2}", if x.abs() < 0.005 { 0.0 } else { *x }))
         .y_label_formatter(&|y| format!("{y:.decimals$}"))
         .draw()?;
     Ok(chart)
 }
 
 /// Shades the span (darker) and its extensions (lighter), times from the span start.
-fn shade_span<DB: DrawingBackend>(chart: &mut Chart<DB>, span: &Span) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn shade_span<DB: DrawingBackend>(
+    chart: &mut Chart<DB>,
+    span: &Span,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let y = chart.y_range();
     let t0 = span.t_s.0;
-    let band = |a: f64, b: f64, alpha: f64| Rectangle::new([(a - t0, y.start), (b - t0, y.end)], PALETTE[4].mix(alpha).filled());
+    let band = |a: f64, b: f64, alpha: f64| {
+        Rectangle::new([(a - t0, y.start), (b - t0, y.end)], PALETTE[4].mix(alpha).filled())
+    };
     chart.draw_series([band(span.t_ext_s.0, span.t_s.0, 0.12), band(span.t_s.1, span.t_ext_s.1, 0.12)])?;
-    chart.draw_series([band(span.t_s.0, span.t_s.1, 0.3)])?.label("span (extensions lighter)").legend(|(x, y)| {
-        Rectangle::new([(x, y - 6), (x + 20, y + 6)], PALETTE[4].mix(0.3).filled())
-    });
+    chart
+        .draw_series([band(span.t_s.0, span.t_s.1, 0.3)])?
+        .label("span (extensions lighter)")
+        .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], PALETTE[4].mix(0.3).filled()));
     Ok(())
 }
 
@@ -362,16 +380,18 @@ fn draw_temperature<DB: DrawingBackend>(
     let mut chart = time_chart(area, xs.clone(), ys, "temperature at the path (°C)", 0)?;
     shade_span(&mut chart, span)?;
     let band = Rectangle::new([(xs.start, BAND_C.0), (xs.end, BAND_C.1)], PALETTE[1].mix(0.15).filled());
-    chart.draw_series([band])?.label("140-150 °C band").legend(|(x, y)| {
-        Rectangle::new([(x, y - 6), (x + 20, y + 6)], PALETTE[1].mix(0.15).filled())
-    });
+    chart
+        .draw_series([band])?
+        .label("140-150 °C band")
+        .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], PALETTE[1].mix(0.15).filled()));
     let red = PALETTE[1].stroke_width(2);
     for piece in finite_pieces(temp.iter().copied()) {
         chart.draw_series(LineSeries::new(piece, red))?;
     }
-    chart.draw_series([Circle::new((span_mid(span), span.corner_temp_c), 5, BLACK.filled())])?.label("T_p (corner)").legend(
-        |(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()),
-    );
+    chart
+        .draw_series([Circle::new((span_mid(span), span.corner_temp_c), 5, BLACK.filled())])?
+        .label("T_p (corner)")
+        .legend(|(x, y)| Circle::new((x + 10, y), 4, BLACK.filled()));
     finish(&mut chart, legend)
 }
 
@@ -388,7 +408,7 @@ fn draw_width<DB: DrawingBackend>(
     legend: bool,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let ys = finite_range(width.iter().chain(desired).map(|p| p.1));
-    let mut chart = time_chart(area, xs, (ys.0.min(0.0), ys.1), "width (mm)", 2)?;
+    let mut chart = time_chart(area, xs, ys, "width (mm)", 2)?;
     shade_span(&mut chart, span)?;
     let (blue, black) = (PALETTE[0].stroke_width(2), BLACK.stroke_width(2));
     for piece in finite_pieces(width.iter().copied()) {
@@ -422,7 +442,9 @@ fn draw_sequence<DB: DrawingBackend>(
     shade_span(&mut chart, span)?;
     let grey = PALETTE[6].stroke_width(2);
     chart
-        .draw_series([lo, hi].map(|b| DashedLineSeries::new([(xs.start, b), (xs.end, b)], 6, 4, grey)).into_iter().flatten())?
+        .draw_series(
+            [lo, hi].map(|b| DashedLineSeries::new([(xs.start, b), (xs.end, b)], 6, 4, grey)).into_iter().flatten(),
+        )?
         .label(format!("bounds {lo} / +{hi} mm/s"))
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], grey));
     let t0 = span.t_s.0;
@@ -445,7 +467,10 @@ fn draw_sequence<DB: DrawingBackend>(
     finish(&mut chart, legend)
 }
 
-fn finish<'a, DB: DrawingBackend + 'a>(chart: &mut Chart<'a, DB>, legend: bool) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn finish<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    legend: bool,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     if legend {
         draw_house_legend(chart, SeriesLabelPosition::UpperRight)?;
     }

@@ -10,12 +10,15 @@
 //! segments form the estimated boundaries. Where the slender condition fails without
 //! DDA (S_c > 1) the half widths are undefined (NaN): those samples are drawn in (a)
 //! as grey normals of the nominal half width, so the reader sees where the model
-//! breaks. Both panels of a row share one square zoom box in millimetres.
+//! breaks. Both panels of a row share one zoom box, fitted around the samples within
+//! `zoom_mm` of the corner and their segments (equal-aspect millimetres); lines are
+//! clipped to it.
 //!
 //! Inputs: a `thermal.monitor` stage (`directions.parquet`) and, optionally, a stage
 //! holding the CAD polygon `path.parquet` (`thermal.reprint`). Without the polygon
 //! the zoom centres on the sample of largest path curvature and `vertices` is ignored.
 
+use std::ops::Range;
 use std::path::Path;
 
 use plotters::coord::Shift;
@@ -25,9 +28,12 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::{closed_outline, interior_angle_deg, load_polygon, plane_chart, Vertex};
+use crate::figures::thermal_common::{
+    clip_polyline, closed_outline, draw_key, finite_range, interior_angle_deg, load_polygon, plane_chart, KeySwatch,
+    PlaneChart, Vertex,
+};
 use crate::read::{f64s, no_rows, read_parquet};
-use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
+use crate::style::{draw_png_and_svg, text, PALETTE};
 
 /// The `figure.thermal_directions` stage kind.
 pub struct ThermalDirectionsFigure;
@@ -38,6 +44,10 @@ const ROW_PX: (u32, u32) = (1400, 700);
 const TITLE_PX: u32 = 48;
 /// Colour of the deposition-direction segments (red, as in the paper).
 const DIRECTION_RED: RGBColor = RGBColor(214, 39, 40);
+/// Colour of the CAD polygon.
+const CAD_GREY: RGBColor = RGBColor(150, 150, 150);
+/// Height of the key band below the panels, in pixels.
+const KEY_PX: u32 = 40;
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec {
@@ -50,7 +60,7 @@ const PARAMS: &[ParamSpec] = &[
         name: "zoom_mm",
         ty: ParamType::Float { min: 0.1, max: 100.0 },
         default: ParamDefault::Float(1.2),
-        doc: "Half side of the square zoom box around each vertex (mm); 1.2 mm shows the corner and about five bead widths of each leg.",
+        doc: "Radius around each vertex whose samples the zoom box is fitted to (mm); 1.2 mm shows the corner and about five bead widths of each leg.",
     },
     ParamSpec {
         name: "every_k_samples",
@@ -116,8 +126,7 @@ impl Directions {
     /// The median of the finite DDA half widths: the nominal half width w0 on a path
     /// that is mostly straight.
     pub fn nominal_half_width_mm(&self) -> f64 {
-        let mut w: Vec<f64> =
-            self.w_dda_mm.iter().flat_map(|&(l, r)| [l, r]).filter(|w| w.is_finite()).collect();
+        let mut w: Vec<f64> = self.w_dda_mm.iter().flat_map(|&(l, r)| [l, r]).filter(|w| w.is_finite()).collect();
         w.sort_by(f64::total_cmp);
         w.get(w.len() / 2).copied().unwrap_or(0.2)
     }
@@ -171,7 +180,9 @@ impl StageKind for ThermalDirectionsFigure {
             every_k: ctx.params.i64("every_k_samples") as usize,
         };
         let title = match ctx.params.str("title") {
-            "" => "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".into(),
+            "" => {
+                "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".into()
+            }
             t => t.to_string(),
         };
         let stem = ctx.output_path("thermal_directions")?;
@@ -246,7 +257,7 @@ pub fn zoom_at_max_curvature(d: &Directions) -> Zoom {
 
 /// The figure size for `rows` zoomed corners.
 pub fn figure_size_px(rows: usize) -> (u32, u32) {
-    (ROW_PX.0, TITLE_PX + ROW_PX.1 * rows.max(1) as u32)
+    (ROW_PX.0, TITLE_PX + KEY_PX + ROW_PX.1 * rows.max(1) as u32)
 }
 
 /// Everything a drawing needs.
@@ -258,36 +269,63 @@ pub struct Plot {
     pub polygon: Vec<Vertex>,
     /// One row per zoom.
     pub zooms: Vec<Zoom>,
-    /// Half side of the zoom box (mm).
+    /// Radius around the corner whose samples the zoom box holds (mm).
     pub half_mm: f64,
     /// Draw every k-th sample.
     pub every_k: usize,
 }
 
 impl Plot {
-    /// Indices of the samples within `margin` half sides of the zoom centre.
-    fn near(&self, zoom: &Zoom, margin: f64) -> Vec<usize> {
-        let r = self.half_mm * margin;
+    /// Indices of the samples within `radius_mm` of the zoom centre.
+    fn near(&self, zoom: &Zoom, radius_mm: f64) -> Vec<usize> {
         let (cx, cy) = zoom.centre_mm;
         (0..self.directions.len())
             .filter(|&i| {
                 let (x, y) = self.directions.xy_mm[i];
-                (x - cx).abs() <= r && (y - cy).abs() <= r
+                (x - cx).hypot(y - cy) <= radius_mm
             })
             .collect()
     }
+
+    /// The box drawn for `zoom`: around the samples within `half_mm` of the corner and
+    /// the ends of their segments in both variants, so the corner fills the panel.
+    pub fn zoom_box(&self, zoom: &Zoom) -> (Range<f64>, Range<f64>) {
+        let nominal = self.directions.nominal_half_width_mm();
+        let ends = self.near(zoom, self.half_mm).into_iter().flat_map(|i| {
+            let (a, b) = (
+                self.directions.segment(i, Variant::WithoutDda, nominal),
+                self.directions.segment(i, Variant::WithDda, nominal),
+            );
+            [self.directions.xy_mm[i], a.left, a.right, b.left, b.right]
+        });
+        let (xs, ys): (Vec<f64>, Vec<f64>) = ends.chain([zoom.centre_mm]).unzip();
+        let ((x0, x1), (y0, y1)) = (finite_range(xs.into_iter()), finite_range(ys.into_iter()));
+        let pad = 0.05 * (x1 - x0).max(y1 - y0);
+        ((x0 - pad)..(x1 + pad), (y0 - pad)..(y1 + pad))
+    }
 }
 
-/// Draws one row (without / with DDA) per zoom.
+/// Draws one row (without / with DDA) per zoom and one key below.
 pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot: &Plot) -> Result<(), String> {
-    let area = area.margin(10, 6, 6, 10).titled(title, text(24.0)).map_err(|e| e.to_string())?;
-    let rows = area.split_evenly((plot.zooms.len().max(1), 2));
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let area = area.margin(10, 6, 6, 10).titled(title, text(24.0)).map_err(e)?;
+    let (grid, key) = area.split_vertically(area.dim_in_pixel().1.saturating_sub(KEY_PX));
+    let rows = grid.split_evenly((plot.zooms.len().max(1), 2));
     for (k, zoom) in plot.zooms.iter().enumerate() {
         for (j, variant) in [Variant::WithoutDda, Variant::WithDda].into_iter().enumerate() {
-            draw_panel(&rows[2 * k + j], plot, zoom, variant).map_err(|e| e.to_string())?;
+            draw_panel(&rows[2 * k + j], plot, zoom, variant).map_err(e)?;
         }
     }
-    Ok(())
+    let mut items = vec![
+        ("path centre line".to_string(), KeySwatch::Line(BLACK)),
+        ("deposition direction, w_r behind to w_l ahead".to_string(), KeySwatch::Line(DIRECTION_RED)),
+        ("S_c > 1 without DDA: width undefined (w0 drawn)".to_string(), KeySwatch::Line(PALETTE[6])),
+        ("estimated boundary".to_string(), KeySwatch::Line(PALETTE[0])),
+    ];
+    if !plot.polygon.is_empty() {
+        items.push(("CAD path".to_string(), KeySwatch::Line(CAD_GREY)));
+    }
+    draw_key(&key, &items).map_err(e)
 }
 
 fn draw_panel<DB: DrawingBackend>(
@@ -301,70 +339,59 @@ fn draw_panel<DB: DrawingBackend>(
         Variant::WithDda => "(b) with DDA",
     };
     let area = area.titled(&format!("{name}: {}", zoom.label), text(18.0))?;
-    let (cx, cy, h) = (zoom.centre_mm.0, zoom.centre_mm.1, plot.half_mm);
-    let mut chart = plane_chart(&area, (cx - h)..(cx + h), (cy - h)..(cy + h), 1)?;
+    let (xs, ys) = plot.zoom_box(zoom);
+    let mut chart = plane_chart(&area, xs, ys, 1)?;
+    let (xs, ys) = (chart.x_range(), chart.y_range());
     // Samples a little outside the box still draw segments that reach into it.
-    let near = plot.near(zoom, 1.3);
+    let reach = 0.75 * (xs.end - xs.start).hypot(ys.end - ys.start);
+    let near = plot.near(zoom, reach);
     let nominal = plot.directions.nominal_half_width_mm();
     let segments: Vec<Segment> = near.iter().map(|&i| plot.directions.segment(i, variant, nominal)).collect();
+    let mut lines = Lines { chart: &mut chart, xs, ys };
     if !plot.polygon.is_empty() {
-        let grey = PALETTE[6].mix(0.7).stroke_width(1);
-        chart
-            .draw_series(DashedLineSeries::new(closed_outline(&plot.polygon), 6, 4, grey))?
-            .label("CAD path")
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], grey));
+        lines.dashed(&closed_outline(&plot.polygon), CAD_GREY.stroke_width(1))?;
     }
-    draw_segments(&mut chart, &segments, &near, plot.every_k)?;
-    draw_boundaries(&mut chart, &segments)?;
-    let centre: Vec<(f64, f64)> = near.iter().map(|&i| plot.directions.xy_mm[i]).collect();
-    chart
-        .draw_series(LineSeries::new(centre, BLACK.stroke_width(2)))?
-        .label("path centre line")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 24, y)], BLACK.stroke_width(2)));
-    draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)
-}
-
-type Chart<'a, DB> = crate::figures::thermal_common::PlaneChart<'a, DB>;
-
-fn draw_segments<DB: DrawingBackend>(
-    chart: &mut Chart<DB>,
-    segments: &[Segment],
-    near: &[usize],
-    every_k: usize,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let picked = || segments.iter().zip(near).filter(|(_, i)| **i % every_k.max(1) == 0).map(|(s, _)| s);
-    let red = DIRECTION_RED.stroke_width(2);
-    chart
-        .draw_series(picked().filter(|s| s.defined).map(|s| PathElement::new([s.right, s.left], red)))?
-        .label("deposition direction, w_r to w_l")
-        .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], red));
-    if picked().any(|s| !s.defined) {
-        let grey = PALETTE[6].stroke_width(2);
-        chart
-            .draw_series(picked().filter(|s| !s.defined).map(|s| PathElement::new([s.right, s.left], grey)))?
-            .label("S_c > 1: width undefined (nominal drawn)")
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], grey));
+    let picked = segments.iter().zip(&near).filter(|(_, i)| **i % plot.every_k.max(1) == 0).map(|(s, _)| s);
+    for s in picked {
+        let colour = if s.defined { DIRECTION_RED } else { PALETTE[6] };
+        lines.solid(&[s.right, s.left], colour.stroke_width(2))?;
     }
-    Ok(())
-}
-
-/// The estimated boundaries: the left ends and the right ends of the defined
-/// segments, in path order (broken where the model is undefined).
-fn draw_boundaries<DB: DrawingBackend>(
-    chart: &mut Chart<DB>,
-    segments: &[Segment],
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let blue = PALETTE[0].stroke_width(2);
-    let picks: [fn(&Segment) -> (f64, f64); 2] = [|s| s.left, |s| s.right];
+    // The estimated boundaries: left ends and right ends in path order, broken where
+    // the model is undefined.
+    let picks: [EndOf; 2] = [|s| s.left, |s| s.right];
     for pick in picks {
         for piece in segments.split(|s| !s.defined) {
-            chart.draw_series(LineSeries::new(piece.iter().map(pick), blue))?;
+            lines.solid(&piece.iter().map(pick).collect::<Vec<_>>(), PALETTE[0].stroke_width(2))?;
         }
     }
-    chart.draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?.label("estimated boundary").legend(
-        move |(x, y)| PathElement::new([(x, y), (x + 24, y)], blue),
-    );
-    Ok(())
+    let centre: Vec<(f64, f64)> = near.iter().map(|&i| plot.directions.xy_mm[i]).collect();
+    lines.solid(&centre, BLACK.stroke_width(2))
+}
+
+/// Picks one end of a segment.
+type EndOf = fn(&Segment) -> (f64, f64);
+
+/// Polylines drawn on a zoomed chart, clipped to its box.
+struct Lines<'c, 'a, DB: DrawingBackend> {
+    chart: &'c mut PlaneChart<'a, DB>,
+    xs: Range<f64>,
+    ys: Range<f64>,
+}
+
+impl<DB: DrawingBackend> Lines<'_, '_, DB> {
+    fn solid(&mut self, points: &[(f64, f64)], style: ShapeStyle) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        for piece in clip_polyline(points, &self.xs, &self.ys) {
+            self.chart.draw_series(LineSeries::new(piece, style))?;
+        }
+        Ok(())
+    }
+
+    fn dashed(&mut self, points: &[(f64, f64)], style: ShapeStyle) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        for piece in clip_polyline(points, &self.xs, &self.ys) {
+            self.chart.draw_series(DashedLineSeries::new(piece, 6, 4, style))?;
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -27,11 +27,11 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::thermal_common::{
-    closed_outline, colour_level, draw_colour_bar, draw_runs, equal_aspect_chart, finite_range, level_colour,
-    load_polygon, merge_runs, plane_chart, PlaneChart, Vertex,
+    closed_outline, colour_level, draw_colour_bar, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour,
+    load_polygon, merge_runs, plane_chart, KeySwatch, PlaneChart, Vertex,
 };
 use crate::read::{f64s, ints, no_rows, read_parquet};
-use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text};
+use crate::style::{draw_png_and_svg, house_mesh, text};
 
 /// The `figure.thermal_frame` stage kind.
 pub struct ThermalFrameFigure;
@@ -41,9 +41,13 @@ const SIZE_PX: (u32, u32) = (1500, 1150);
 /// Width of the colour bar strip, in pixels.
 const COLOUR_BAR_PX: u32 = 130;
 /// Height of the frame row as a fraction of the area below the title.
-const TOP_ROW_FRACTION: f64 = 0.55;
+const TOP_ROW_FRACTION: f64 = 0.52;
+/// Height of the key band between the frame row and the mosaic, in pixels.
+const KEY_PX: u32 = 40;
+/// Colour of the band outline (white reads on every viridis colour).
+const BAND_LINE: RGBColor = RGBColor(255, 255, 255);
 /// Marker colours: matched corners, unmatched detections, the nozzle.
-const MATCHED: RGBColor = RGBColor(255, 255, 255);
+const MATCHED: RGBColor = RGBColor(0, 0, 0);
 const UNMATCHED: RGBColor = RGBColor(214, 39, 40);
 const NOZZLE: RGBColor = RGBColor(230, 159, 0);
 
@@ -60,7 +64,12 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(150.0),
         doc: "Upper edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 150 °C.",
     },
-    ParamSpec { name: "title", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "Figure title (default: a generic description)." },
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description).",
+    },
 ];
 
 /// One pixel or plane cell with its temperature.
@@ -150,8 +159,10 @@ fn cells(dir: &Path, file: &str, x: &str, y: &str) -> Result<Vec<Cell>, StageErr
     let df = read_parquet(&path)?;
     let temp = f64s(&df, "temp_c", &path)?;
     let (xs, ys) = (coords(&df, x, &path)?, coords(&df, y, &path)?);
-    let cells: Vec<Cell> =
-        (0..df.height()).filter(|&i| temp[i].is_finite()).map(|i| Cell { x: xs[i], y: ys[i], temp_c: temp[i] }).collect();
+    let cells: Vec<Cell> = (0..df.height())
+        .filter(|&i| temp[i].is_finite())
+        .map(|i| Cell { x: xs[i], y: ys[i], temp_c: temp[i] })
+        .collect();
     if cells.is_empty() {
         return Err(no_rows(&path, "temp_c", "a finite temperature"));
     }
@@ -172,9 +183,11 @@ pub fn load(dir: &Path, band_c: (f64, f64)) -> Result<FrameData, StageError> {
     let mosaic = cells(dir, "mosaic.parquet", "x_mm", "y_mm")?;
     let path = dir.join("detections_example.parquet");
     let df = read_parquet(&path)?;
-    let (u, v, matched) = (coords(&df, "u_px", &path)?, coords(&df, "v_px", &path)?, ints(&df, "matched_vertex", &path)?);
-    let detections =
-        (0..df.height()).map(|i| Detection { u_px: u[i], v_px: v[i], vertex: (matched[i] >= 0).then_some(matched[i]) }).collect();
+    let (u, v, matched) =
+        (coords(&df, "u_px", &path)?, coords(&df, "v_px", &path)?, ints(&df, "matched_vertex", &path)?);
+    let detections = (0..df.height())
+        .map(|i| Detection { u_px: u[i], v_px: v[i], vertex: (matched[i] >= 0).then_some(matched[i]) })
+        .collect();
     let path = dir.join("frame_example_meta.parquet");
     let df = read_parquet(&path)?;
     if df.height() == 0 {
@@ -212,7 +225,8 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, data
     let area = area.margin(10, 6, 6, 10).titled(title, text(24.0)).map_err(|e| e.to_string())?;
     let (panels, bar) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(COLOUR_BAR_PX));
     let top_px = (panels.dim_in_pixel().1 as f64 * TOP_ROW_FRACTION) as u32;
-    let (top, bottom) = panels.split_vertically(top_px);
+    let (top, rest) = panels.split_vertically(top_px);
+    let (key, bottom) = rest.split_vertically(KEY_PX);
     let (a, b) = top.split_horizontally(top.dim_in_pixel().0 / 2);
     let range = finite_range(data.frame.iter().chain(&data.mosaic).map(|c| c.temp_c));
     let (layer, frame) = data.layer_frame;
@@ -220,7 +234,25 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, data
     draw_frame_panel(&a, data, range, &caption, false).map_err(|e| e.to_string())?;
     draw_frame_panel(&b, data, range, "(b) detected corners and nozzle", true).map_err(|e| e.to_string())?;
     draw_mosaic(&bottom, data, range).map_err(|e| e.to_string())?;
+    draw_key(&key, &key_items(data)).map_err(|e| e.to_string())?;
     draw_colour_bar(&bar, range, "temperature (°C)", 0).map_err(|e| e.to_string())
+}
+
+fn key_items(data: &FrameData) -> Vec<(String, KeySwatch)> {
+    let matched = data.detections.iter().filter(|d| d.vertex.is_some()).count();
+    let mut items = vec![
+        (
+            format!("{:.0}-{:.0} °C band outline", data.band_c.0, data.band_c.1),
+            KeySwatch::Outlined(RGBColor(60, 60, 60), BAND_LINE),
+        ),
+        (format!("corner matched to a CAD vertex ({matched})"), KeySwatch::Circle(MATCHED)),
+        (format!("detection not matched ({})", data.detections.len() - matched), KeySwatch::Cross(UNMATCHED)),
+        ("nozzle".to_string(), KeySwatch::Triangle(NOZZLE)),
+    ];
+    if !data.polygon.is_empty() {
+        items.push(("CAD path (in c)".to_string(), KeySwatch::LineOn(RGBColor(60, 60, 60), WHITE)));
+    }
+    items
 }
 
 /// The frame in pixel coordinates; rows are plotted at y = v_max − v so that v grows
@@ -234,32 +266,25 @@ fn draw_frame_panel<DB: DrawingBackend>(
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let area = area.titled(caption, text(18.0))?;
     let (u_max, v_max) = data.frame.iter().fold((0.0_f64, 0.0_f64), |(u, v), c| (u.max(c.x), v.max(c.y)));
-    let flip = |(u, v): (f64, f64)| (u, v_max - v);
-    let mut chart = equal_aspect_chart(&area, -0.5..u_max + 0.5, -0.5..v_max + 0.5)?;
+    let flip = |(u, v): (f64, f64)| (u, -v);
+    let mut chart = equal_aspect_chart(&area, -0.5..u_max + 0.5, -(v_max + 0.5)..0.5)?;
     house_mesh(&mut chart)
         .disable_mesh()
         .x_desc("u (px)")
         .y_desc("v (px)")
         .x_label_formatter(&|u| format!("{u:.0}"))
-        .y_label_formatter(&|y| format!("{:.0}", v_max - y))
+        .y_label_formatter(&|y| format!("{:.0}", 0.0 - y))
         .draw()?;
     let levelled: Vec<(f64, f64, usize)> =
-        data.frame.iter().map(|c| (c.x, v_max - c.y, colour_level(c.temp_c, range))).collect();
+        data.frame.iter().map(|c| (c.x, -c.y, colour_level(c.temp_c, range))).collect();
     draw_runs(&mut chart, &merge_runs(&levelled, 1.0), 1.0, level_colour)?;
-    let white = WHITE.stroke_width(2);
+    let line = BAND_LINE.stroke_width(1);
     let outline = band_outline(&data.frame, data.band_c);
-    chart
-        .draw_series(outline.iter().map(|e| PathElement::new([flip(e[0]), flip(e[1])], white)))?
-        .label(format!("{:.0}-{:.0} °C band", data.band_c.0, data.band_c.1))
-        .legend(|(x, y)| {
-            EmptyElement::at((x, y))
-                + Rectangle::new([(0, -7), (22, 7)], RGBColor(60, 60, 60).filled())
-                + Rectangle::new([(0, -7), (22, 7)], WHITE.stroke_width(2))
-        });
+    chart.draw_series(outline.iter().map(|e| PathElement::new([flip(e[0]), flip(e[1])], line)))?;
     if markers {
         draw_markers(&mut chart, data, flip)?;
     }
-    draw_house_legend(&mut chart, SeriesLabelPosition::LowerLeft)
+    Ok(())
 }
 
 fn draw_markers<DB: DrawingBackend>(
@@ -269,25 +294,15 @@ fn draw_markers<DB: DrawingBackend>(
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let matched: Vec<(Detection, (f64, f64))> =
         data.detections.iter().filter(|d| d.vertex.is_some()).map(|d| (*d, flip((d.u_px, d.v_px)))).collect();
-    chart
-        .draw_series(matched.iter().map(|(_, p)| Circle::new(*p, 9, MATCHED.stroke_width(3))))?
-        .label(format!("corner matched to a CAD vertex ({})", matched.len()))
-        .legend(|(x, y)| Circle::new((x + 10, y), 6, MATCHED.stroke_width(3)));
-    let label_style = text(15.0).color(&WHITE);
-    chart.draw_series(
-        matched.iter().map(|(d, p)| Text::new(format!("v{}", d.vertex.unwrap_or(-1)), (p.0 + 4.0, p.1 + 5.0), label_style.clone())),
-    )?;
-    let unmatched: Vec<(f64, f64)> =
-        data.detections.iter().filter(|d| d.vertex.is_none()).map(|d| flip((d.u_px, d.v_px))).collect();
-    chart
-        .draw_series(unmatched.iter().map(|p| Cross::new(*p, 8, UNMATCHED.stroke_width(3))))?
-        .label(format!("detection not matched ({})", unmatched.len()))
-        .legend(|(x, y)| Cross::new((x + 10, y), 6, UNMATCHED.stroke_width(3)));
-    let nozzle = flip(data.nozzle_px);
-    chart
-        .draw_series([TriangleMarker::new(nozzle, 11, NOZZLE.filled())])?
-        .label("nozzle")
-        .legend(|(x, y)| TriangleMarker::new((x + 10, y), 7, NOZZLE.filled()));
+    chart.draw_series(matched.iter().map(|(_, p)| Circle::new(*p, 9, MATCHED.stroke_width(3))))?;
+    let label_style = text(16.0).color(&WHITE);
+    let label = |(d, p): &(Detection, (f64, f64))| {
+        Text::new(format!("v{}", d.vertex.unwrap_or(-1)), (p.0 + 5.0, p.1 + 9.0), label_style.clone())
+    };
+    chart.draw_series(matched.iter().map(label))?;
+    let unmatched = data.detections.iter().filter(|d| d.vertex.is_none()).map(|d| flip((d.u_px, d.v_px)));
+    chart.draw_series(unmatched.map(|p| Cross::new(p, 8, UNMATCHED.stroke_width(3))))?;
+    chart.draw_series([TriangleMarker::new(flip(data.nozzle_px), 11, NOZZLE.filled())])?;
     Ok(())
 }
 
@@ -307,12 +322,7 @@ fn draw_mosaic<DB: DrawingBackend>(
         data.mosaic.iter().map(|c| (c.x, c.y, colour_level(c.temp_c, range))).collect();
     draw_runs(&mut chart, &merge_runs(&levelled, step), step, level_colour)?;
     if !data.polygon.is_empty() {
-        let style = WHITE.stroke_width(2);
-        chart
-            .draw_series(DashedLineSeries::new(closed_outline(&data.polygon), 8, 5, style))?
-            .label("CAD path")
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], style));
-        draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)?;
+        chart.draw_series(DashedLineSeries::new(closed_outline(&data.polygon), 8, 5, WHITE.stroke_width(2)))?;
     }
     Ok(())
 }

@@ -20,7 +20,7 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::r_surface::grid_step;
 use crate::figures::thermal_common::{
-    closed_outline, draw_key, draw_runs, load_polygon, merge_runs, plane_chart, KeySwatch, Vertex,
+    clip_polyline, closed_outline, draw_key, draw_runs, load_polygon, merge_runs, plane_chart, KeySwatch, Vertex,
 };
 use crate::figures::thermal_directions::parse_vertices;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -58,7 +58,12 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(3),
         doc: "Corners (before/after pairs) per row of the figure.",
     },
-    ParamSpec { name: "title", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "Figure title (default: a generic description with the mean O_E)." },
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description with the mean O_E).",
+    },
 ];
 
 /// A deposit class of one grid cell.
@@ -91,6 +96,9 @@ impl Class {
     }
 }
 
+/// Cells (x mm, y mm, class) of the conventional and of the compensated print.
+pub type Cells = [Vec<(f64, f64, Class)>; 2];
+
 /// One corner's evaluation (a row of `corners.parquet`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Corner {
@@ -108,7 +116,7 @@ pub struct Plot {
     /// The corners drawn, in order.
     pub corners: Vec<Corner>,
     /// Cells of the conventional and of the compensated print.
-    pub cells: [Vec<(f64, f64, Class)>; 2],
+    pub cells: Cells,
     /// Grid spacing of the cells (mm).
     pub step_mm: f64,
     /// The CAD polygon.
@@ -205,7 +213,7 @@ pub fn load_corners(path: &Path, wanted: &[i64]) -> Result<Vec<Corner>, StageErr
 
 /// Reads `deposit_regions.parquet` into the conventional and compensated cells and
 /// the grid spacing. An unknown variant or class is an error naming the row.
-pub fn load_cells(path: &Path) -> Result<([Vec<(f64, f64, Class)>; 2], f64), StageError> {
+pub fn load_cells(path: &Path) -> Result<(Cells, f64), StageError> {
     let df = read_parquet(path)?;
     let (variant, class) = (strs(&df, "variant", path)?, strs(&df, "class", path)?);
     let (x, y) = (f64s(&df, "x_mm", path)?, f64s(&df, "y_mm", path)?);
@@ -256,7 +264,10 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
 }
 
 /// A long title over two lines, split at " | " when it does not fit in one.
-fn draw_title<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn draw_title<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let style = text(22.0);
     let width = area.dim_in_pixel().0 as i32;
     let fits = area.estimate_text_size(title, &style)?.0 as i32 <= width;
@@ -286,11 +297,15 @@ fn draw_panel<DB: DrawingBackend>(
     let margin = plot.step_mm;
     let inside: Vec<(f64, f64, Class)> = plot.cells[side]
         .iter()
-        .filter(|c| c.0 >= xs.start - margin && c.0 <= xs.end + margin && c.1 >= ys.start - margin && c.1 <= ys.end + margin)
+        .filter(|c| {
+            c.0 >= xs.start - margin && c.0 <= xs.end + margin && c.1 >= ys.start - margin && c.1 <= ys.end + margin
+        })
         .copied()
         .collect();
     draw_runs(&mut chart, &merge_runs(&inside, plot.step_mm), plot.step_mm, Class::colour)?;
-    chart.draw_series(LineSeries::new(closed_outline(&plot.polygon), BLACK.stroke_width(1)))?;
+    for piece in clip_polyline(&closed_outline(&plot.polygon), &xs, &ys) {
+        chart.draw_series(LineSeries::new(piece, BLACK.stroke_width(1)))?;
+    }
     Ok(())
 }
 
@@ -317,7 +332,8 @@ mod tests {
     #[test]
     fn bad_class_or_missing_vertex_is_named() {
         let dir = tempfile::tempdir().expect("tempdir");
-        let df = df!("variant" => ["conventional"], "x_mm" => [0.0], "y_mm" => [0.0], "class" => ["blob"]).expect("frame");
+        let df =
+            df!("variant" => ["conventional"], "x_mm" => [0.0], "y_mm" => [0.0], "class" => ["blob"]).expect("frame");
         write_table(dir.path(), "deposit_regions", df);
         let err = load_cells(&dir.path().join("deposit_regions.parquet")).expect_err("bad class").to_string();
         assert!(err.contains("deposit_regions.parquet") && err.contains("class, row 0"), "{err}");

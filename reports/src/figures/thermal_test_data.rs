@@ -190,7 +190,11 @@ pub fn frame_example() -> (DataFrame, DataFrame, DataFrame) {
             let corner = track.iter().map(|c| (c.0 - p.0).hypot(c.1 - p.1)).fold(f64::INFINITY, f64::min);
             u.push(col);
             v.push(row);
-            temp.push(45.0 + 110.0 * (-d / 6.0).exp() + 30.0 * (-corner / 8.0).exp() + 0.2 * noise((row * 160 + col) as usize));
+            temp.push(
+                45.0 + 110.0 * (-d / 6.0).exp()
+                    + 30.0 * (-corner / 8.0).exp()
+                    + 0.2 * noise((row * 160 + col) as usize),
+            );
         }
     }
     let frame = df!("u_px" => u, "v_px" => v, "temp_c" => temp).expect("frame");
@@ -199,8 +203,8 @@ pub fn frame_example() -> (DataFrame, DataFrame, DataFrame) {
         "temp_c" => [182.0, 181.0, 179.0, 178.0, 120.0], "matched_vertex" => [7i32, 6, 5, 8, -1]
     )
     .expect("frame");
-    let meta = df!("layer" => [0i32], "frame" => [12i32], "nozzle_u_px" => [140.0], "nozzle_v_px" => [40.0])
-        .expect("frame");
+    let meta =
+        df!("layer" => [0i32], "frame" => [12i32], "nozzle_u_px" => [140.0], "nozzle_v_px" => [40.0]).expect("frame");
     (frame, detections, meta)
 }
 
@@ -277,8 +281,14 @@ pub fn write_compensate(dir: &Path) {
         span.push(k as i32);
         vertex.push(apex as i32);
         angle.push(angle_deg(&poly, apex));
-        (t0.push(tc - 0.08), t1.push(tc + 0.08), e0.push(tc - 0.18), e1.push(tc + 0.18));
-        (temp.push(corner_temp), gain.push(ke), max_dw.push(0.3), solve.push(15.0 + k as f64));
+        t0.push(tc - 0.08);
+        t1.push(tc + 0.08);
+        e0.push(tc - 0.18);
+        e1.push(tc + 0.18);
+        temp.push(corner_temp);
+        gain.push(ke);
+        max_dw.push(0.3);
+        solve.push(15.0 + k as f64);
         let mut lagged = 0.0;
         for j in 0..=360 {
             let t = tc - 0.18 + 0.001 * j as f64;
@@ -287,8 +297,13 @@ pub fn write_compensate(dir: &Path) {
             let command = (ke * 20.0 * 0.3 * (-((t - tc + 0.06) / 0.05).powi(2)).exp()).clamp(-2.0, 4.0);
             // The first-order lag of eq. 34 (τ = 0.0873 s), explicit Euler at 1 ms.
             lagged += (command - lagged) * 0.001 / 0.0873;
-            (c_span.push(k as i32), c_vertex.push(apex as i32), c_t.push(t), c_dw.push(dw_mm));
-            (desired.push(want), input.push(command), output.push(lagged));
+            c_span.push(k as i32);
+            c_vertex.push(apex as i32);
+            c_t.push(t);
+            c_dw.push(dw_mm);
+            desired.push(want);
+            input.push(command);
+            output.push(lagged);
         }
     }
     let spans = df!(
@@ -380,7 +395,10 @@ pub fn deposit_regions(poly: &[(f64, f64)]) -> DataFrame {
                     (true, false) => "under",
                     (false, false) => continue,
                 };
-                (variant.push(name), x.push(p.0), y.push(p.1), class.push(c));
+                variant.push(name);
+                x.push(p.0);
+                y.push(p.1);
+                class.push(c);
             }
         }
     }

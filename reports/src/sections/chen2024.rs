@@ -93,6 +93,9 @@ pub fn source(input: &InputArtifact, file: &str) -> String {
     }
 }
 
+/// A row of `accuracy.parquet`: value, unit, n, note.
+pub type AccuracyRow = (f64, String, i64, String);
+
 /// One corner of `corners.parquet`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CornerOe {
@@ -114,7 +117,7 @@ pub struct Ours {
     /// Solve time of each span (ms).
     pub solve_ms: Vec<f64>,
     /// `accuracy.parquet`: metric → (value, unit, n, note).
-    pub accuracy: BTreeMap<String, (f64, String, i64, String)>,
+    pub accuracy: BTreeMap<String, AccuracyRow>,
     /// Frames used, and skip reason → count.
     pub frames_used: usize,
     /// Skipped frames by reason.
@@ -192,7 +195,7 @@ fn read_solve_ms(path: &Path) -> Result<Vec<f64>, StageError> {
     Ok(solve)
 }
 
-fn read_accuracy(path: &Path) -> Result<BTreeMap<String, (f64, String, i64, String)>, StageError> {
+fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageError> {
     let df = read_parquet(path)?;
     let (metric, value) = (strs(&df, "metric", path)?, f64s(&df, "value", path)?);
     let (unit, n, note) = (strs(&df, "unit", path)?, ints(&df, "n", path)?, strs(&df, "note", path)?);
@@ -242,7 +245,11 @@ pub fn checks(ours: &Ours) -> Vec<Check> {
     };
     let loc = ours.metric("capture_time_err_median_ms");
     vec![
-        at_least("mean O_E falls (relative reduction of the mean, %)", reduction_pct(oe_before, oe_after), DONE_OE_REDUCTION_PCT),
+        at_least(
+            "mean O_E falls (relative reduction of the mean, %)",
+            reduction_pct(oe_before, oe_after),
+            DONE_OE_REDUCTION_PCT,
+        ),
         at_least("max contour error falls (%)", reduction_pct(max0, max1), DONE_MAX_REDUCTION_PCT),
         at_least("RMS contour error falls (%)", reduction_pct(rms0, rms1), DONE_RMS_REDUCTION_PCT),
         Check {
@@ -315,22 +322,112 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
     let lines = [
         ("sec_3_3", "mean O_E before compensation (eq. 40)", Some(PAPER_OE_PCT.0), "", Some(oe0), "%", 2, corners),
         ("sec_3_3", "mean O_E after compensation (eq. 40)", Some(PAPER_OE_PCT.1), "", Some(oe1), "%", 2, corners),
-        ("sec_3_3", "relative reduction of the mean O_E", Some(paper_oe_red), "", Some(reduction_pct(oe0, oe1)), "%", 2, corners),
+        (
+            "sec_3_3",
+            "relative reduction of the mean O_E",
+            Some(paper_oe_red),
+            "",
+            Some(reduction_pct(oe0, oe1)),
+            "%",
+            2,
+            corners,
+        ),
         ("table_3", "max contour error, conventional (eq. 41)", Some(PAPER_MAX_MM.0), "", Some(max0), "mm", 4, contour),
         ("table_3", "max contour error, compensated", Some(PAPER_MAX_MM.1), "", Some(max1), "mm", 4, contour),
-        ("table_3", "max contour error reduction", Some(PAPER_REDUCTION_PCT.0), "", Some(reduction_pct(max0, max1)), "%", 2, contour),
+        (
+            "table_3",
+            "max contour error reduction",
+            Some(PAPER_REDUCTION_PCT.0),
+            "",
+            Some(reduction_pct(max0, max1)),
+            "%",
+            2,
+            contour,
+        ),
         ("table_3", "RMS contour error, conventional", Some(PAPER_RMS_MM.0), "", Some(rms0), "mm", 4, contour),
         ("table_3", "RMS contour error, compensated", Some(PAPER_RMS_MM.1), "", Some(rms1), "mm", 4, contour),
-        ("table_3", "RMS contour error reduction", Some(PAPER_REDUCTION_PCT.1), "", Some(reduction_pct(rms0, rms1)), "%", 2, contour),
-        ("sec_3_3", "compensation time per corner (median; ours: solve only)", Some(PAPER_TIME_PER_CORNER_MS), "≈ 500", solve, "ms", 1, spans),
-        ("sec_3_2", "corner detector precision (paper: mAP 99.5 %)", None, &map_text, m("corner_precision").map(|v| 100.0 * v), "%", 1, accuracy),
+        (
+            "table_3",
+            "RMS contour error reduction",
+            Some(PAPER_REDUCTION_PCT.1),
+            "",
+            Some(reduction_pct(rms0, rms1)),
+            "%",
+            2,
+            contour,
+        ),
+        (
+            "sec_3_3",
+            "compensation time per corner (median; ours: solve only)",
+            Some(PAPER_TIME_PER_CORNER_MS),
+            "≈ 500",
+            solve,
+            "ms",
+            1,
+            spans,
+        ),
+        (
+            "sec_3_2",
+            "corner detector precision (paper: mAP 99.5 %)",
+            None,
+            &map_text,
+            m("corner_precision").map(|v| 100.0 * v),
+            "%",
+            1,
+            accuracy,
+        ),
         ("sec_3_2", "corner detector recall", None, "—", m("corner_recall").map(|v| 100.0 * v), "%", 1, accuracy),
-        ("sec_2_3", "capture-time localisation error, median (eq. 28)", None, "δt within 10", m("capture_time_err_median_ms"), "ms", 2, accuracy),
-        ("sec_2_3", "same, using the recorded time (baseline)", None, "—", m("capture_time_err_baseline_median_ms"), "ms", 2, accuracy),
-        ("sec_2_3", "homography reprojection error, RMS (eq. 27)", None, "—", m("reprojection_rms_mm"), "mm", 3, accuracy),
-        ("sec_2_4", "extracted width error, median (eqs 31-32)", None, "—", m("width_err_median_mm"), "mm", 3, accuracy),
+        (
+            "sec_2_3",
+            "capture-time localisation error, median (eq. 28)",
+            None,
+            "δt within 10",
+            m("capture_time_err_median_ms"),
+            "ms",
+            2,
+            accuracy,
+        ),
+        (
+            "sec_2_3",
+            "same, using the recorded time (baseline)",
+            None,
+            "—",
+            m("capture_time_err_baseline_median_ms"),
+            "ms",
+            2,
+            accuracy,
+        ),
+        (
+            "sec_2_3",
+            "homography reprojection error, RMS (eq. 27)",
+            None,
+            "—",
+            m("reprojection_rms_mm"),
+            "mm",
+            3,
+            accuracy,
+        ),
+        (
+            "sec_2_4",
+            "extracted width error, median (eqs 31-32)",
+            None,
+            "—",
+            m("width_err_median_mm"),
+            "mm",
+            3,
+            accuracy,
+        ),
         ("sec_3_2", "frames used", None, "—", Some(ours.frames_used as f64), "frames", 0, frames),
-        ("sec_3_2", "frames skipped", None, "—", Some(ours.skipped.values().sum::<usize>() as f64), "frames", 0, frames),
+        (
+            "sec_3_2",
+            "frames skipped",
+            None,
+            "—",
+            Some(ours.skipped.values().sum::<usize>() as f64),
+            "frames",
+            0,
+            frames,
+        ),
     ];
     for (section, item, paper, paper_text, value, unit, decimals, source) in lines {
         push_line(&mut html, rows, Line { section, item, paper, paper_text, ours: value, unit, decimals, source });
@@ -397,7 +494,10 @@ fn discussion(ours: &Ours) -> String {
     let solve = median(ours.solve_ms.clone());
     let loc = fmt(ours.metric("capture_time_err_median_ms"), 2);
     let base = fmt(ours.metric("capture_time_err_baseline_median_ms"), 2);
-    let (p, r) = (fmt(ours.metric("corner_precision").map(|v| 100.0 * v), 1), fmt(ours.metric("corner_recall").map(|v| 100.0 * v), 1));
+    let (p, r) = (
+        fmt(ours.metric("corner_precision").map(|v| 100.0 * v), 1),
+        fmt(ours.metric("corner_recall").map(|v| 100.0 * v), 1),
+    );
     format!(
         "<h4>Where and why ours differs</h4>\n\
 <p><b>Over-deposition index.</b> Ours, mean over {n} corners: {oe0:.2} % → {oe1:.2} % (paper: 106.75 % → 31.73 %, over the four corner types of its one-layer part). \
