@@ -47,3 +47,35 @@ pub fn no_rows(path: &Path, column: &str, wanted: &str) -> StageError {
         expected: format!("expected rows with {wanted}"),
     }
 }
+
+/// Column `name` as 64-bit integers, from any integer type (ids are written as i32,
+/// counts as i64). A non-integer column or a null is an error naming the column.
+pub fn ints(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<i64>, StageError> {
+    let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
+    let col = df.column(name).map_err(bad)?;
+    if !col.dtype().is_integer() {
+        return Err(StageError::BadInput {
+            file: path.to_path_buf(),
+            location: Some(name.into()),
+            expected: format!("expected an integer column, found {}", col.dtype()),
+        });
+    }
+    let wide = col.cast(&polars::prelude::DataType::Int64).map_err(bad)?;
+    let ca = wide.i64().map_err(bad)?;
+    ca.iter().enumerate().map(|(row, v)| v.ok_or_else(|| null_at(path, name, row))).collect()
+}
+
+/// Column `name` as booleans (nulls are an error).
+pub fn bools(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<bool>, StageError> {
+    let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
+    let ca = df.column(name).map_err(bad)?.bool().map_err(bad)?;
+    ca.iter().enumerate().map(|(row, v)| v.ok_or_else(|| null_at(path, name, row))).collect()
+}
+
+fn null_at(path: &Path, name: &str, row: usize) -> StageError {
+    StageError::BadInput {
+        file: path.to_path_buf(),
+        location: Some(format!("{name}, row {row}")),
+        expected: "expected a value, found null".into(),
+    }
+}

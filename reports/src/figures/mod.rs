@@ -6,7 +6,15 @@ mod inkjet_height_maps;
 mod loo_predictions;
 mod r_surface;
 #[cfg(test)]
-mod test_util;
+pub(crate) mod test_util;
+mod thermal_common;
+mod thermal_contour_error;
+mod thermal_corners;
+mod thermal_directions;
+mod thermal_frame;
+mod thermal_overdeposition;
+#[cfg(test)]
+pub(crate) mod thermal_test_data;
 mod transfer_cv;
 mod width_profiles;
 
@@ -14,6 +22,11 @@ pub use infill::InfillFigure;
 pub use inkjet_height_maps::InkjetHeightMapsFigure;
 pub use loo_predictions::LooPredictionsFigure;
 pub use r_surface::RSurfaceFigure;
+pub use thermal_contour_error::ThermalContourErrorFigure;
+pub use thermal_corners::ThermalCornersFigure;
+pub use thermal_directions::ThermalDirectionsFigure;
+pub use thermal_frame::ThermalFrameFigure;
+pub use thermal_overdeposition::ThermalOverdepositionFigure;
 pub use transfer_cv::TransferCvFigure;
 pub use width_profiles::WidthProfilesFigure;
 
@@ -32,6 +45,11 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(TransferCvFigure));
     registry.register(Box::new(InfillFigure));
     registry.register(Box::new(InkjetHeightMapsFigure));
+    registry.register(Box::new(ThermalDirectionsFigure));
+    registry.register(Box::new(ThermalFrameFigure));
+    registry.register(Box::new(ThermalCornersFigure));
+    registry.register(Box::new(ThermalOverdepositionFigure));
+    registry.register(Box::new(ThermalContourErrorFigure));
 }
 
 /// The axes of a line-width profile (paper 000 Figs 3, 6): position along the line

@@ -2,9 +2,11 @@
 //! writes `section.html` (embedded in the report) and `comparison.parquet` (paper's
 //! number beside ours, with where ours came from).
 
+mod chen2024;
 mod lu2015;
 mod ren2021;
 
+pub use chen2024::Chen2024Section;
 pub use lu2015::Lu2015Section;
 
 pub use ren2021::Ren2021Section;
@@ -16,6 +18,7 @@ use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
 pub fn register(registry: &mut Registry) {
     registry.register(Box::new(Ren2021Section));
     registry.register(Box::new(Lu2015Section));
+    registry.register(Box::new(Chen2024Section));
 }
 
 /// One comparison row.
