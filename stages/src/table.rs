@@ -21,6 +21,11 @@ pub fn i64_col(name: &str, values: Vec<i64>) -> Column {
     Series::new(name.into(), values).into_column()
 }
 
+/// A column of booleans.
+pub fn bool_col(name: &str, values: Vec<bool>) -> Column {
+    Series::new(name.into(), values).into_column()
+}
+
 /// A table from columns of equal length.
 pub fn frame(columns: Vec<Column>) -> Result<DataFrame, StageError> {
     let height = columns.first().map_or(0, |c| c.len());

@@ -281,7 +281,7 @@ fn edge_distance_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
@@ -308,18 +308,19 @@ mod tests {
 
     #[test]
     fn straight_edge_has_the_nominal_width() {
-        // Far from corners and from the start (bottom edge, x = 30 mm, y = 0) the flow has
+        // Mid left side (x = 0, after a gentle corner taken at full speed) the flow has
         // settled and eq. 3 gives the bead width w = E/(h|v|) = bead_width × flow factor.
         let (setup, _, deposit) = conventional();
         let grid = &deposit.grid;
-        for x_mm in [28.0, 30.0, 32.0] {
-            let (ix, _) = grid.cell_of([x_mm, 0.0]).unwrap();
-            // Only the bottom edge's cells: the zig-zag top crosses the same column higher up.
-            let near_edge = |iy: usize| grid.cell_center_mm(ix, iy)[1].abs() < 1.0;
-            let filled = (0..grid.ny).filter(|&iy| near_edge(iy) && grid.fill[grid.index(ix, iy)] >= 0.5).count();
+        let (centre, _) = models::thermal::setup::straight_test_point();
+        for dy_mm in [-1.0, 0.0, 1.0] {
+            let (_, iy) = grid.cell_of([centre[0], centre[1] + dy_mm]).unwrap();
+            // Only the side's cells: the zig-zag teeth cross the same row farther in.
+            let near_edge = |ix: usize| (grid.cell_center_mm(ix, iy)[0] - centre[0]).abs() < 1.0;
+            let filled = (0..grid.nx).filter(|&ix| near_edge(ix) && grid.fill[grid.index(ix, iy)] >= 0.5).count();
             let width_mm = filled as f64 * grid.cell_mm;
             let expected = setup.bead_width_mm * deposit.flow_factor;
-            assert!((width_mm - expected).abs() <= grid.cell_mm, "x {x_mm}: {width_mm} vs {expected}");
+            assert!((width_mm - expected).abs() <= grid.cell_mm, "dy {dy_mm}: {width_mm} vs {expected}");
         }
     }
 
@@ -340,10 +341,22 @@ mod tests {
     fn truth_widths_match_the_bead_on_straight_edges() {
         let (setup, trajectory, deposit) = conventional();
         let widths = half_widths_mm(&deposit.grid, &trajectory);
-        let k = (0..trajectory.len()).find(|&k| trajectory.x_mm[k] >= 30.0 && trajectory.y_mm[k].abs() < 1e-9).unwrap();
+        let k = straight_sample(&trajectory);
         let (l, r) = widths[k];
         let half = setup.bead_width_mm * deposit.flow_factor / 2.0;
         assert!((l - half).abs() < 0.015 && (r - half).abs() < 0.015, "{l} {r} vs {half}");
+    }
+
+    /// The trajectory sample nearest the middle of the left side.
+    pub(crate) fn straight_sample(trajectory: &Trajectory) -> usize {
+        let (p, _) = models::thermal::setup::straight_test_point();
+        (0..trajectory.len())
+            .min_by(|&a, &b| {
+                let da = (trajectory.x_mm[a] - p[0]).hypot(trajectory.y_mm[a] - p[1]);
+                let db = (trajectory.x_mm[b] - p[0]).hypot(trajectory.y_mm[b] - p[1]);
+                da.total_cmp(&db)
+            })
+            .unwrap()
     }
 
     fn over_deposit_mm2(grid: &DepositGrid, path: &[[f64; 2]], vertex: [f64; 2], radius: f64, half: f64) -> f64 {

@@ -339,6 +339,7 @@ fn convolve_at(line: &[f32], at: usize, kernel: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::thermal::deposition::tests::straight_sample;
     use crate::thermal::deposition::{conventional_command, print_part};
     use models::thermal::{PrintSetup, Trajectory};
     use rand::SeedableRng;
@@ -362,9 +363,9 @@ mod tests {
 
     #[test]
     fn straight_bead_crosses_the_corner_band_within_a_second() {
-        // Bottom edge at x = 30 mm, y = 0: the bead centre passes 150 °C and 140 °C 0.5-1 s after deposition.
+        // Mid left side: the bead centre passes 150 °C and 140 °C 0.5-1 s after deposition.
         let (trajectory, _, heat) = heat_of_conventional_layer();
-        let k = (0..trajectory.len()).find(|&k| trajectory.x_mm[k] >= 30.0).unwrap();
+        let k = straight_sample(&trajectory);
         let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
         let (t150, t140) =
             (crossing_s(&heat, p, trajectory.t_s[k], 150.0), crossing_s(&heat, p, trajectory.t_s[k], 140.0));
@@ -375,7 +376,7 @@ mod tests {
     fn sharp_corners_stay_hot_longer_than_straight_edges() {
         // The 45° apex: the bulge crosses 140 °C later than the straight bead does.
         let (trajectory, _, heat) = heat_of_conventional_layer();
-        let k = (0..trajectory.len()).find(|&k| trajectory.x_mm[k] >= 30.0).unwrap();
+        let k = straight_sample(&trajectory);
         let edge = crossing_s(&heat, [trajectory.x_mm[k], trajectory.y_mm[k]], trajectory.t_s[k], 140.0);
         let corner = trajectory.corners.iter().find(|c| (c.interior_angle_deg - 45.0).abs() < 1e-6).unwrap();
         let t_mid = 0.5 * (corner.arc_start_s + corner.arc_end_s);

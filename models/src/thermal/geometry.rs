@@ -190,6 +190,7 @@ mod tests {
             assert!((kappa[k] - path).abs() < 0.01 * path.abs() + 1e-3, "sample {k}: {} vs {path}", kappa[k]);
             checked += 1;
         }
-        assert!(checked > tr.len() - 200);
+        // Up to seven samples around each of the two arc ends are skipped, nothing else.
+        assert!(checked > tr.len() - 16 * tr.corners.len());
     }
 }

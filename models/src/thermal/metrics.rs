@@ -420,7 +420,7 @@ mod tests {
         let w0 = 0.225;
         let bead = IdealBead::new(&corner_test_path(), w0).unwrap();
         let cell = 0.025;
-        let mut grid = DepositGrid::covering([-1.5, -1.5], [39.0, 15.0], cell);
+        let mut grid = DepositGrid::covering([-1.5, -6.5], [39.0, 16.5], cell);
         rasterise(&mut grid, 3, |p| bead.contains(p));
         for c in corner_depositions(&grid, &bead, default_corner_radius_mm(w0)) {
             // Only boundary cells split by the edge carry fill outside the ideal bead.

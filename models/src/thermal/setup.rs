@@ -1,12 +1,14 @@
 //! The printing parameters of paper 003 (Table 1) and the corner test path (Fig. 7a).
 //!
 //! The paper does not give the test path's coordinates, only that it has "different
-//! angles of corners" (Fig. 7a, "4 types of corners", Sec. 3.3). Ours is a closed,
-//! counter-clockwise path: a 37 mm base and a zig-zag top of four teeth with apex
-//! angles of 45°, 60°, 90° and 120°, so that the valleys between them add corners of
-//! 52.5°, 75° and 105° and the path has eleven corners in all. Teeth 5 mm high keep
-//! four or more corners within the camera's field of view (about 20 mm wide at
-//! 14.5 mm and 45°) over most of the top, which the homography needs (eq. 27).
+//! angles of corners" (Fig. 7a, "4 types of corners", Sec. 3.3) and prints in about
+//! 10 s. Ours is a closed, counter-clockwise path 37 mm wide: 10 mm straight sides and
+//! a zig-zag top and bottom, each of four teeth with apex angles of 45°, 60°, 90° and
+//! 120°; the valleys between them add corners of 52.5°, 75° and 105°, the sides meet
+//! the zig-zags at 120° and 157.5°, eighteen corners in all, about 8 s of printing.
+//! Teeth 5 mm high put corners every 5-10 mm of path, so that four or more corners that
+//! are still hot lie within the camera's field of view (about 20 mm at 14.5 mm and 45°)
+//! in many frames, which the homography needs (eq. 27).
 
 use super::errors::{positive, ThermalError};
 
@@ -99,28 +101,45 @@ impl PrintSetup {
     }
 }
 
-/// Height of each tooth of the test path's zig-zag top (mm).
+/// Height of each tooth of the test path's zig-zags (mm).
 pub const TOOTH_HEIGHT_MM: f64 = 5.0;
-/// Height of the straight sides below the zig-zag (mm).
-pub const BASE_HEIGHT_MM: f64 = 8.0;
-/// Apex angles of the four teeth, right to left in print order (degrees).
+/// Length of the straight sides between the two zig-zags (mm).
+pub const BASE_HEIGHT_MM: f64 = 10.0;
+/// Apex angles of the four teeth of the top zig-zag, right to left in print order;
+/// the bottom zig-zag has the same teeth below them, printed left to right (degrees).
 pub const TOOTH_APEX_DEG: [f64; 4] = [120.0, 90.0, 60.0, 45.0];
 
 /// Vertices of the corner test path (mm), counter-clockwise, starting at the
-/// bottom-left corner. The path is closed: the last vertex joins the first.
+/// bottom-right end of the right side: up the right side, the top zig-zag right to
+/// left, down the left side, the bottom zig-zag left to right. The path is closed:
+/// the last vertex joins the first. Print starts in the middle of the right side.
 pub fn corner_test_path() -> Vec<[f64; 2]> {
     let half_bases: Vec<f64> =
         TOOTH_APEX_DEG.iter().map(|deg| TOOTH_HEIGHT_MM * (deg.to_radians() / 2.0).tan()).collect();
     let width_mm: f64 = 2.0 * half_bases.iter().sum::<f64>();
-    let mut vertices = vec![[0.0, 0.0], [width_mm, 0.0], [width_mm, BASE_HEIGHT_MM]];
+    let mut vertices = vec![[width_mm, 0.0], [width_mm, BASE_HEIGHT_MM]];
     let mut x = width_mm;
     for half in &half_bases {
         vertices.push([x - half, BASE_HEIGHT_MM + TOOTH_HEIGHT_MM]);
         x -= 2.0 * half;
         vertices.push([x, BASE_HEIGHT_MM]);
     }
-    // The last valley is the top-left corner itself: (0, BASE_HEIGHT_MM).
+    // The last top valley is the top-left corner (0, BASE_HEIGHT_MM); then down the left side.
+    vertices.push([0.0, 0.0]);
+    for half in half_bases.iter().rev() {
+        vertices.push([x + half, -TOOTH_HEIGHT_MM]);
+        x += 2.0 * half;
+        vertices.push([x, 0.0]);
+    }
+    // The last bottom valley is the first vertex.
+    vertices.pop();
     vertices
+}
+
+/// A point in the middle of the left side, the longest straight run between two
+/// gentle corners, where the flow has settled (mm), and the side's direction of travel.
+pub fn straight_test_point() -> ([f64; 2], [f64; 2]) {
+    ([0.0, BASE_HEIGHT_MM / 2.0], [0.0, -1.0])
 }
 
 #[cfg(test)]
@@ -139,16 +158,22 @@ mod tests {
         let v = corner_test_path();
         let n = v.len();
         let angles: Vec<f64> = (0..n).map(|i| interior_angle_deg(v[(i + n - 1) % n], v[i], v[(i + 1) % n])).collect();
-        // Apexes are at vertices 3, 5, 7, 9; valleys at 4, 6, 8.
+        // Top apexes at vertices 2, 4, 6, 8 (valleys 3, 5, 7); bottom apexes at 11, 13, 15, 17
+        // (valleys 12, 14, 16), the bottom teeth in reverse order.
         for (k, apex) in TOOTH_APEX_DEG.iter().enumerate() {
-            assert!((angles[3 + 2 * k] - apex).abs() < 1e-9, "apex {k}: {}", angles[3 + 2 * k]);
+            assert!((angles[2 + 2 * k] - apex).abs() < 1e-9, "top apex {k}: {}", angles[2 + 2 * k]);
+            assert!((angles[17 - 2 * k] - apex).abs() < 1e-9, "bottom apex {k}: {}", angles[17 - 2 * k]);
         }
         for (k, pair) in TOOTH_APEX_DEG.windows(2).enumerate() {
             let valley = (pair[0] + pair[1]) / 2.0;
-            assert!((angles[4 + 2 * k] - valley).abs() < 1e-9, "valley {k}: {}", angles[4 + 2 * k]);
+            assert!((angles[3 + 2 * k] - valley).abs() < 1e-9, "top valley {k}: {}", angles[3 + 2 * k]);
+            assert!((angles[16 - 2 * k] - valley).abs() < 1e-9, "bottom valley {k}: {}", angles[16 - 2 * k]);
         }
-        assert_eq!(n, 11);
-        assert!(v[10][0].abs() < 1e-12 && (v[10][1] - BASE_HEIGHT_MM).abs() < 1e-12);
+        assert_eq!(n, 18);
+        // The straight test point is the middle of the left side, between vertices 9 and 10.
+        let (p, _) = straight_test_point();
+        assert!(v[9][0].abs() < 1e-9 && (v[9][1] - BASE_HEIGHT_MM).abs() < 1e-9 && v[10] == [0.0, 0.0]);
+        assert!((p[0] - v[9][0]).abs() < 1e-9 && (p[1] - 0.5 * (v[9][1] + v[10][1])).abs() < 1e-9);
     }
 
     #[test]

@@ -408,6 +408,7 @@ mod tests {
         for w in tr.corners.windows(2) {
             assert!(w[0].arc_end_s <= w[1].arc_start_s);
         }
+        // Printing starts in the middle of edge 0, so the first corner is vertex 1.
         assert_eq!(tr.corners[0].vertex, 1);
     }
 

@@ -98,16 +98,14 @@ pub struct Span {
     pub gain_ke: f64,
     /// Largest |Δw| in the span (mm).
     pub max_dw_mm: f64,
-    /// Time to solve the compensation (ms).
-    pub solve_ms: f64,
 }
 
 impl Span {
     /// The row caption.
     pub fn caption(&self) -> String {
         format!(
-            "span {}: vertex {} ({:.0}° corner), T_p = {:.1} °C, K_e = {:.2}, max Δw = {:.3} mm, solved in {:.1} ms",
-            self.span, self.vertex, self.angle_deg, self.corner_temp_c, self.gain_ke, self.max_dw_mm, self.solve_ms
+            "span {}: vertex {} ({:.0}° corner), T_p = {:.1} °C, K_e = {:.2}, max Δw = {:.3} mm",
+            self.span, self.vertex, self.angle_deg, self.corner_temp_c, self.gain_ke, self.max_dw_mm
         )
     }
 }
@@ -229,7 +227,7 @@ pub fn load_spans(dir: &Path, wanted: &[i64]) -> Result<Vec<(Span, Sequence)>, S
     let (span, vertex) = (ints(&df, "span", &path)?, ints(&df, "vertex", &path)?);
     let (angle, t0, t1, e0, e1) =
         (f("angle_deg")?, f("t_start_s")?, f("t_end_s")?, f("t_ext_start_s")?, f("t_ext_end_s")?);
-    let (temp, gain, dw, solve) = (f("corner_temp_c")?, f("gain_ke")?, f("max_dw_mm")?, f("solve_ms")?);
+    let (temp, gain, dw) = (f("corner_temp_c")?, f("gain_ke")?, f("max_dw_mm")?);
     let spans: Vec<Span> = (0..df.height())
         .map(|i| Span {
             span: span[i],
@@ -240,7 +238,6 @@ pub fn load_spans(dir: &Path, wanted: &[i64]) -> Result<Vec<(Span, Sequence)>, S
             corner_temp_c: temp[i],
             gain_ke: gain[i],
             max_dw_mm: dw[i],
-            solve_ms: solve[i],
         })
         .filter(|s| wanted.is_empty() || wanted.contains(&s.span))
         .collect();

@@ -271,7 +271,7 @@ pub fn write_compensate(dir: &Path) {
     let poly = corner_path();
     let (mut span, mut vertex, mut angle, mut t0, mut t1, mut e0, mut e1) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
-    let (mut temp, mut gain, mut max_dw, mut solve) = (vec![], vec![], vec![], vec![]);
+    let (mut temp, mut gain, mut max_dw) = (vec![], vec![], vec![]);
     let (mut c_span, mut c_vertex, mut c_t, mut c_dw) = (vec![], vec![], vec![], vec![]);
     let (mut desired, mut output, mut input) = (vec![], vec![], vec![]);
     for (k, &apex) in APEXES.iter().enumerate() {
@@ -288,7 +288,6 @@ pub fn write_compensate(dir: &Path) {
         temp.push(corner_temp);
         gain.push(ke);
         max_dw.push(0.3);
-        solve.push(15.0 + k as f64);
         let mut lagged = 0.0;
         for j in 0..=360 {
             let t = tc - 0.18 + 0.001 * j as f64;
@@ -309,7 +308,7 @@ pub fn write_compensate(dir: &Path) {
     let spans = df!(
         "span" => span, "vertex" => vertex, "angle_deg" => angle, "t_start_s" => t0, "t_end_s" => t1,
         "t_ext_start_s" => e0, "t_ext_end_s" => e1, "corner_temp_c" => temp, "gain_ke" => gain,
-        "max_dw_mm" => max_dw, "solve_ms" => solve
+        "max_dw_mm" => max_dw
     )
     .expect("frame");
     let comp = df!(

@@ -22,7 +22,6 @@ use std::path::Path;
 use pipeline::stage::Arity;
 use pipeline::{InputArtifact, ParamSpec, StageContext, StageError, StageKind};
 
-use super::ren2021::median;
 use super::{comparison_frame, Row};
 use crate::html::escape;
 use crate::read::{bools, f64s, ints, no_rows, read_parquet, strs};
@@ -38,8 +37,6 @@ pub const PAPER_MAX_MM: (f64, f64) = (1.6805, 0.2468);
 pub const PAPER_RMS_MM: (f64, f64) = (0.4301, 0.2017);
 /// Table 3: the reductions the paper prints (%).
 pub const PAPER_REDUCTION_PCT: (f64, f64) = (85.31, 53.10);
-/// Sec. 3.3: compensation time per corner, thermal processing and solve (ms).
-pub const PAPER_TIME_PER_CORNER_MS: f64 = 500.0;
 /// Sec. 3.2: mAP of the Faster R-CNN corner detector (%).
 pub const PAPER_MAP_PCT: f64 = 99.5;
 
@@ -114,8 +111,6 @@ pub struct Ours {
     pub corners: Vec<CornerOe>,
     /// (max, RMS) contour error, conventional then compensated (mm).
     pub contour_mm: [(f64, f64); 2],
-    /// Solve time of each span (ms).
-    pub solve_ms: Vec<f64>,
     /// `accuracy.parquet`: metric → (value, unit, n, note).
     pub accuracy: BTreeMap<String, AccuracyRow>,
     /// Frames used, and skip reason → count.
@@ -134,7 +129,6 @@ impl Ours {
         Ok(Self {
             corners: read_corners(&reprint.dir.join("corners.parquet"))?,
             contour_mm: read_contour(&reprint.dir.join("contour.parquet"))?,
-            solve_ms: read_solve_ms(&compensate.dir.join("spans.parquet"))?,
             accuracy: read_accuracy(&accuracy.dir.join("accuracy.parquet"))?,
             frames_used,
             skipped,
@@ -184,15 +178,6 @@ fn read_contour(path: &Path) -> Result<[(f64, f64); 2], StageError> {
         variant.iter().position(|v| v == name).map(|i| (max[i], rms[i])).ok_or_else(|| no_rows(path, "variant", name))
     };
     Ok([row("conventional")?, row("compensated")?])
-}
-
-fn read_solve_ms(path: &Path) -> Result<Vec<f64>, StageError> {
-    let df = read_parquet(path)?;
-    let solve = f64s(&df, "solve_ms", path)?;
-    if solve.is_empty() {
-        return Err(no_rows(path, "solve_ms", "one row per compensated span"));
-    }
-    Ok(solve)
 }
 
 fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageError> {
@@ -314,9 +299,8 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
     let mut html = String::from("<table><tr><th class=\"t\">quantity</th><th>paper</th><th>ours</th><th class=\"t\">unit</th><th class=\"t\">our source</th></tr>\n");
     let (oe0, oe1) = ours.mean_oe_pct();
     let [(max0, rms0), (max1, rms1)] = ours.contour_mm;
-    let [spans, corners, contour, accuracy, frames] = &ours.sources;
+    let [_spans, corners, contour, accuracy, frames] = &ours.sources;
     let paper_oe_red = reduction_pct(PAPER_OE_PCT.0, PAPER_OE_PCT.1);
-    let solve = (!ours.solve_ms.is_empty()).then(|| median(ours.solve_ms.clone()));
     let m = |name: &str| ours.metric(name);
     let map_text = format!("mAP {PAPER_MAP_PCT} %");
     let lines = [
@@ -355,16 +339,6 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
             "%",
             2,
             contour,
-        ),
-        (
-            "sec_3_3",
-            "compensation time per corner (median; ours: solve only)",
-            Some(PAPER_TIME_PER_CORNER_MS),
-            "≈ 500",
-            solve,
-            "ms",
-            1,
-            spans,
         ),
         (
             "sec_3_2",
@@ -491,7 +465,6 @@ fn checks_table(ours: &Ours) -> String {
 fn discussion(ours: &Ours) -> String {
     let (oe0, oe1) = ours.mean_oe_pct();
     let [(max0, rms0), (max1, rms1)] = ours.contour_mm;
-    let solve = median(ours.solve_ms.clone());
     let loc = fmt(ours.metric("capture_time_err_median_ms"), 2);
     let base = fmt(ours.metric("capture_time_err_baseline_median_ms"), 2);
     let (p, r) = (
@@ -509,9 +482,9 @@ is the only cause of over-deposition, so the numbers agree in kind, not to the d
 the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the outer surface of a 20-layer part with a laser \
 profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's contour per layer, with no profiler noise, so our residual error after compensation \
 is that of the deposition model alone.</p>\n\
-<p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve; ours \
-({solve:.1} ms median, spans.parquet solve_ms) times only the constrained least-squares solve of eq. 39 on one CPU core, so the two are not comparable: ours \
-says the solve is not the bottleneck.</p>\n\
+<p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
+Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
+solve of eq. 39 per corner (models/benches/thermal.rs) and the whole frame pipeline per frame (vision/benches/frames.rs); see the README for the numbers.</p>\n\
 <p><b>Corner detection.</b> The paper reports mAP 99.5 % for a Faster R-CNN trained on 69 annotated real frames (Sec. 3.2). We have no GPU, no weights and no \
 annotated real frames, so we detect corners classically (hot spots in the 140-150 °C band) on synthetic frames whose true corner positions are known, and \
 report precision {p} % and recall {r} % against that ground truth instead; mAP is not computed.</p>\n\

@@ -88,9 +88,21 @@ impl StageKind for AccuracyEvaluateStage {
         let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
         detection_metrics(&monitor, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
         let used = frames.used.iter().filter(|u| **u).count();
-        metrics.push("frames_used", used as f64, "frames", used, "frames localised (≥ 4 matched corners, homography found)");
+        metrics.push(
+            "frames_used",
+            used as f64,
+            "frames",
+            used,
+            "frames localised (≥ 4 matched corners, homography found)",
+        );
         let skipped = frames.used.len() - used;
-        metrics.push("frames_skipped", skipped as f64, "frames", skipped, "bad, out-of-order or corner-poor frames (see frames.parquet skip_reason)");
+        metrics.push(
+            "frames_skipped",
+            skipped as f64,
+            "frames",
+            skipped,
+            "bad, out-of-order or corner-poor frames (see frames.parquet skip_reason)",
+        );
         ctx.write_table("accuracy", &mut metrics.into_frame()?)?;
         Ok(())
     }
@@ -161,7 +173,11 @@ impl FrameRows {
     }
 }
 
-fn truth_frame<'a>(truth: &'a ThermalTruth, layer: i64, frame: i64) -> Option<&'a datasets::thermal::sequence::TruthFrame> {
+fn truth_frame<'a>(
+    truth: &'a ThermalTruth,
+    layer: i64,
+    frame: i64,
+) -> Option<&'a datasets::thermal::sequence::TruthFrame> {
     truth.frames.iter().find(|f| f.layer as i64 == layer && f.frame as i64 == frame)
 }
 
@@ -195,7 +211,8 @@ fn homography_metrics(
     let mut errors = Vec::new();
     for i in (0..frames.used.len()).filter(|&i| frames.used[i]) {
         let Some(h) = frames.homography[i] else { continue };
-        let in_frame = truth.corners.iter().filter(|c| c.layer as i64 == frames.layer[i] && c.frame as i64 == frames.frame[i]);
+        let in_frame =
+            truth.corners.iter().filter(|c| c.layer as i64 == frames.layer[i] && c.frame as i64 == frames.frame[i]);
         for corner in in_frame {
             let plane = h.apply(undistorter.undistort_px(corner.pixel));
             let cad = path_mm[corner.vertex];
@@ -204,7 +221,13 @@ fn homography_metrics(
     }
     let n = errors.len();
     let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n.max(1) as f64).sqrt();
-    metrics.push("homography_err_median_mm", quantile(&mut errors, 0.5), "mm", n, "true corner pixels through the estimated H, to their CAD vertex");
+    metrics.push(
+        "homography_err_median_mm",
+        quantile(&mut errors, 0.5),
+        "mm",
+        n,
+        "true corner pixels through the estimated H, to their CAD vertex",
+    );
     metrics.push("reprojection_rms_mm", rms, "mm", n, "RMS of the same distances");
 }
 
@@ -237,7 +260,13 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
         signed.push(err);
     }
     let n = abs_err.len();
-    metrics.push("width_err_median_mm", quantile(&mut abs_err, 0.5), "mm", n, "|(w_l + w_r) − true width| along the deposition direction");
+    metrics.push(
+        "width_err_median_mm",
+        quantile(&mut abs_err, 0.5),
+        "mm",
+        n,
+        "|(w_l + w_r) − true width| along the deposition direction",
+    );
     metrics.push("width_bias_median_mm", quantile(&mut signed, 0.5), "mm", n, "median of the signed width error");
     Ok(())
 }
@@ -293,8 +322,20 @@ fn detection_metrics(
         positives += counts.truths;
     }
     let ratio = |num: usize, den: usize| if den == 0 { f64::NAN } else { num as f64 / den as f64 };
-    metrics.push("corner_precision", ratio(tp, detections), "fraction", detections, "detections within the radius of a true in-band corner");
-    metrics.push("corner_recall", ratio(tp, positives), "fraction", positives, "true in-band corners with a detection within the radius");
+    metrics.push(
+        "corner_precision",
+        ratio(tp, detections),
+        "fraction",
+        detections,
+        "detections within the radius of a true in-band corner",
+    );
+    metrics.push(
+        "corner_recall",
+        ratio(tp, positives),
+        "fraction",
+        positives,
+        "true in-band corners with a detection within the radius",
+    );
     Ok(())
 }
 

@@ -109,7 +109,7 @@ pub fn f64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<f64>, S
         .cast(&polars::prelude::DataType::Float64)
         .map_err(|source| StageError::Table { path: file.into(), source })?;
     let values = cast.f64().map_err(|source| StageError::Table { path: file.into(), source })?;
-    Ok(values.into_iter().map(|v| v.unwrap_or(f64::NAN)).collect())
+    Ok(values.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
 }
 
 /// A column of integers of `df` (read from `file`).
@@ -119,7 +119,7 @@ pub fn i64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<i64>, S
         .cast(&polars::prelude::DataType::Int64)
         .map_err(|source| StageError::Table { path: file.into(), source })?;
     let values = cast.i64().map_err(|source| StageError::Table { path: file.into(), source })?;
-    Ok(values.into_iter().map(|v| v.unwrap_or(-1)).collect())
+    Ok(values.iter().map(|v| v.unwrap_or(-1)).collect())
 }
 
 /// A domain error about one file of the sequence.

@@ -5,9 +5,17 @@
 //! extended windows touch are merged so that every sample has one compensation. For
 //! each span: the corner it belongs to (the CAD vertex nearest its largest error), the
 //! corner temperature T_p (median temperature of that corner's detections, all inside
-//! the 140-150 °C band by construction), the gain K_e = 1 + (150 − T_p)/15 (Sec. 3.2),
+//! the monitor's band by construction), the gain K_e = 1 + (150 − T_p)/15 (Sec. 3.2,
+//! T_p clamped to the paper's 140-150 °C band),
 //! the desired change of the deposition velocity (eq. 33) and the filtered-B-spline
 //! input that produces it through G(s) within the bounds (eqs 36-39).
+//!
+//! Only over-deposition by default: near sharp corners the desired width of eq. 31,
+//! w0/cos ψ, grows without bound as the allocated direction turns towards the path
+//! (ψ → 90°), so the measured width falls short of it exactly where the bead bulges, and
+//! compensating that "under-deposition" would add material to the bulge. The paper's
+//! evaluation (O_E, eq. 40; Figs 9-10) is about over-deposition alone; negative Δw are
+//! set to zero unless `add_material` is true.
 //!
 //! Units: the deposition velocity v_e is the extruder's (E-axis) velocity in mm/s of
 //! filament, E = A_fil·v_e. This is the reading under which the paper's numbers fit
@@ -29,6 +37,12 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use super::common::{f64_column, i64_column, interior_angles_deg, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col};
+
+/// The temperature band over which the paper identified K_e (Sec. 3.2): its corners are
+/// measured at 140-150 °C, so K_e runs from 1 to 1.67. A corner measured outside the band
+/// (the monitor's band may be wider, see specs/chen2024.toml) is clamped to it: the
+/// formula is not meant to be extrapolated (it turns negative above 165 °C).
+const PAPER_BAND_C: (f64, f64) = (140.0, 150.0);
 
 /// The `thermal.compensate` stage kind.
 pub struct CompensateStage;
@@ -71,6 +85,12 @@ const PARAMS: &[ParamSpec] = &[
         doc: "Upper bound ΔV_max of the control points (mm/s of filament), Sec. 3.2: 4 mm/s.",
     },
     ParamSpec {
+        name: "add_material",
+        ty: ParamType::Bool,
+        default: ParamDefault::Bool(false),
+        doc: "Also compensate spans measured narrower than desired (Δw < 0) by adding material; false: only over-deposition is compensated (module doc says why).",
+    },
+    ParamSpec {
         name: "gain",
         ty: ParamType::Choice(&["paper", "unit"]),
         default: ParamDefault::Str("paper"),
@@ -103,7 +123,7 @@ impl StageKind for CompensateStage {
         let setup = seq.process.print_setup();
         let trajectory = trajectory_of(&seq)?;
         let monitor_dir = ctx.inputs[1].dir.clone();
-        let measured = MeasuredWidths::read(&monitor_dir, ctx.params.i64("layer"), trajectory.len())?;
+        let mut measured = MeasuredWidths::read(&monitor_dir, ctx.params.i64("layer"), trajectory.len())?;
         let corner_temps = corner_temperatures(&monitor_dir, seq.path_mm.len())?;
         let fbs = FbsParams {
             knot_spacing_s: ctx.params.f64("knot_spacing_s"),
@@ -113,6 +133,9 @@ impl StageKind for CompensateStage {
         };
         let extension_s = ctx.params.f64("extension_s");
         let merge_gap = (2.0 * extension_s / trajectory.dt_s).ceil() as usize + 1;
+        if !ctx.params.bool("add_material") {
+            measured.dw_mm.iter_mut().for_each(|dw| *dw = dw.max(0.0));
+        }
         let spans = error_spans(&measured.dw_mm, ctx.params.f64("epsilon_mm"), merge_gap);
         let to_filament = setup.bead_width_mm * setup.layer_height_mm / setup.filament_area_mm2();
         let speed = trajectory.speed_mm_s();
@@ -125,7 +148,7 @@ impl StageKind for CompensateStage {
             let vertex = span_vertex(&seq.path_mm, &trajectory, &measured.dw_mm, *span);
             let corner_temp_c = corner_temps[vertex];
             let gain = match ctx.params.str("gain") {
-                "paper" if corner_temp_c.is_finite() => paper_gain(corner_temp_c),
+                "paper" if corner_temp_c.is_finite() => paper_gain(corner_temp_c.clamp(PAPER_BAND_C.0, PAPER_BAND_C.1)),
                 _ => 1.0,
             };
             let range = window.first..=window.last;
@@ -142,7 +165,8 @@ impl StageKind for CompensateStage {
             for (j, dv) in solution.input_mm_s.iter().enumerate() {
                 command[window.first + j] -= dv;
             }
-            let max_dw = measured.dw_mm[span.first..=span.last].iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
+            let max_dw =
+                measured.dw_mm[span.first..=span.last].iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
             rows.span(index, vertex, angles[vertex], &trajectory.t_s, *span, window, corner_temp_c, gain, max_dw);
             rows.samples(index, vertex, &trajectory.t_s, window, &measured.dw_mm, &desired, &solution);
         }

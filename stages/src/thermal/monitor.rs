@@ -46,7 +46,7 @@ use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 use super::common::{
     camera_model, deposition_directions, left_directions, open_sequence, trajectory_of, vertex_passage_times,
 };
-use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 /// The `thermal.monitor` stage kind.
 pub struct MonitorStage;
@@ -334,8 +334,11 @@ impl<'a> Analysis<'a> {
         (0..layers)
             .map(|layer| {
                 let owner = self.frame_of_samples(frames, layer);
-                let threshold_c =
-                    if self.settings.calibrate { self.calibrated_threshold(frames, &owner) } else { self.settings.threshold_c };
+                let threshold_c = if self.settings.calibrate {
+                    self.calibrated_threshold(frames, &owner)
+                } else {
+                    self.settings.threshold_c
+                };
                 let measured = self.read_widths(frames, &owner, threshold_c);
                 LayerWidths { layer, threshold_c, owner, measured }
             })
@@ -444,6 +447,15 @@ fn collect_detections(
             (vertex, [d.u_px, d.v_px], f64::from(d.temp_c))
         })
         .collect()
+}
+
+/// The skip reasons of `frames`, counted: "12 × too few corners: …; 3 × …".
+fn skip_summary(frames: &[FrameOutcome]) -> String {
+    let mut counts: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for reason in frames.iter().filter_map(|f| f.skip.as_deref()) {
+        *counts.entry(reason).or_default() += 1;
+    }
+    counts.iter().map(|(r, n)| format!("{n} × {r}")).collect::<Vec<_>>().join("; ")
 }
 
 fn display_rel(path: &Path) -> String {
@@ -561,7 +573,11 @@ fn widths_frame(
 }
 
 /// `frames.parquet` and `detections.parquet`.
-fn write_frame_tables(ctx: &mut StageContext, seq: &ThermalSequence, frames: &[FrameOutcome]) -> Result<(), StageError> {
+fn write_frame_tables(
+    ctx: &mut StageContext,
+    seq: &ThermalSequence,
+    frames: &[FrameOutcome],
+) -> Result<(), StageError> {
     let used: Vec<bool> = frames.iter().map(|f| f.skip.is_none()).collect();
     let homography_cols: Vec<_> = (0..9)
         .map(|i| {
@@ -577,12 +593,8 @@ fn write_frame_tables(ctx: &mut StageContext, seq: &ThermalSequence, frames: &[F
         i64_col("corners_found", frames.iter().map(|f| f.corners_found as i64).collect()),
         i64_col("corners_matched", frames.iter().map(|f| f.matched as i64).collect()),
         f64_col("reproj_err_mm", frames.iter().map(|f| f.reproj_err_mm).collect()),
-        polars::prelude::Series::new("used".into(), used).into(),
-        polars::prelude::Series::new(
-            "at_window_edge".into(),
-            frames.iter().map(|f| f.at_window_edge).collect::<Vec<bool>>(),
-        )
-        .into(),
+        bool_col("used", used),
+        bool_col("at_window_edge", frames.iter().map(|f| f.at_window_edge).collect()),
         str_col("skip_reason", frames.iter().map(|f| f.skip.clone().unwrap_or_default()).collect()),
     ];
     columns.extend(homography_cols);
@@ -619,9 +631,11 @@ fn write_figure_tables(
         .filter(|f| f.skip.is_none())
         .max_by(|a, b| a.matched.cmp(&b.matched).then(b.entry.recorded_time_s.total_cmp(&a.entry.recorded_time_s)));
     let Some(best) = best else {
-        return Err(StageError::Domain(
-            format!("no frame of {} could be localised (see the frame diagnostics)", seq.dir.display()).into(),
-        ));
+        return Err(StageError::BadInput {
+            file: seq.dir.join("frames.csv"),
+            location: None,
+            expected: format!("at least one frame that can be localised; none could: {}", skip_summary(frames)),
+        });
     };
     let image = best.undistorted.as_ref().expect("used frames keep their image");
     let (mut u, mut v, mut t) = (Vec::new(), Vec::new(), Vec::new());
@@ -650,7 +664,8 @@ fn write_figure_tables(
     ])?;
     ctx.write_table("frame_example_meta", &mut meta)?;
     let mut mosaic = mosaic_frame(analysis, frames, best.entry.layer)?;
-    ctx.write_table("mosaic", &mut mosaic)
+    ctx.write_table("mosaic", &mut mosaic)?;
+    Ok(())
 }
 
 /// Cell size of the mosaic (mm): about one camera pixel on the plane.

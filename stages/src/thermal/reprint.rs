@@ -86,7 +86,8 @@ impl StageKind for ReprintEvaluateStage {
         let layers = ctx.params.i64("layers") as usize;
         let print = |command: &[f64]| -> Result<Vec<DepositGrid>, StageError> {
             let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
-            let printed = print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
+            let printed =
+                print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
             Ok(printed.into_iter().map(|l| l.grid).collect())
         };
         let (before, after) = (print(&commands.0)?, print(&commands.1)?);
@@ -109,7 +110,8 @@ impl StageKind for ReprintEvaluateStage {
             f64_col("x_mm", path.iter().map(|p| p[0]).collect()),
             f64_col("y_mm", path.iter().map(|p| p[1]).collect()),
         ])?;
-        ctx.write_table("path", &mut path_table)
+        ctx.write_table("path", &mut path_table)?;
+        Ok(())
     }
 }
 
@@ -243,4 +245,3 @@ fn regions_frame(
     }
     frame(vec![str_col("variant", cols.0), f64_col("x_mm", cols.1), f64_col("y_mm", cols.2), str_col("class", cols.3)])
 }
-
