@@ -88,6 +88,46 @@ pub enum DatasetsCommand {
     /// Convert raw measured data into datasets of our format.
     #[command(subcommand)]
     Import(ImportCommand),
+    /// Write datasets from a virtual printer.
+    #[command(subcommand)]
+    Generate(GenerateCommand),
+}
+
+/// Virtual-printer generators, one variant each (arguments in one struct per generator).
+#[derive(Debug, Subcommand)]
+pub enum GenerateCommand {
+    /// The virtual ink-jet printer of paper 002: an inkjet-scans dataset (scan after every layer).
+    Inkjet(InkjetGenerateArgs),
+}
+
+/// `amrepro datasets generate inkjet`.
+#[derive(Debug, Args)]
+pub struct InkjetGenerateArgs {
+    /// The part: cylinder (Figs 11-12), cuboid (Table II) or pipe_junction (Figs 13-15).
+    #[arg(long, value_parser = ["cylinder", "cuboid", "pipe_junction"])]
+    pub scenario: String,
+    /// Seed of every random stream.
+    #[arg(long)]
+    pub seed: u64,
+    /// An extra effect (curing_shrinkage, levelling_flow, nozzle_bias, substrate_tilt,
+    /// volume_drift); repeat, each followed by --strength.
+    #[arg(long = "effect", value_name = "NAME")]
+    pub effects: Vec<String>,
+    /// Strength of the preceding --effect (same order).
+    #[arg(long = "strength", value_name = "X", allow_negative_numbers = true)]
+    pub strengths: Vec<f64>,
+    /// Largest droplet-volume shortfall in percent (the paper's [0 20%]).
+    #[arg(long, default_value_t = 20.0)]
+    pub variation_pct: f64,
+    /// How the layer patterns are chosen.
+    #[arg(long, value_parser = ["open_loop", "closed_loop"], default_value = "open_loop")]
+    pub controller: String,
+    /// Open-loop layer count (default: the scenario's nominal count).
+    #[arg(long)]
+    pub layers: Option<usize>,
+    /// Dataset folder to write (replaced atomically if it is an inkjet-scans dataset).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// Importers.

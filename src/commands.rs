@@ -8,8 +8,8 @@ use pipeline::graph::{render, GraphFormat};
 use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
-    Cli, Command, DatasetsCommand, FsuImportArgs, GraphArgs, GraphFormatArg, ImportCommand, ReportArgs, RunArgs,
-    StagesArgs,
+    Cli, Command, DatasetsCommand, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg, ImportCommand,
+    InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs,
 };
 
 /// Every stage kind this binary knows: domain stages and figures.
@@ -27,6 +27,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Graph(args) => graph(args),
         Command::Stages(args) => list_stages(args),
         Command::Datasets(DatasetsCommand::Import(ImportCommand::FsuLinewidth(args))) => import_fsu(args),
+        Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Inkjet(args))) => generate_inkjet(args),
         Command::Report(ReportArgs { out }) => report(&out),
     }
 }
@@ -152,6 +153,29 @@ fn import_fsu(args: FsuImportArgs) -> Result<()> {
     for dir in written {
         println!("wrote fdm-widths dataset {}", dir.display());
     }
+    Ok(())
+}
+
+fn generate_inkjet(args: InkjetGenerateArgs) -> Result<()> {
+    use datasets::inkjet::{write_dataset, ControlLaw, Effects, GenerateOptions, Scenario};
+    if args.effects.len() != args.strengths.len() {
+        bail!(
+            "every --effect needs one --strength (got {} effects, {} strengths)",
+            args.effects.len(),
+            args.strengths.len()
+        );
+    }
+    let pairs: Vec<(&str, f64)> = args.effects.iter().map(String::as_str).zip(args.strengths.iter().copied()).collect();
+    let opts = GenerateOptions {
+        scenario: Scenario::parse(&args.scenario)?,
+        seed: args.seed,
+        variation_pct: args.variation_pct,
+        controller: if args.controller == "open_loop" { ControlLaw::OpenLoop } else { ControlLaw::ClosedLoop },
+        effects: Effects::from_pairs(&pairs)?,
+        open_loop_layers: args.layers,
+    };
+    let dir = write_dataset(&opts, &args.out).with_context(|| format!("generating {}", args.out.display()))?;
+    println!("wrote inkjet-scans dataset {} (effects: {})", dir.display(), opts.effects.describe());
     Ok(())
 }
 

@@ -11,6 +11,7 @@ pub mod csv_table;
 pub mod error;
 pub mod fdm_widths;
 pub mod fsu;
+pub mod inkjet;
 pub mod manifest;
 pub mod thermal;
 

@@ -33,12 +33,13 @@ fn setup() -> Setup {
     let radius = 45.0 * grid.spacing_um;
     let footprint = Pattern::from_fn(grid, |x, y| (x - centre).powi(2) + (y - centre).powi(2) <= radius * radius);
     let truth = TruthPrinter::paper(0.2);
-    let mut rng = ChaCha8Rng::seed_from_u64(42);
-    let mut heights = HeightMap::flat(grid, 0.0);
+    let mut run = truth.start(grid, &mut ChaCha8Rng::seed_from_u64(42));
+    let nominal = uniform_coeffs(grid, DropletCoeffs::paper_table1());
     for _ in 0..50 {
-        truth.print_layer(&mut heights, &footprint, &mut rng);
+        run.print_layer(&footprint, &nominal).expect("pattern fits the grid");
     }
-    let measured = truth.measure(&heights, &mut rng);
+    let measured = run.measure();
+    let heights = run.truth();
     let cells = footprint.cells();
     let mean = cells.iter().map(|&c| heights.height_um[c]).sum::<f64>() / cells.len() as f64;
     let target = Target::uniform(grid, footprint, mean + 4.0).expect("non-empty footprint");

@@ -63,4 +63,38 @@ pub enum InkjetError {
     /// The target footprint has no cell, so eq. 8 has nothing to average.
     #[error("the target footprint is empty")]
     EmptyFootprint,
+    /// An extra effect of the virtual printer that does not exist.
+    #[error("unknown effect `{name}` (known effects: {known})")]
+    UnknownEffect {
+        /// The name given.
+        name: String,
+        /// The known names, comma-separated.
+        known: String,
+    },
+    /// An effect strength outside its admissible range.
+    #[error("effect {name}: strength {strength} is outside [{min}, {max}] ({unit})")]
+    EffectStrength {
+        /// The effect.
+        name: &'static str,
+        /// The strength given.
+        strength: f64,
+        /// Smallest admissible strength.
+        min: f64,
+        /// Largest admissible strength.
+        max: f64,
+        /// What the strength measures.
+        unit: &'static str,
+    },
+    /// The same effect given twice.
+    #[error("effect {name} given twice")]
+    DuplicateEffect {
+        /// The effect.
+        name: &'static str,
+    },
+    /// An effects list item that is not `name=strength`.
+    #[error("cannot read effect `{item}`: expected name=strength, e.g. curing_shrinkage=0.05")]
+    EffectSyntax {
+        /// The item as written.
+        item: String,
+    },
 }

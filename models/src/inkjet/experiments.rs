@@ -2,13 +2,11 @@
 //! (Sec. V-A), the cuboid of Table II (Sec. V-D) and the exact-recovery check of
 //! Sec. IV-C.
 //!
-//! A "truth" printer stands in for the machine (DESIGN §5.2): it follows the same height
-//! model, but every droplet deposited has its `(h1, h2, h3)` scaled by `(1 − u)`,
-//! `u ~ U[0, p]` drawn independently per droplet and layer (our reading of the paper's
-//! "[0 20%] / [0 40%] variation on h1, h2 and h3": a droplet-volume shortfall). The
-//! profiler returns the true profile plus 1 µm Gaussian noise (Sec. V-B: 1 µm
-//! repeatability); its lateral resolution is the droplet grid. The controller predicts
-//! with the nominal Table I coefficients.
+//! The machine is the virtual printer of [`super::printer`] (DESIGN §5.2): the same
+//! height model, every droplet's `(h1, h2, h3)` scaled by `(1 − u)`, `u ~ U[0, p]` (our
+//! reading of the paper's "[0 20%] / [0 40%] variation on h1, h2 and h3": a
+//! droplet-volume shortfall), measured by a profiler with 1 µm noise (Sec. V-B). The
+//! controller predicts with the nominal Table I coefficients.
 //!
 //! Metrics over the footprint (Figs 11-12 report "mean error" and "std"): the mean error
 //! is `|mean(h_d − H)|`, the error of the average height. The paper's closed-loop pair
@@ -18,57 +16,20 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 use super::controller::{open_loop_layer_count, ClosedLoopController};
 use super::errors::InkjetError;
 use super::grid::{Grid, HeightMap, Pattern};
-use super::height_model::{deposit_layer_into, uniform_coeffs, DropletCoeffs};
+use super::height_model::{
+    deposit_layer_into, material_map, two_material_coeffs, uniform_coeffs, DropletCoeffs, Material,
+};
 use super::horizon::Problem;
 use super::mpc::{optimise, MpcParams};
 use super::objective::Target;
-
-/// The simulated machine: nominal droplets with a random volume shortfall, and a noisy
-/// profiler.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TruthPrinter {
-    /// Nominal droplet coefficients (Table I).
-    pub nominal: DropletCoeffs,
-    /// Largest shortfall `p`: each droplet is scaled by `1 − u`, `u ~ U[0, p]`.
-    pub max_shortfall: f64,
-    /// Standard deviation of the profiler noise, µm.
-    pub noise_um: f64,
-}
-
-impl TruthPrinter {
-    /// Table I droplets, shortfall `U[0, p]`, 1 µm profiler noise (Sec. V-B).
-    pub fn paper(max_shortfall: f64) -> Self {
-        Self { nominal: DropletCoeffs::paper_table1(), max_shortfall, noise_um: 1.0 }
-    }
-
-    /// Prints `pattern` on the true profile `heights` (in place), drawing one shortfall
-    /// per droplet in row-major order.
-    pub fn print_layer(&self, heights: &mut HeightMap, pattern: &Pattern, rng: &mut impl Rng) {
-        let coeffs: Vec<DropletCoeffs> = pattern
-            .droplet
-            .iter()
-            .map(|&d| {
-                let u = if d { rng.random_range(0.0..=self.max_shortfall) } else { 0.0 };
-                self.nominal.scaled(1.0 - u)
-            })
-            .collect();
-        let before = heights.height_um.clone();
-        deposit_layer_into(heights.grid, &before, &pattern.droplet, &coeffs, &mut heights.height_um);
-    }
-
-    /// What the profiler reports for the true profile `heights`.
-    pub fn measure(&self, heights: &HeightMap, rng: &mut impl Rng) -> HeightMap {
-        let noise = Normal::new(0.0, self.noise_um).expect("finite, non-negative noise");
-        let height_um = heights.height_um.iter().map(|h| h + noise.sample(rng)).collect();
-        HeightMap { grid: heights.grid, height_um }
-    }
-}
+pub use super::pipe_junction::{pipe_junction, PipeJunction, RegionMetrics, TwoMaterial};
+use super::printer::PrintRun;
+pub use super::printer::TruthPrinter;
 
 /// A print job: part, machine, and both control laws' settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -85,6 +46,24 @@ pub struct Scenario {
     pub mpc: MpcParams,
     /// Safety cap on the closed-loop layer count (never reached in our scenarios).
     pub max_layers: usize,
+    /// Two-material printing (Sec. IV-B, eqs 6-7): the part geometry and the support
+    /// droplets; `None` prints the part material everywhere.
+    pub two_material: Option<TwoMaterial>,
+}
+
+impl Scenario {
+    /// The nominal per-cell coefficients for the next layer on the profile `heights`:
+    /// the part material everywhere, or per eqs 6-7 the material map of `heights`.
+    pub fn layer_coeffs(&self, heights: &HeightMap) -> (Vec<Material>, Vec<DropletCoeffs>) {
+        match &self.two_material {
+            None => (vec![Material::Part; heights.grid.len()], uniform_coeffs(heights.grid, self.model)),
+            Some(two) => {
+                let materials = material_map(heights, |x, y, z| two.geometry.contains(x, y, z));
+                let coeffs = two_material_coeffs(&materials, self.model, two.support);
+                (materials, coeffs)
+            }
+        }
+    }
 }
 
 /// Cylinder of Figs 11-12: `h_d = 400 µm` on the Table I grid, open loop 53 layers
@@ -150,6 +129,7 @@ fn paper_scenario(
         open_loop_layers,
         mpc: MpcParams::recommended(),
         max_layers: 4 * open_loop_layers + 10,
+        two_material: None,
     }
 }
 
@@ -200,47 +180,139 @@ pub struct PrintOutcome {
     pub layers_printed: usize,
     /// Number of droplets printed.
     pub droplets_printed: usize,
+    /// Per cell, the true height after the last layer that put part material there (the
+    /// top of the object once the support is washed away, Fig. 15); `None` where no part
+    /// droplet was printed. Two-material prints only (empty otherwise).
+    pub part_top_um: Vec<Option<f64>>,
 }
 
-/// Open-loop print: the whole footprint, `scenario.open_loop_layers` times, on a flat
-/// substrate at height 0.
-pub fn run_open_loop(scenario: &Scenario, rng: &mut impl Rng) -> PrintOutcome {
-    let grid = scenario.target.grid();
-    let mut heights = HeightMap::flat(grid, 0.0);
-    let pattern = &scenario.target.footprint;
-    for _ in 0..scenario.open_loop_layers {
-        scenario.truth.print_layer(&mut heights, pattern, rng);
+/// The control law of a print (Sec. IV-A).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControlLaw {
+    /// The whole footprint every layer, `open_loop_layers` times; two-material prints
+    /// choose each layer's materials assuming the nominal layer height (Sec. V-B: "assuming
+    /// a fixed layer height").
+    OpenLoop,
+    /// Measure, choose the materials from the measured profile (Fig. 10), solve eq. 8,
+    /// print the first layer of the plan; stop when nothing is deposited.
+    ClosedLoop,
+}
+
+impl ControlLaw {
+    /// `open_loop` / `closed_loop`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ControlLaw::OpenLoop => "open_loop",
+            ControlLaw::ClosedLoop => "closed_loop",
+        }
     }
-    outcome(scenario, heights, scenario.open_loop_layers, pattern.count() * scenario.open_loop_layers)
+}
+
+/// One printed layer as the profiler saw it (what an `inkjet-scans` dataset stores).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LayerRecord {
+    /// The pattern printed.
+    pub pattern: Pattern,
+    /// The material of each cell's droplet (meaningful where `pattern` prints).
+    pub materials: Vec<Material>,
+    /// The profiler's reading after the layer.
+    pub measured: HeightMap,
+    /// The true profile after the layer.
+    pub truth: HeightMap,
+}
+
+/// Every scan of a print: the substrate before the first layer, then each layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrintRecording {
+    /// Profiler reading of the substrate (layer 0).
+    pub substrate_measured: HeightMap,
+    /// True substrate.
+    pub substrate_truth: HeightMap,
+    /// The layers in print order.
+    pub layers: Vec<LayerRecord>,
+}
+
+/// Open-loop print on a flat substrate at height 0.
+pub fn run_open_loop(scenario: &Scenario, rng: &mut impl Rng) -> PrintOutcome {
+    run_print(scenario, ControlLaw::OpenLoop, rng, false).expect("open loop cannot fail on a checked scenario").0
 }
 
 /// Closed-loop print: before each layer, measure, solve eq. 8 and print the first
 /// pattern of the plan; stop when the controller deposits nothing.
 pub fn run_closed_loop(scenario: &Scenario, rng: &mut impl Rng) -> Result<PrintOutcome, InkjetError> {
-    let grid = scenario.target.grid();
-    let controller = ClosedLoopController::new(scenario.mpc)?;
-    let coeffs = uniform_coeffs(grid, scenario.model.check()?);
-    let mut heights = HeightMap::flat(grid, 0.0);
-    let (mut layers, mut droplets) = (0, 0);
-    while layers < scenario.max_layers {
-        let measured = scenario.truth.measure(&heights, rng);
-        let decision = controller.next_pattern(&measured, &scenario.target, &coeffs, rng)?;
-        if decision.is_finished() {
-            break;
-        }
-        scenario.truth.print_layer(&mut heights, &decision.pattern, rng);
-        layers += 1;
-        droplets += decision.pattern.count();
-    }
-    Ok(outcome(scenario, heights, layers, droplets))
+    Ok(run_print(scenario, ControlLaw::ClosedLoop, rng, false)?.0)
 }
 
-fn outcome(scenario: &Scenario, heights: HeightMap, layers: usize, droplets: usize) -> PrintOutcome {
+/// A print under `law` on the scenario's virtual printer; with `record`, every layer's
+/// pattern, materials, scan and true profile. Recording measures after every layer on
+/// the profiler's own random stream, so it does not change the print.
+pub fn run_print(
+    scenario: &Scenario,
+    law: ControlLaw,
+    rng: &mut impl Rng,
+    record: bool,
+) -> Result<(PrintOutcome, Option<PrintRecording>), InkjetError> {
+    scenario.model.check()?;
+    let grid = scenario.target.grid();
+    let mut run = scenario.truth.start(grid, rng);
+    let mut recording = record.then(|| {
+        let substrate_measured = run.measure();
+        PrintRecording { substrate_measured, substrate_truth: run.truth().clone(), layers: Vec::new() }
+    });
+    let mut part_top_um = vec![None; if scenario.two_material.is_some() { grid.len() } else { 0 }];
+    let controller = ClosedLoopController::new(scenario.mpc)?;
+    let nominal_layer_um = scenario.model.droplet_volume_um();
+    let mut droplets = 0;
+    loop {
+        let layer = run.layers_printed();
+        let (pattern, materials, coeffs) = match law {
+            ControlLaw::OpenLoop => {
+                if layer == scenario.open_loop_layers {
+                    break;
+                }
+                let assumed = HeightMap::flat(grid, layer as f64 * nominal_layer_um);
+                let (materials, coeffs) = scenario.layer_coeffs(&assumed);
+                (scenario.target.footprint.clone(), materials, coeffs)
+            }
+            ControlLaw::ClosedLoop => {
+                if layer == scenario.max_layers {
+                    break;
+                }
+                let measured = run.measure();
+                let (materials, coeffs) = scenario.layer_coeffs(&measured);
+                let decision = controller.next_pattern(&measured, &scenario.target, &coeffs, rng)?;
+                if decision.is_finished() {
+                    break;
+                }
+                (decision.pattern, materials, coeffs)
+            }
+        };
+        run.print_layer(&pattern, &coeffs)?;
+        droplets += pattern.count();
+        note_part_top(&mut part_top_um, &pattern, &materials, run.truth());
+        if let Some(rec) = recording.as_mut() {
+            let measured = run.measure();
+            rec.layers.push(LayerRecord { pattern, materials, measured, truth: run.truth().clone() });
+        }
+    }
+    Ok((outcome(scenario, &run, droplets, part_top_um), recording))
+}
+
+fn note_part_top(part_top_um: &mut [Option<f64>], pattern: &Pattern, materials: &[Material], truth: &HeightMap) {
+    for (c, top) in part_top_um.iter_mut().enumerate() {
+        if pattern.droplet[c] && materials[c] == Material::Part {
+            *top = Some(truth.height_um[c]);
+        }
+    }
+}
+
+fn outcome(scenario: &Scenario, run: &PrintRun, droplets: usize, part_top_um: Vec<Option<f64>>) -> PrintOutcome {
     PrintOutcome {
-        metrics: PrintMetrics::of(&scenario.target, &heights),
-        final_heights: heights,
-        layers_printed: layers,
+        metrics: PrintMetrics::of(&scenario.target, run.truth()),
+        final_heights: run.truth().clone(),
+        layers_printed: run.layers_printed(),
         droplets_printed: droplets,
+        part_top_um,
     }
 }
 
@@ -374,29 +446,34 @@ mod tests {
     }
 
     #[test]
-    fn truth_printer_without_shortfall_or_noise_is_the_nominal_model() {
-        let scenario = cuboid(0.0);
+    fn open_loop_without_shortfall_or_noise_is_the_nominal_model() {
+        let mut scenario = cuboid(0.0);
+        scenario.truth.profiler = crate::inkjet::printer::Profiler::ideal();
         let grid = scenario.target.grid();
-        let truth = TruthPrinter { noise_um: 0.0, ..scenario.truth };
-        let mut rng = ChaCha8Rng::seed_from_u64(0);
-        let mut heights = HeightMap::flat(grid, 0.0);
-        truth.print_layer(&mut heights, &scenario.target.footprint, &mut rng);
-        let mut expected = vec![0.0; grid.len()];
+        let (open, recording) =
+            run_print(&scenario, ControlLaw::OpenLoop, &mut ChaCha8Rng::seed_from_u64(0), true).unwrap();
         let coeffs = uniform_coeffs(grid, DropletCoeffs::paper_table1());
-        deposit_layer_into(grid, &vec![0.0; grid.len()], &scenario.target.footprint.droplet, &coeffs, &mut expected);
-        assert_eq!(heights.height_um, expected);
-        assert_eq!(truth.measure(&heights, &mut rng), heights);
+        let mut expected = vec![0.0; grid.len()];
+        for _ in 0..3 {
+            let before = expected.clone();
+            deposit_layer_into(grid, &before, &scenario.target.footprint.droplet, &coeffs, &mut expected);
+        }
+        assert_eq!(open.final_heights.height_um, expected);
+        let recording = recording.unwrap();
+        assert_eq!(recording.layers.len(), 3);
+        // An ideal profiler reads the truth.
+        assert_eq!(recording.layers[2].measured, open.final_heights);
+        // Recording does not change the print.
+        assert_eq!(run_open_loop(&scenario, &mut ChaCha8Rng::seed_from_u64(0)), open);
     }
 
     #[test]
     fn a_shortfall_only_ever_removes_volume() {
         // Each droplet adds between (1 - p)(h1 + 4h2 + 4h3) and h1 + 4h2 + 4h3.
-        let scenario = cuboid(0.4);
-        let mut heights = HeightMap::flat(scenario.target.grid(), 0.0);
-        let pattern = &scenario.target.footprint;
-        scenario.truth.print_layer(&mut heights, pattern, &mut ChaCha8Rng::seed_from_u64(3));
-        let added: f64 = heights.height_um.iter().sum();
-        let full = 7.6 * pattern.count() as f64;
+        let scenario = cuboid_with_layers(0.4, Some(1));
+        let open = run_open_loop(&scenario, &mut ChaCha8Rng::seed_from_u64(3));
+        let added: f64 = open.final_heights.height_um.iter().sum();
+        let full = 7.6 * scenario.target.footprint.count() as f64;
         assert!(added < full && added > 0.6 * full);
     }
 

@@ -9,7 +9,11 @@
 //! - [`horizon`]: the N-layer prediction and the incremental / naive flip evaluation.
 //! - [`mpc`]: the stochastic greedy search (Sec. IV-C).
 //! - [`controller`]: open-loop and closed-loop layer patterns (Sec. IV-A).
+//! - [`printer`]: the virtual printer and profiler (DESIGN §5.2), with switchable
+//!   extra effects; the one machine of the experiments and the dataset generator.
 //! - [`experiments`]: the paper's simulations (Figs 11-12, Table II, Sec. IV-C).
+//! - [`pipe_junction`]: the two-material pipe junction (Figs 13-15) and its
+//!   edge-deformation metrics.
 //!
 //! Architecture Invariant: pure numerics: no I/O, every random stream comes from a
 //! caller-supplied seeded generator, and results do not depend on the thread count.
@@ -22,6 +26,8 @@ pub mod height_model;
 pub mod horizon;
 pub mod mpc;
 pub mod objective;
+pub mod pipe_junction;
+pub mod printer;
 
 pub use errors::InkjetError;
 pub use grid::{Grid, HeightMap, Pattern};

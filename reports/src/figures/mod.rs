@@ -3,6 +3,8 @@
 
 mod infill;
 mod inkjet_height_maps;
+mod inkjet_model_vs_scan;
+mod inkjet_pipe_junction;
 mod loo_predictions;
 mod r_surface;
 #[cfg(test)]
@@ -20,6 +22,8 @@ mod width_profiles;
 
 pub use infill::InfillFigure;
 pub use inkjet_height_maps::InkjetHeightMapsFigure;
+pub use inkjet_model_vs_scan::InkjetModelVsScanFigure;
+pub use inkjet_pipe_junction::InkjetPipeJunctionFigure;
 pub use loo_predictions::LooPredictionsFigure;
 pub use r_surface::RSurfaceFigure;
 pub use thermal_contour_error::ThermalContourErrorFigure;
@@ -50,6 +54,8 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(ThermalCornersFigure));
     registry.register(Box::new(ThermalOverdepositionFigure));
     registry.register(Box::new(ThermalContourErrorFigure));
+    registry.register(Box::new(InkjetModelVsScanFigure));
+    registry.register(Box::new(InkjetPipeJunctionFigure));
 }
 
 /// The axes of a line-width profile (paper 000 Figs 3, 6): position along the line

@@ -1,14 +1,18 @@
 //! Stages of paper 002 (Lu, Zheng, Mishra 2015, "A Layer-To-Layer Model and Feedback
 //! Control of Ink-Jet 3-D Printing"): the simulated prints of the cylinder (Sec. V-A,
 //! Figs 11-12) and the cuboid (Sec. V-D, Table II), open and closed loop, and the
-//! exact-recovery check of the optimiser (Sec. IV-C). The numerics live in
+//! exact-recovery check of the optimiser (Sec. IV-C), the two-material pipe junction
+//! (Figs 13-15), and `inkjet-scans` datasets from the virtual printer with the test of
+//! the layer-to-layer model against them. The numerics live in
 //! [`models::inkjet::experiments`]; these stages only run them and write tables.
 
 mod print;
 mod recovery;
+mod scans;
 
 pub use print::{height_map_frame, summary_frame, PrintExperimentStage};
 pub use recovery::{recovery_frame, RecoveryStage};
+pub use scans::{effects_label, layer_residuals, GenerateScansStage, LayerResidual, ScanResidualsStage};
 
 use pipeline::Registry;
 
@@ -16,4 +20,6 @@ use pipeline::Registry;
 pub fn register(registry: &mut Registry) {
     registry.register(Box::new(PrintExperimentStage));
     registry.register(Box::new(RecoveryStage));
+    registry.register(Box::new(GenerateScansStage));
+    registry.register(Box::new(ScanResidualsStage));
 }

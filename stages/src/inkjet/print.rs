@@ -1,15 +1,22 @@
 //! `inkjet.print_experiment`: one simulated print of paper 002 with the truth printer
 //! (droplet-volume shortfall `U[0, p]`, 1 µm profiler noise): the cylinder of Sec. V-A
 //! (Figs 11-12: open-loop vs closed-loop mean error and std at `[0 20%]` / `[0 40%]`
-//! variation) or the cuboid of Sec. V-D-2 (Table II: average height and Z-axis RMSD).
-//! Writes the footprint metrics and the final height map.
+//! variation), the cuboid of Sec. V-D (Table II: average height and Z-axis RMSD; 3
+//! nominal layers, or 4 as in Figs 21-23) or the two-material pipe junction of Figs
+//! 13-15 (100 × 100 grid). Writes the footprint metrics and the final height map; the
+//! pipe junction also writes its edge-deformation metrics, the printed part's top
+//! surface and every layer's material map (for the cross-sections of Figs 13-14).
 
-use models::inkjet::experiments::{cuboid, cylinder, run_closed_loop, run_open_loop, PrintOutcome};
+use models::inkjet::experiments::{
+    cuboid_with_layers, cylinder, pipe_junction, run_print, ControlLaw, PrintOutcome, PrintRecording, Scenario,
+};
+use models::inkjet::height_model::Material;
+use models::inkjet::pipe_junction::{desired_part_top, edge_deformation, RegionMetrics};
 use models::inkjet::HeightMap;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
-use polars::prelude::DataFrame;
+use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -21,9 +28,9 @@ pub struct PrintExperimentStage;
 const PARAMS: &[ParamSpec] = &[
     ParamSpec {
         name: "scenario",
-        ty: ParamType::Choice(&["cylinder", "cuboid"]),
+        ty: ParamType::Choice(&["cylinder", "cuboid", "pipe_junction"]),
         default: ParamDefault::Required,
-        doc: "The part: the cylinder of Sec. V-A (h_d = 400 µm, radius 15 droplets) or the 8 × 8-droplet cuboid of Table II (h_d = 22.8 µm).",
+        doc: "The part: the cylinder of Sec. V-A (h_d = 400 µm, radius 15 droplets), the 8 × 8-droplet cuboid of Table II (h_d = 22.8 µm) or the two-material pipe junction of Figs 13-15 (100 × 100 grid, h_d = 200 µm).",
     },
     ParamSpec {
         name: "variation_pct",
@@ -37,6 +44,18 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Required,
         doc: "open_loop: the footprint h_d / h_layer times (Sec. IV-A); closed_loop: measure, solve eq. 8, print the first layer of the plan (Sec. IV-C).",
     },
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 0, max: 10_000 },
+        default: ParamDefault::Int(0),
+        doc: "Open-loop layer count; 0 = the nominal h_d / (h1 + 4h2 + 4h3) (3 for the cuboid; 4 is the Sec. V-D-1 print of Figs 21-23). Ignored by the closed loop.",
+    },
+    ParamSpec {
+        name: "edge_band_cells",
+        ty: ParamType::Int { min: 1, max: 10 },
+        default: ParamDefault::Int(2),
+        doc: "Pipe junction only: width of the edge band (cells from the part's plan-view boundary) for edge_deformation.parquet.",
+    },
 ];
 
 impl StageKind for PrintExperimentStage {
@@ -44,13 +63,13 @@ impl StageKind for PrintExperimentStage {
         "inkjet.print_experiment"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
-        "One simulated ink-jet print (cylinder or cuboid, open or closed loop) → summary.parquet, height_map.parquet"
+        "One simulated ink-jet print (cylinder, cuboid or two-material pipe junction, open or closed loop) → summary.parquet, height_map.parquet (+ edge_deformation.parquet, part_top.parquet, layers.parquet for the pipe junction)"
     }
     fn implements(&self) -> &'static str {
-        "paper 002 Sec. V-A (Figs 11-12), Sec. V-D-2 (Table II), Sec. IV (open / closed loop)"
+        "paper 002 Sec. V-A (Figs 11-15), Sec. V-D (Table II, Figs 21-24), Sec. IV (open / closed loop, two materials)"
     }
     fn params(&self) -> &'static [ParamSpec] {
         PARAMS
@@ -63,22 +82,102 @@ impl StageKind for PrintExperimentStage {
         let scenario_name = ctx.params.str("scenario").to_string();
         let controller = ctx.params.str("controller").to_string();
         let variation_pct = ctx.params.f64("variation_pct");
+        let layers = ctx.params.i64("layers") as usize;
         let max_shortfall = variation_pct / 100.0;
         let scenario = match scenario_name.as_str() {
             "cylinder" => cylinder(max_shortfall),
-            _ => cuboid(max_shortfall),
+            "pipe_junction" => pipe_junction(max_shortfall),
+            _ => cuboid_with_layers(max_shortfall, (layers > 0).then_some(layers)),
         };
+        let law = if controller == "open_loop" { ControlLaw::OpenLoop } else { ControlLaw::ClosedLoop };
+        let two_material = scenario.two_material.is_some();
         let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
-        let outcome = match controller.as_str() {
-            "open_loop" => run_open_loop(&scenario, &mut rng),
-            _ => run_closed_loop(&scenario, &mut rng).map_err(StageError::domain)?,
-        };
+        let (outcome, recording) = run_print(&scenario, law, &mut rng, two_material).map_err(StageError::domain)?;
         let mut summary = summary_frame(&scenario_name, &controller, variation_pct, &outcome)?;
         ctx.write_table("summary", &mut summary)?;
         let mut map = height_map_frame(&outcome.final_heights)?;
         ctx.write_table("height_map", &mut map)?;
+        if let Some(recording) = recording {
+            let band = ctx.params.i64("edge_band_cells") as usize;
+            let regions = edge_deformation(&scenario, &outcome, band).map_err(StageError::domain)?;
+            let mut edges = edge_frame(&scenario_name, &controller, variation_pct, &regions)?;
+            ctx.write_table("edge_deformation", &mut edges)?;
+            let mut top = part_top_frame(&scenario, &outcome)?;
+            ctx.write_table("part_top", &mut top)?;
+            let mut layers = layers_frame(&recording)?;
+            ctx.write_table("layers", &mut layers)?;
+        }
         Ok(())
     }
+}
+
+/// One row per region (`edge`, `interior`) of the part-top error of a two-material print.
+pub fn edge_frame(
+    scenario: &str,
+    controller: &str,
+    variation_pct: f64,
+    regions: &[RegionMetrics],
+) -> Result<DataFrame, StageError> {
+    let n = regions.len();
+    frame(vec![
+        str_col("scenario", vec![scenario.to_string(); n]),
+        str_col("controller", vec![controller.to_string(); n]),
+        f64_col("variation_pct", vec![variation_pct; n]),
+        str_col("region", regions.iter().map(|r| r.region.name().to_string()).collect()),
+        i64_col("cells", regions.iter().map(|r| r.cells as i64).collect()),
+        f64_col("rmse_um", regions.iter().map(|r| r.rmse_um).collect()),
+        f64_col("max_abs_um", regions.iter().map(|r| r.max_abs_um).collect()),
+        f64_col("mean_err_um", regions.iter().map(|r| r.mean_err_um).collect()),
+    ])
+}
+
+/// One row per grid cell: the printed part's top and the desired one (null off the part).
+fn part_top_frame(scenario: &Scenario, outcome: &PrintOutcome) -> Result<DataFrame, StageError> {
+    let grid = scenario.target.grid();
+    let desired = desired_part_top(scenario).map_err(StageError::domain)?;
+    let (xi, yi): (Vec<i64>, Vec<i64>) =
+        (0..grid.len()).map(|c| grid.coords(c)).map(|(i, j)| (i as i64, j as i64)).unzip();
+    frame(vec![
+        i64_col("x_index", xi),
+        i64_col("y_index", yi),
+        Series::new("part_top_um".into(), outcome.part_top_um.clone()).into_column(),
+        Series::new("desired_top_um".into(), desired).into_column(),
+    ])
+}
+
+/// One row per layer and cell: the profile before and after the layer (true heights) and
+/// the material printed there (`part`, `support`, or `none`).
+fn layers_frame(recording: &PrintRecording) -> Result<DataFrame, StageError> {
+    let grid = recording.substrate_truth.grid;
+    let n = grid.len() * recording.layers.len();
+    let (mut layer, mut xi, mut yi) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut bottom, mut top, mut material) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut before = &recording.substrate_truth;
+    for (k, record) in recording.layers.iter().enumerate() {
+        for c in 0..grid.len() {
+            let (i, j) = grid.coords(c);
+            layer.push(k as i64 + 1);
+            xi.push(i as i64);
+            yi.push(j as i64);
+            bottom.push(before.height_um[c]);
+            top.push(record.truth.height_um[c]);
+            let name = match (record.pattern.droplet[c], record.materials[c]) {
+                (false, _) => "none",
+                (true, Material::Part) => "part",
+                (true, Material::Support) => "support",
+            };
+            material.push(name.to_string());
+        }
+        before = &record.truth;
+    }
+    frame(vec![
+        i64_col("layer", layer),
+        i64_col("x_index", xi),
+        i64_col("y_index", yi),
+        f64_col("bottom_um", bottom),
+        f64_col("top_um", top),
+        str_col("material", material),
+    ])
 }
 
 /// The one-row summary of a print: scenario, controller, variation, layers printed and
@@ -142,7 +241,13 @@ mod tests {
             rmsd_um: 2.5,
             average_height_um: 3.5,
         };
-        let outcome = PrintOutcome { final_heights: heights, metrics, layers_printed: 7, droplets_printed: 42 };
+        let outcome = PrintOutcome {
+            final_heights: heights,
+            metrics,
+            layers_printed: 7,
+            droplets_printed: 42,
+            part_top_um: Vec::new(),
+        };
 
         let summary = summary_frame("cuboid", "closed_loop", 20.0, &outcome).unwrap();
         assert_eq!(summary.height(), 1);

@@ -1,0 +1,344 @@
+//! Reading and writing `inkjet-scans` folders (layout in the module doc of
+//! [`crate::inkjet`]); every read error names the file, the line and the field.
+
+use std::path::Path;
+
+use models::inkjet::height_model::Material;
+use models::inkjet::DropletCoeffs;
+use serde::{Deserialize, Serialize};
+
+use crate::csv_table::CsvTable;
+use crate::error::DatasetError;
+use crate::manifest::{DatasetManifest, MANIFEST_FILE};
+
+/// The kind string in `dataset.toml`.
+pub const KIND: &str = "inkjet-scans";
+/// Current folder layout version.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Droplet coefficients as written in `grid.toml`, µm.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoeffsToml {
+    /// Height change at the droplet's cell.
+    pub h1_um: f64,
+    /// Height change at each side neighbour.
+    pub h2_um: f64,
+    /// Height change at each corner neighbour.
+    pub h3_um: f64,
+}
+
+impl From<DropletCoeffs> for CoeffsToml {
+    fn from(c: DropletCoeffs) -> Self {
+        Self { h1_um: c.h1_um, h2_um: c.h2_um, h3_um: c.h3_um }
+    }
+}
+
+impl From<CoeffsToml> for DropletCoeffs {
+    fn from(c: CoeffsToml) -> Self {
+        Self { h1_um: c.h1_um, h2_um: c.h2_um, h3_um: c.h3_um }
+    }
+}
+
+/// The profiler as written in `grid.toml`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfilerToml {
+    /// Repeatability (noise std), µm.
+    pub noise_um: f64,
+    /// Gaussian spot std, µm (0: point samples).
+    pub spot_sigma_um: f64,
+}
+
+/// `grid.toml`: the droplet grid, the nominal droplets and how the print was run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridToml {
+    /// Cells along x.
+    pub m_x: usize,
+    /// Cells along y.
+    pub m_y: usize,
+    /// Droplet spacing `L = γ·d`, µm.
+    pub spacing_um: f64,
+    /// Desired part height `h_d`, µm.
+    pub desired_height_um: f64,
+    /// What was printed (`cylinder`, `cuboid`, `pipe_junction`, or your own name).
+    pub scenario: String,
+    /// How the patterns were chosen (`open_loop`, `closed_loop`, or your own name).
+    pub controller: String,
+    /// Largest droplet-volume shortfall, percent (virtual prints; 0 for measured data).
+    #[serde(default)]
+    pub variation_pct: f64,
+    /// Nominal part-material droplets `(h1, h2, h3)`.
+    pub part: CoeffsToml,
+    /// Nominal support droplets `(g1, g2, g3)` for two-material prints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub support: Option<CoeffsToml>,
+    /// The height sensor.
+    pub profiler: ProfilerToml,
+}
+
+/// A whole `inkjet-scans` dataset (without its `truth/`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct InkjetScans {
+    /// Its `dataset.toml`.
+    pub manifest: DatasetManifest,
+    /// Its `grid.toml`.
+    pub grid: GridToml,
+    /// Desired height per cell (row-major, `j·m_x + i`), `None` off the footprint.
+    pub target: Vec<Option<f64>>,
+    /// Measured heights per layer, row-major: `scans[0]` is the substrate, `scans[k]`
+    /// the scan after layer `k`.
+    pub scans: Vec<Vec<f64>>,
+    /// Printed cells per layer: `patterns[k − 1]` is layer `k`, `None` where no droplet.
+    pub patterns: Vec<Vec<Option<Material>>>,
+}
+
+impl InkjetScans {
+    /// Number of printed layers.
+    pub fn layers(&self) -> usize {
+        self.patterns.len()
+    }
+
+    /// Reads and checks a dataset folder (not its `truth/`).
+    pub fn read(dir: &Path) -> Result<Self, DatasetError> {
+        let manifest = DatasetManifest::read(dir, KIND)?;
+        let grid = read_grid(&dir.join("grid.toml"))?;
+        let target = read_target(&dir.join("target.csv"), &grid)?;
+        let scans = read_layers(&dir.join("scans.csv"), &grid)?;
+        let patterns = read_patterns(&dir.join("patterns.csv"), &grid, scans.len() - 1)?;
+        Ok(Self { manifest, grid, target, scans, patterns })
+    }
+
+    /// Reads `truth/heights.csv` of a virtual dataset (evaluation stages only).
+    pub fn read_truth(dir: &Path, grid: &GridToml) -> Result<Vec<Vec<f64>>, DatasetError> {
+        read_layers(&dir.join("truth").join("heights.csv"), grid)
+    }
+
+    /// Writes the dataset into `dir` (a fresh staging folder), with `truth` (same
+    /// layout as `scans`) into `truth/` when given.
+    pub fn write(&self, dir: &Path, truth: Option<&[Vec<f64>]>) -> Result<(), DatasetError> {
+        std::fs::create_dir_all(dir).map_err(|e| DatasetError::io(dir, e))?;
+        write_file(&dir.join(MANIFEST_FILE), &self.manifest.to_toml())?;
+        let grid_text = toml::to_string_pretty(&self.grid).expect("grid serialises");
+        write_file(&dir.join("grid.toml"), &grid_text)?;
+        let m_x = self.grid.m_x;
+        let mut target = String::from("i,j,desired_um\n");
+        for (c, want) in self.target.iter().enumerate() {
+            if let Some(h) = want {
+                target += &format!("{},{},{h}\n", c % m_x, c / m_x);
+            }
+        }
+        write_file(&dir.join("target.csv"), &target)?;
+        write_file(&dir.join("scans.csv"), &layers_csv(&self.scans, m_x))?;
+        let mut patterns = String::from("layer,i,j,material\n");
+        for (k, layer) in self.patterns.iter().enumerate() {
+            for (c, m) in layer.iter().enumerate() {
+                if let Some(m) = m {
+                    patterns += &format!("{},{},{},{}\n", k + 1, c % m_x, c / m_x, material_name(*m));
+                }
+            }
+        }
+        write_file(&dir.join("patterns.csv"), &patterns)?;
+        if let Some(truth) = truth {
+            let truth_dir = dir.join("truth");
+            std::fs::create_dir_all(&truth_dir).map_err(|e| DatasetError::io(&truth_dir, e))?;
+            write_file(&truth_dir.join("heights.csv"), &layers_csv(truth, m_x))?;
+        }
+        Ok(())
+    }
+}
+
+/// `part` / `support`.
+pub fn material_name(m: Material) -> &'static str {
+    match m {
+        Material::Part => "part",
+        Material::Support => "support",
+    }
+}
+
+fn layers_csv(layers: &[Vec<f64>], m_x: usize) -> String {
+    let mut text = String::from("layer,i,j,height_um\n");
+    for (k, heights) in layers.iter().enumerate() {
+        for (c, h) in heights.iter().enumerate() {
+            text += &format!("{k},{},{},{h:.4}\n", c % m_x, c / m_x);
+        }
+    }
+    text
+}
+
+fn write_file(path: &Path, text: &str) -> Result<(), DatasetError> {
+    std::fs::write(path, text).map_err(|e| DatasetError::io(path, e))
+}
+
+fn read_grid(file: &Path) -> Result<GridToml, DatasetError> {
+    let text = std::fs::read_to_string(file).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.to_path_buf(), hint: None },
+        _ => DatasetError::io(file, e),
+    })?;
+    let grid: GridToml = toml::from_str(&text).map_err(|e| DatasetError::Malformed {
+        file: file.to_path_buf(),
+        location: None,
+        expected: e.to_string().trim().replace('\n', " "),
+    })?;
+    let bad = |field: &str, expected: &str| DatasetError::Malformed {
+        file: file.to_path_buf(),
+        location: Some(field.into()),
+        expected: expected.into(),
+    };
+    if grid.m_x == 0 || grid.m_y == 0 {
+        return Err(bad("m_x", "expected at least one cell along x and y"));
+    }
+    if !(grid.spacing_um.is_finite() && grid.spacing_um > 0.0) {
+        return Err(bad("spacing_um", "expected a positive spacing"));
+    }
+    for (name, c) in [("part", Some(grid.part)), ("support", grid.support)] {
+        if let Some(c) = c {
+            DropletCoeffs::from(c).check().map_err(|e| bad(name, &e.to_string()))?;
+        }
+    }
+    Ok(grid)
+}
+
+/// Parses the `i`, `j` fields of a row into a row-major cell index.
+fn cell(
+    table: &CsvTable,
+    row: &(usize, Vec<String>),
+    cols: (usize, usize),
+    grid: &GridToml,
+) -> Result<usize, DatasetError> {
+    let index = |col: usize, size: usize| -> Result<usize, DatasetError> {
+        let raw = &row.1[col];
+        raw.parse::<usize>()
+            .ok()
+            .filter(|&v| v < size)
+            .ok_or_else(|| table.field_error(row.0, col, format!("expected a cell index in 0..{size}, got `{raw}`")))
+    };
+    Ok(index(cols.1, grid.m_y)? * grid.m_x + index(cols.0, grid.m_x)?)
+}
+
+fn read_target(file: &Path, grid: &GridToml) -> Result<Vec<Option<f64>>, DatasetError> {
+    let table = CsvTable::read(file)?;
+    let cols = (table.column("i")?, table.column("j")?);
+    let hc = table.column("desired_um")?;
+    let mut target = vec![None; grid.m_x * grid.m_y];
+    for row in &table.rows {
+        let c = cell(&table, row, cols, grid)?;
+        if target[c].is_some() {
+            return Err(table.field_error(row.0, cols.0, "this cell is listed twice"));
+        }
+        target[c] = Some(table.number(row, hc)?);
+    }
+    Ok(target)
+}
+
+/// Reads a `layer,i,j,height_um` file: layers 0..=L, every cell of every layer once.
+fn read_layers(file: &Path, grid: &GridToml) -> Result<Vec<Vec<f64>>, DatasetError> {
+    let table = CsvTable::read(file)?;
+    let (lc, hc) = (table.column("layer")?, table.column("height_um")?);
+    let cols = (table.column("i")?, table.column("j")?);
+    let cells = grid.m_x * grid.m_y;
+    let mut layers: Vec<Vec<f64>> = Vec::new();
+    let mut filled: Vec<usize> = Vec::new();
+    for row in &table.rows {
+        let k = layer_index(&table, row, lc, layers.len() + 1)?;
+        if k == layers.len() {
+            if filled.last().is_some_and(|&n| n != cells) {
+                return Err(table.field_error(
+                    row.0,
+                    lc,
+                    format!("layer {} has {} of {cells} cells", k - 1, filled[k - 1]),
+                ));
+            }
+            layers.push(vec![f64::NAN; cells]);
+            filled.push(0);
+        }
+        let c = cell(&table, row, cols, grid)?;
+        if !layers[k][c].is_nan() {
+            return Err(table.field_error(row.0, cols.0, format!("cell listed twice in layer {k}")));
+        }
+        layers[k][c] = table.number(row, hc)?;
+        filled[k] += 1;
+    }
+    if filled.last().is_some_and(|&n| n != cells) {
+        let last = table.rows.last().map_or(1, |r| r.0);
+        return Err(DatasetError::at_line(
+            file,
+            last,
+            format!("the last layer has {} of {cells} cells", filled[filled.len() - 1]),
+        ));
+    }
+    Ok(layers)
+}
+
+/// A layer number that is the current one or the next (`limit` = one past the largest
+/// allowed value).
+fn layer_index(table: &CsvTable, row: &(usize, Vec<String>), col: usize, limit: usize) -> Result<usize, DatasetError> {
+    let raw = &row.1[col];
+    let k = raw
+        .parse::<usize>()
+        .map_err(|_| table.field_error(row.0, col, format!("expected a layer number, got `{raw}`")))?;
+    if k + 2 < limit || k >= limit {
+        return Err(table.field_error(row.0, col, format!("expected layers in increasing order from 0, got {k}")));
+    }
+    Ok(k)
+}
+
+fn read_patterns(file: &Path, grid: &GridToml, layers: usize) -> Result<Vec<Vec<Option<Material>>>, DatasetError> {
+    let table = CsvTable::read(file)?;
+    let (lc, mc) = (table.column("layer")?, table.column("material")?);
+    let cols = (table.column("i")?, table.column("j")?);
+    let mut patterns = vec![vec![None; grid.m_x * grid.m_y]; layers];
+    for row in &table.rows {
+        let raw = &row.1[lc];
+        let k = raw.parse::<usize>().ok().filter(|k| (1..=layers).contains(k)).ok_or_else(|| {
+            table.field_error(
+                row.0,
+                lc,
+                format!(
+                    "expected a layer in 1..={layers} (scans.csv has {layers} layers after the substrate), got `{raw}`"
+                ),
+            )
+        })?;
+        let material = match row.1[mc].as_str() {
+            "part" => Material::Part,
+            "support" => Material::Support,
+            other => return Err(table.field_error(row.0, mc, format!("expected `part` or `support`, got `{other}`"))),
+        };
+        let c = cell(&table, row, cols, grid)?;
+        if patterns[k - 1][c].replace(material).is_some() {
+            return Err(table.field_error(row.0, cols.0, format!("cell listed twice in layer {k}")));
+        }
+    }
+    Ok(patterns)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The files of the worked example in docs/DATASETS.md (`$ cat my-print/<file>`
+    /// blocks of the inkjet-scans section).
+    fn worked_example(dir: &Path) {
+        let doc = include_str!("../../../docs/DATASETS.md");
+        let section = &doc[doc.find("## Kind `inkjet-scans`").expect("section")..];
+        let example = &section[section.find("$ cat my-print/").expect("example")..];
+        let example = &example[..example.find("```").expect("end of block")];
+        for block in example.split("$ cat my-print/").skip(1) {
+            let (name, body) = block.split_once('\n').expect("file name line");
+            std::fs::write(dir.join(name.trim()), body.trim_end().to_string() + "\n").unwrap();
+        }
+    }
+
+    #[test]
+    fn the_documented_worked_example_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        worked_example(dir.path());
+        let scans = InkjetScans::read(dir.path()).unwrap();
+        assert_eq!((scans.grid.m_x, scans.grid.m_y, scans.layers()), (3, 2, 1));
+        assert_eq!(scans.target.iter().filter(|t| t.is_some()).count(), 2);
+        assert_eq!(scans.scans[1][4], 6.0);
+        assert_eq!(scans.patterns[0][1], Some(Material::Part));
+        assert_eq!(scans.patterns[0][0], None);
+    }
+}

@@ -1,0 +1,133 @@
+//! `figure.inkjet_model_vs_scan`: the paper-002 layer-to-layer model against the profiler
+//! scans of a print, in the style of Lu, Zheng, Mishra 2015 Fig. 8 (the model's
+//! prediction of an open-loop printed cylinder, showing edge shrinkage) and Figs 21-22
+//! (measured vs model-predicted four-layer cuboid, both dome-shaped): aerial heat maps of
+//! the measured profile and of the model run open loop from the first scan with the
+//! printed patterns, on a shared scale, and their cross-sections through the middle row.
+//! Reads `profiles.parquet` of an `inkjet.scan_residuals` stage. Cells below
+//! [`NO_MATERIAL_FRACTION`] of the desired height are drawn as bare substrate, so the
+//! profiler's ±1 µm noise off the part does not speckle the maps.
+
+use plotters::coord::Shift;
+use plotters::prelude::{DrawingArea, DrawingBackend};
+
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::figures::inkjet_height_maps::{draw, Cell, Print};
+use crate::read::{f64s, i64s, no_rows, read_parquet};
+use crate::style::{draw_png_and_svg, text};
+
+/// The `figure.inkjet_model_vs_scan` stage kind.
+pub struct InkjetModelVsScanFigure;
+
+const SIZE_PX: (u32, u32) = (1400, 900);
+/// Cells lower than this fraction of the desired height count as having no material.
+pub const NO_MATERIAL_FRACTION: f64 = 0.05;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description).",
+    },
+    ParamSpec {
+        name: "layer",
+        ty: ParamType::Int { min: 0, max: 100_000 },
+        default: ParamDefault::Int(0),
+        doc: "Layer to show (0 = the last one in the table).",
+    },
+    ParamSpec {
+        name: "desired_height_um",
+        ty: ParamType::Float { min: 0.0, max: 10_000.0 },
+        default: ParamDefault::Required,
+        doc: "Height drawn as the dashed reference line and against which the captions' mean error is taken (µm).",
+    },
+];
+
+impl StageKind for InkjetModelVsScanFigure {
+    fn name(&self) -> &'static str {
+        "figure.inkjet_model_vs_scan"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Measured (profiler) vs model-predicted height maps of one layer of an inkjet-scans print, aerial and middle-row side views → inkjet_model_vs_scan.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 002 Fig. 8 (model prediction of an open-loop print), Figs 21-22 (measured vs predicted four-layer cuboid)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let desired = ctx.params.f64("desired_height_um");
+        let prints = load(&ctx.inputs[0].dir.join("profiles.parquet"), ctx.params.i64("layer"), desired)?;
+        let title = match ctx.params.str("title") {
+            "" => "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string(),
+            t => t.to_string(),
+        };
+        let stem = ctx.output_path("inkjet_model_vs_scan")?;
+        draw_png_and_svg(
+            &stem,
+            SIZE_PX,
+            |a| draw_titled(a, &title, &prints, desired),
+            |a| draw_titled(a, &title, &prints, desired),
+        )
+    }
+}
+
+fn draw_titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    prints: &[Print; 2],
+    desired_um: f64,
+) -> Result<(), String> {
+    let area = area.margin(12, 8, 8, 12).titled(title, text(24.0)).map_err(|e| e.to_string())?;
+    draw(&area, prints, desired_um)
+}
+
+/// The measured and the model-predicted profile of `layer` (0: the last) as two prints,
+/// captioned with their mean error against `desired_um` and std over the cells above
+/// half the desired height (the part).
+fn load(path: &std::path::Path, layer: i64, desired_um: f64) -> Result<[Print; 2], StageError> {
+    let df = read_parquet(path)?;
+    let layers = i64s(&df, "layer", path)?;
+    let last = layers.iter().copied().max().ok_or_else(|| no_rows(path, "layer", "one row per layer and cell"))?;
+    let layer = if layer == 0 { last } else { layer };
+    let (xi, yi) = (i64s(&df, "x_index", path)?, i64s(&df, "y_index", path)?);
+    let (x, y) = (f64s(&df, "x_um", path)?, f64s(&df, "y_um", path)?);
+    let rows: Vec<usize> = (0..df.height()).filter(|&r| layers[r] == layer).collect();
+    if rows.is_empty() {
+        return Err(no_rows(path, "layer", &format!("rows of layer {layer}")));
+    }
+    let print = |column: &str, label: &str| -> Result<Print, StageError> {
+        let h = f64s(&df, column, path)?;
+        let cells: Vec<Cell> = rows
+            .iter()
+            .map(|&r| {
+                let height_um = if h[r] < NO_MATERIAL_FRACTION * desired_um { 0.0 } else { h[r] };
+                Cell { x_index: xi[r], y_index: yi[r], x_um: x[r], y_um: y[r], height_um }
+            })
+            .collect();
+        let part: Vec<f64> = cells.iter().map(|c| c.height_um).filter(|&v| v > desired_um / 2.0).collect();
+        let n = part.len().max(1) as f64;
+        let mean = part.iter().sum::<f64>() / n;
+        let std = (part.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        Ok(Print {
+            controller: label.to_string(),
+            layers: layer,
+            mean_err_um: (desired_um - mean).abs(),
+            std_um: std,
+            cells,
+        })
+    };
+    Ok([print("measured_um", "profiler scan")?, print("model_um", "model prediction")?])
+}

@@ -1,0 +1,272 @@
+//! `figure.inkjet_pipe_junction`: the two-material pipe junction of paper 002 (Lu, Zheng,
+//! Mishra 2015) Figs 13-15, open vs closed loop: aerial views of the printed part's top
+//! surface once the support is washed away (Figs 13-14; cells without part in grey), and
+//! a cross-section through the main pipe showing which material every layer put where
+//! (the printing block of Fig. 15: part blue, support orange) with the desired part top.
+//! Reads `part_top.parquet`, `layers.parquet` and `edge_deformation.parquet` of two
+//! `inkjet.print_experiment` stages (scenario `pipe_junction`), open loop first.
+
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::figures::r_surface::viridis;
+use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
+
+/// The `figure.inkjet_pipe_junction` stage kind.
+pub struct InkjetPipeJunctionFigure;
+
+const SIZE_PX: (u32, u32) = (1500, 1150);
+const COLOUR_BAR_PX: u32 = 120;
+const NO_PART: RGBColor = RGBColor(225, 225, 225);
+const SUPPORT: RGBColor = RGBColor(240, 190, 120);
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "title",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Figure title (default: a generic description).",
+    },
+    ParamSpec {
+        name: "section_x_index",
+        ty: ParamType::Int { min: 0, max: 100_000 },
+        default: ParamDefault::Int(20),
+        doc: "Grid column of the y–z cross-section (20: across the main pipe, away from the branch).",
+    },
+];
+
+/// One pipe-junction print as drawn.
+struct PipePrint {
+    controller: String,
+    /// `(x_index, y_index, printed top, desired top)` per cell (NaN: none).
+    tops: Vec<(i64, i64, f64, f64)>,
+    /// `(layer, y_index, bottom, top, material)` in the section column.
+    section: Vec<(i64, f64, f64, String)>,
+    /// `(region, rmse, max)`.
+    regions: Vec<(String, f64, f64)>,
+}
+
+impl StageKind for InkjetPipeJunctionFigure {
+    fn name(&self) -> &'static str {
+        "figure.inkjet_pipe_junction"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Part-top aerial views and a material cross-section of the open- and closed-loop two-material pipe junction → inkjet_pipe_junction.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 002 Figs 13-15 (two-material pipe junction, open vs closed loop)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(2)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let column = ctx.params.i64("section_x_index");
+        let prints = [load(&ctx.inputs[0].dir, column)?, load(&ctx.inputs[1].dir, column)?];
+        let title = match ctx.params.str("title") {
+            "" => "Two-material pipe junction: part top and material cross-section, open vs closed loop".to_string(),
+            t => t.to_string(),
+        };
+        let stem = ctx.output_path("inkjet_pipe_junction")?;
+        draw_png_and_svg(
+            &stem,
+            SIZE_PX,
+            |a| draw_titled(a, &title, &prints, column),
+            |a| draw_titled(a, &title, &prints, column),
+        )
+    }
+}
+
+fn load(dir: &Path, column: i64) -> Result<PipePrint, StageError> {
+    let path = dir.join("part_top.parquet");
+    let df = read_parquet(&path)?;
+    let (xi, yi) = (i64s(&df, "x_index", &path)?, i64s(&df, "y_index", &path)?);
+    let (top, want) = (f64s(&df, "part_top_um", &path)?, f64s(&df, "desired_top_um", &path)?);
+    let tops: Vec<_> = (0..df.height()).map(|r| (xi[r], yi[r], top[r], want[r])).collect();
+    if tops.is_empty() {
+        return Err(no_rows(&path, "part_top_um", "one row per grid cell"));
+    }
+    let path = dir.join("layers.parquet");
+    let df = read_parquet(&path)?;
+    let (layer, xi, yi) = (i64s(&df, "layer", &path)?, i64s(&df, "x_index", &path)?, i64s(&df, "y_index", &path)?);
+    let (bottom, top, material) =
+        (f64s(&df, "bottom_um", &path)?, f64s(&df, "top_um", &path)?, strs(&df, "material", &path)?);
+    let section: Vec<_> = (0..df.height())
+        .filter(|&r| xi[r] == column && layer[r] > 0)
+        .map(|r| (yi[r], bottom[r], top[r], material[r].clone()))
+        .collect();
+    if section.is_empty() {
+        return Err(no_rows(&path, "x_index", &format!("rows of grid column {column}")));
+    }
+    let path = dir.join("edge_deformation.parquet");
+    let df = read_parquet(&path)?;
+    let (region, rmse, max) =
+        (strs(&df, "region", &path)?, f64s(&df, "rmse_um", &path)?, f64s(&df, "max_abs_um", &path)?);
+    let controller = strs(&df, "controller", &path)?.into_iter().next().unwrap_or_default();
+    let regions = (0..df.height()).map(|r| (region[r].clone(), rmse[r], max[r])).collect();
+    Ok(PipePrint { controller, tops, section, regions })
+}
+
+fn draw_titled<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    prints: &[PipePrint; 2],
+    column: i64,
+) -> Result<(), String> {
+    let area = area.margin(12, 8, 8, 12).titled(title, text(24.0)).map_err(|e| e.to_string())?;
+    let (top, bottom) = area.split_vertically((area.dim_in_pixel().1 as f64 * 0.56) as u32);
+    let (maps, bar) = top.split_horizontally(top.dim_in_pixel().0.saturating_sub(COLOUR_BAR_PX));
+    let max_um = prints.iter().flat_map(|p| p.tops.iter().map(|t| t.3)).filter(|v| v.is_finite()).fold(1e-6, f64::max);
+    for (panel, print) in maps.split_evenly((1, 2)).iter().zip(prints) {
+        draw_aerial(panel, print, max_um, column).map_err(|e| e.to_string())?;
+    }
+    draw_colour_bar(&bar, max_um).map_err(|e| e.to_string())?;
+    for (panel, print) in bottom.split_evenly((1, 2)).iter().zip(prints) {
+        draw_section(panel, print, column, max_um).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn caption(print: &PipePrint) -> String {
+    let region = |name: &str| print.regions.iter().find(|r| r.0 == name).map_or(f64::NAN, |r| r.1);
+    format!(
+        "{}: part-top RMS error edge {:.1} µm, interior {:.1} µm",
+        print.controller.replace('_', " "),
+        region("edge"),
+        region("interior")
+    )
+}
+
+fn draw_aerial<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    print: &PipePrint,
+    max_um: f64,
+    column: i64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let n = print.tops.iter().map(|t| t.0.max(t.1)).max().unwrap_or(0) as f64 + 1.0;
+    let area = area.titled(&caption(print), text(18.0))?;
+    let (w, h) = area.dim_in_pixel();
+    let side = w.saturating_sub(80).min(h.saturating_sub(60));
+    let pad_w = w.saturating_sub(side + 80) / 2;
+    let mut chart = ChartBuilder::on(&area)
+        .margin_left(pad_w)
+        .margin_right(pad_w)
+        .margin_top(6)
+        .x_label_area_size(44)
+        .y_label_area_size(56)
+        .build_cartesian_2d(-0.5..n - 0.5, -0.5..n - 0.5)?;
+    house_mesh(&mut chart)
+        .disable_mesh()
+        .x_desc("x index (cells)")
+        .y_desc("y index (cells)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .draw()?;
+    let cell = |t: &(i64, i64, f64, f64)| {
+        let (x, y) = (t.0 as f64, t.1 as f64);
+        let colour = if t.2.is_finite() { viridis((t.2 / max_um).clamp(0.0, 1.0)) } else { NO_PART };
+        Rectangle::new([(x - 0.5, y - 0.5), (x + 0.5, y + 0.5)], colour.filled())
+    };
+    chart.draw_series(print.tops.iter().map(cell))?;
+    let c = column as f64;
+    chart.draw_series(DashedLineSeries::new([(c, -0.5), (c, n - 0.5)], 6, 4, WHITE.stroke_width(2)))?;
+    Ok(())
+}
+
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    max_um: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    const SLICES: usize = 120;
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(40)
+        .margin_bottom(54)
+        .margin_left(4)
+        .margin_right(10)
+        .right_y_label_area_size(72)
+        .build_cartesian_2d(0.0..1.0, 0.0..max_um)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc("part top (µm)")
+        .label_style(text(14.0))
+        .axis_desc_style(text(15.0))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .draw()?;
+    let step = max_um / SLICES as f64;
+    let slice = |k: usize| {
+        let y = k as f64 * step;
+        Rectangle::new([(0.0, y), (1.0, y + step)], viridis(k as f64 / (SLICES - 1) as f64).filled())
+    };
+    chart.draw_series((0..SLICES).map(slice))?;
+    Ok(())
+}
+
+fn draw_section<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    print: &PipePrint,
+    column: i64,
+    max_um: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let n = print.tops.iter().map(|t| t.1).max().unwrap_or(0) as f64 + 1.0;
+    let y_hi = print.section.iter().map(|s| s.2).fold(max_um, f64::max) * 1.08;
+    let caption =
+        format!("{}: materials by layer at x index {column} (dashed line above)", print.controller.replace('_', " "));
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(18.0))
+        .margin(8)
+        .margin_right(16)
+        .x_label_area_size(44)
+        .y_label_area_size(64)
+        .build_cartesian_2d(-0.5..n - 0.5, 0.0..y_hi)?;
+    house_mesh(&mut chart)
+        .disable_mesh()
+        .x_desc("y index (cells)")
+        .y_desc("height (µm)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .draw()?;
+    let block = |s: &(i64, f64, f64, String)| {
+        let colour = if s.3 == "part" { PALETTE[0] } else { SUPPORT };
+        let y = s.0 as f64;
+        Rectangle::new([(y - 0.5, s.1), (y + 0.5, s.2)], colour.filled())
+    };
+    chart.draw_series(print.section.iter().filter(|s| s.3 != "none").map(block))?;
+    let mut desired: Vec<(f64, f64)> =
+        print.tops.iter().filter(|t| t.0 == column && t.3.is_finite()).map(|t| (t.1 as f64, t.3)).collect();
+    desired.sort_by(|a, b| a.0.total_cmp(&b.0));
+    chart
+        .draw_series(desired.iter().map(|&(y, z)| Circle::new((y, z), 3, BLACK.filled())))?
+        .label("desired part top")
+        .legend(|(x, y)| Circle::new((x + 12, y), 3, BLACK.filled()));
+    chart
+        .draw_series([Rectangle::new([(-1.0, -1.0), (-1.0, -1.0)], PALETTE[0].filled())])?
+        .label("part material")
+        .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 24, y + 6)], PALETTE[0].filled()));
+    chart
+        .draw_series([Rectangle::new([(-1.0, -1.0), (-1.0, -1.0)], SUPPORT.filled())])?
+        .label("support material")
+        .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 24, y + 6)], SUPPORT.filled()));
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font(text(14.0))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
