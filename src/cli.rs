@@ -98,6 +98,33 @@ pub enum DatasetsCommand {
 pub enum GenerateCommand {
     /// The virtual ink-jet printer of paper 002: an inkjet-scans dataset (scan after every layer).
     Inkjet(InkjetGenerateArgs),
+    /// The virtual extrusion printer with a nozzle-mounted thermal camera of paper 003:
+    /// a thermal-sequence dataset (frames, trajectory, camera, truth/).
+    Thermal(ThermalGenerateArgs),
+}
+
+/// `amrepro datasets generate thermal`.
+#[derive(Debug, Args)]
+pub struct ThermalGenerateArgs {
+    /// Seed of every random stream.
+    #[arg(long)]
+    pub seed: u64,
+    /// Layers printed and filmed.
+    #[arg(long, default_value_t = 1)]
+    pub layers: usize,
+    /// An extra effect (camera_latency, tau_mismatch, heat_diffusion_widening,
+    /// layer_heat_accumulation); repeat, each followed by --strength.
+    #[arg(long = "effect", value_name = "NAME")]
+    pub effects: Vec<String>,
+    /// Strength of the preceding --effect (same order).
+    #[arg(long = "strength", value_name = "X", allow_negative_numbers = true)]
+    pub strengths: Vec<f64>,
+    /// Let the camera repeat frames and freeze for its shutter, as FLIR Leptons do.
+    #[arg(long)]
+    pub lepton_habits: bool,
+    /// Dataset folder to write (replaced atomically).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// `amrepro datasets generate inkjet`.

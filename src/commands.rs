@@ -9,7 +9,7 @@ use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
     Cli, Command, DatasetsCommand, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg, ImportCommand,
-    InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs,
+    InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
 };
 
 /// Every stage kind this binary knows: domain stages and figures.
@@ -28,6 +28,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Stages(args) => list_stages(args),
         Command::Datasets(DatasetsCommand::Import(ImportCommand::FsuLinewidth(args))) => import_fsu(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Inkjet(args))) => generate_inkjet(args),
+        Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Thermal(args))) => generate_thermal(args),
         Command::Report(ReportArgs { out }) => report(&out),
     }
 }
@@ -156,16 +157,36 @@ fn import_fsu(args: FsuImportArgs) -> Result<()> {
     Ok(())
 }
 
+/// The `--effect NAME --strength X` pairs of a generator, checked for matching counts.
+fn effect_pairs<'a>(effects: &'a [String], strengths: &[f64]) -> Result<Vec<(&'a str, f64)>> {
+    if effects.len() != strengths.len() {
+        bail!("every --effect needs one --strength (got {} effects, {} strengths)", effects.len(), strengths.len());
+    }
+    Ok(effects.iter().map(String::as_str).zip(strengths.iter().copied()).collect())
+}
+
+fn generate_thermal(args: ThermalGenerateArgs) -> Result<()> {
+    use datasets::thermal::{generate, Effects, GenerateConfig, LeptonHabits};
+    let pairs = effect_pairs(&args.effects, &args.strengths)?;
+    let config = GenerateConfig {
+        seed: args.seed,
+        layers: args.layers.max(1),
+        effects: Effects::from_pairs(pairs)?,
+        lepton_habits: LeptonHabits { repeated_frames: args.lepton_habits, shutter_freeze: args.lepton_habits },
+    };
+    let summary = generate(&config, &args.out).with_context(|| format!("generating {}", args.out.display()))?;
+    println!(
+        "wrote thermal-sequence dataset {} ({} layers, {} frames)",
+        args.out.display(),
+        summary.layers,
+        summary.frames
+    );
+    Ok(())
+}
+
 fn generate_inkjet(args: InkjetGenerateArgs) -> Result<()> {
     use datasets::inkjet::{write_dataset, ControlLaw, Effects, GenerateOptions, Scenario};
-    if args.effects.len() != args.strengths.len() {
-        bail!(
-            "every --effect needs one --strength (got {} effects, {} strengths)",
-            args.effects.len(),
-            args.strengths.len()
-        );
-    }
-    let pairs: Vec<(&str, f64)> = args.effects.iter().map(String::as_str).zip(args.strengths.iter().copied()).collect();
+    let pairs = effect_pairs(&args.effects, &args.strengths)?;
     let opts = GenerateOptions {
         scenario: Scenario::parse(&args.scenario)?,
         seed: args.seed,

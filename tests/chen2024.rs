@@ -1,0 +1,103 @@
+//! Paper 003 through the shipped `specs/chen2024.toml` and the `thermal-sequence`
+//! format: the tables, figures and report section it promises, and bad frames turned
+//! into diagnostics while the run goes on.
+
+mod common;
+
+use std::path::Path;
+
+use common::*;
+use polars::prelude::{DataFrame, ParquetReader, SerReader};
+
+fn read(path: &Path) -> DataFrame {
+    ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
+}
+
+fn f64s(df: &DataFrame, name: &str) -> Vec<f64> {
+    df.column(name).unwrap().f64().unwrap().iter().map(|v| v.unwrap_or(f64::NAN)).collect()
+}
+
+fn strs(df: &DataFrame, name: &str) -> Vec<String> {
+    df.column(name).unwrap().str().unwrap().iter().map(|v| v.unwrap_or_default().to_string()).collect()
+}
+
+#[test]
+fn chen2024_writes_its_tables_figures_and_section() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = shipped_spec(tmp.path(), "chen2024", tmp.path()); // virtual printer: no measured data
+    ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    let out = tmp.path().join("out/thermal");
+    let frames = read(&out.join("frames.parquet"));
+    for column in ["layer", "frame", "recorded_time_s", "estimated_time_s", "corners_found", "reproj_err_mm", "used"] {
+        assert!(frames.column(column).is_ok(), "frames.parquet lacks {column}");
+    }
+    let used = frames.column("used").unwrap().bool().unwrap().iter().filter(|u| *u == Some(true)).count();
+    assert!(used >= 10, "only {used} of {} frames localised", frames.height());
+    let corners = read(&out.join("corners.parquet"));
+    assert_eq!(corners.height(), 18, "one row per corner of the test path");
+    let before = f64s(&corners, "oe_before_pct");
+    assert!(before.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let contour = read(&out.join("contour.parquet"));
+    assert_eq!(strs(&contour, "variant"), ["conventional", "compensated"]);
+    assert!(f64s(&contour, "max_mm").iter().all(|v| v.is_finite() && *v > 0.0));
+    let accuracy = read(&out.join("accuracy.parquet"));
+    let metrics = strs(&accuracy, "metric");
+    for metric in ["capture_time_err_median_ms", "capture_time_err_baseline_median_ms", "width_err_median_mm"] {
+        assert!(metrics.iter().any(|m| m == metric), "accuracy.parquet lacks {metric}");
+    }
+    for table in ["widths", "compensation", "spans", "paper_comparison"] {
+        assert!(out.join(format!("{table}.parquet")).is_file(), "{table}.parquet");
+    }
+    let runs = tmp.path().join("out/runs/chen2024");
+    for (stage, stem) in [
+        ("fig3", "thermal_directions"),
+        ("fig4", "thermal_frame"),
+        ("fig8", "thermal_corners"),
+        ("fig10", "thermal_overdeposition"),
+        ("fig11", "thermal_contour_error"),
+    ] {
+        assert!(runs.join(stage).join(format!("{stem}.png")).is_file(), "{stage}");
+    }
+    let report = std::fs::read_to_string(tmp.path().join("out/report/index.html")).unwrap();
+    assert!(report.contains("Paper 003"), "the report has the paper-003 section");
+}
+
+/// Writes a 16-bit grayscale PNG of `width` × `height` filled with `value`.
+fn png16(width: usize, height: usize, value: u16) -> Vec<u8> {
+    datasets::thermal::sequence::encode_png16(width, height, &vec![value; width * height])
+}
+
+#[test]
+fn bad_frames_are_diagnosed_by_name_and_the_run_goes_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(dir, &["datasets", "generate", "thermal", "--seed", "3", "--out", "seq"]);
+    let frames = dir.join("seq/frames");
+    std::fs::write(frames.join("L00_F0030.png"), png16(80, 60, 30000)).unwrap(); // wrong size
+    let whole = std::fs::read(frames.join("L00_F0031.png")).unwrap();
+    std::fs::write(frames.join("L00_F0031.png"), &whole[..whole.len() / 3]).unwrap(); // truncated
+    std::fs::write(frames.join("L00_F0032.png"), png16(160, 120, 0)).unwrap(); // no reading anywhere: all NaN
+    // Frame 34 claims to have been recorded before frame 33: out of order.
+    let csv = std::fs::read_to_string(dir.join("seq/frames.csv")).unwrap();
+    let csv = csv.replace("0,34,4.250000,", "0,34,4.100000,");
+    std::fs::write(dir.join("seq/frames.csv"), csv).unwrap();
+    let spec = dir.join("spec.toml");
+    std::fs::write(
+        &spec,
+        "[run]\nname = \"bad_frames\"\nseed = 3\n\n[dataset.seq]\npath = \"seq\"\n\n\
+         [stage.monitor]\nkind = \"thermal.monitor\"\ninputs = [\"seq\"]\n\
+         params = { band_low_c = 90.0, band_high_c = 220.0 }\n",
+    )
+    .unwrap();
+    ok(dir, &["run", "-q", spec.to_str().unwrap()]);
+    let table = read(&dir.join("out/runs/bad_frames/monitor/frames.parquet"));
+    let reasons = strs(&table, "skip_reason");
+    let frame_no: Vec<i64> = table.column("frame").unwrap().i64().unwrap().iter().map(|v| v.unwrap()).collect();
+    let reason = |f: i64| reasons[frame_no.iter().position(|&x| x == f).unwrap()].clone();
+    assert!(reason(30).contains("L00_F0030.png") && reason(30).contains("160"), "{}", reason(30));
+    assert!(reason(31).contains("L00_F0031.png"), "{}", reason(31));
+    assert!(reason(32).contains("L00_F0032.png"), "{}", reason(32));
+    assert!(reason(34).contains("out of order"), "{}", reason(34));
+    let used = table.column("used").unwrap().bool().unwrap().iter().filter(|u| *u == Some(true)).count();
+    assert!(used >= 5, "the other frames are still localised ({used})");
+}
