@@ -44,7 +44,8 @@ pub struct Scenario {
     pub open_loop_layers: usize,
     /// Closed-loop controller parameters.
     pub mpc: MpcParams,
-    /// Safety cap on the closed-loop layer count (never reached in our scenarios).
+    /// Safety cap on the closed-loop layer count (reached only by the 100 × 100 pipe
+    /// junction, where profiler noise keeps a few cells reading low every layer).
     pub max_layers: usize,
     /// Two-material printing (Sec. IV-B, eqs 6-7): the part geometry and the support
     /// droplets; `None` prints the part material everywhere.

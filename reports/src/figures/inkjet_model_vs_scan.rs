@@ -131,3 +131,57 @@ fn load(path: &std::path::Path, layer: i64, desired_um: f64) -> Result<[Print; 2
     };
     Ok([print("measured_um", "profiler scan")?, print("model_um", "model prediction")?])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use polars::df;
+
+    /// Two layers of a 12 × 12 square part: the "scan" 10 % lower and noisy, the
+    /// "model" nominal.
+    fn profiles(dir: &std::path::Path) {
+        let (mut layer, mut xi, mut yi, mut x, mut y, mut measured, mut model) =
+            (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+        for k in 1..=2i64 {
+            for j in 0..12i64 {
+                for i in 0..12i64 {
+                    let inside = (2..10).contains(&i) && (2..10).contains(&j);
+                    let h = if inside { 7.6 * k as f64 } else { 0.0 };
+                    layer.push(k);
+                    xi.push(i);
+                    yi.push(j);
+                    x.push(i as f64 * 263.0);
+                    y.push(j as f64 * 263.0);
+                    measured.push(0.9 * h + noise((k * 144 + j * 12 + i) as usize));
+                    model.push(h);
+                }
+            }
+        }
+        let df = df!("layer" => layer, "x_index" => xi, "y_index" => yi, "x_um" => x, "y_um" => y,
+            "measured_um" => measured, "model_um" => model)
+        .expect("frame");
+        write_table(dir, "profiles", df);
+    }
+
+    #[test]
+    fn loads_the_last_layer_and_draws_scan_against_model() {
+        let (input, out) = (tempfile::tempdir().expect("tempdir"), tempfile::tempdir().expect("tempdir"));
+        profiles(input.path());
+        let prints = load(&input.path().join("profiles.parquet"), 0, 15.2).expect("loads");
+        assert_eq!(prints[1].layers, 2);
+        assert!((prints[1].mean_err_um).abs() < 1e-9, "the model sits at 15.2 µm");
+        // Cells off the part (noise around 0) are drawn as bare substrate.
+        assert!(prints[0].cells.iter().filter(|c| c.x_index < 2).all(|c| c.height_um == 0.0));
+        assert!(load(&input.path().join("profiles.parquet"), 7, 15.2).is_err(), "no layer 7");
+        let stem = out.path().join("inkjet_model_vs_scan");
+        draw_png_and_svg(
+            &stem,
+            SIZE_PX,
+            |a| draw_titled(a, "synthetic", &prints, 15.2),
+            |a| draw_titled(a, "synthetic", &prints, 15.2),
+        )
+        .expect("draws");
+        assert_drawn(&stem);
+    }
+}

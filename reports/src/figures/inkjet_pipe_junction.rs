@@ -270,3 +270,77 @@ fn draw_section<DB: DrawingBackend>(
         .draw()?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_util::{assert_drawn, write_table};
+    use polars::df;
+
+    /// A 20 × 20 print with a part band along x (rows 8-11), 3 layers.
+    fn write_print(dir: &Path, controller: &str, offset_um: f64) {
+        let (mut xi, mut yi, mut top, mut want) = (vec![], vec![], vec![], vec![]);
+        for j in 0..20i64 {
+            for i in 0..20i64 {
+                xi.push(i);
+                yi.push(j);
+                let part = (8..12).contains(&j);
+                want.push(part.then_some(20.0 + j as f64));
+                top.push(part.then_some(20.0 + j as f64 + offset_um));
+            }
+        }
+        write_table(
+            dir,
+            "part_top",
+            df!("x_index" => xi, "y_index" => yi, "part_top_um" => top, "desired_top_um" => want).expect("frame"),
+        );
+        let (mut layer, mut xi, mut yi, mut bottom, mut upper, mut material) =
+            (vec![], vec![], vec![], vec![], vec![], vec![]);
+        for k in 1..=3i64 {
+            for j in 0..20i64 {
+                for i in 0..20i64 {
+                    layer.push(k);
+                    xi.push(i);
+                    yi.push(j);
+                    bottom.push(10.0 * (k - 1) as f64);
+                    upper.push(10.0 * k as f64);
+                    material.push(if (8..12).contains(&j) { "part" } else { "support" }.to_string());
+                }
+            }
+        }
+        write_table(
+            dir,
+            "layers",
+            df!("layer" => layer, "x_index" => xi, "y_index" => yi, "bottom_um" => bottom,
+            "top_um" => upper, "material" => material)
+            .expect("frame"),
+        );
+        write_table(
+            dir,
+            "edge_deformation",
+            df!("controller" => [controller, controller], "region" => ["edge", "interior"],
+            "rmse_um" => [offset_um, offset_um / 2.0], "max_abs_um" => [offset_um, offset_um])
+            .expect("frame"),
+        );
+    }
+
+    #[test]
+    fn loads_and_draws_open_and_closed_loop() {
+        let dirs: Vec<_> = (0..3).map(|_| tempfile::tempdir().expect("tempdir")).collect();
+        write_print(dirs[0].path(), "open_loop", 6.0);
+        write_print(dirs[1].path(), "closed_loop", 1.0);
+        let prints = [load(dirs[0].path(), 5).expect("loads"), load(dirs[1].path(), 5).expect("loads")];
+        assert_eq!(prints[0].section.len(), 3 * 20);
+        assert_eq!(caption(&prints[0]), "open loop: part-top RMS error edge 6.0 µm, interior 3.0 µm");
+        assert!(load(dirs[0].path(), 50).is_err(), "no column 50");
+        let stem = dirs[2].path().join("inkjet_pipe_junction");
+        draw_png_and_svg(
+            &stem,
+            SIZE_PX,
+            |a| draw_titled(a, "synthetic", &prints, 5),
+            |a| draw_titled(a, "synthetic", &prints, 5),
+        )
+        .expect("draws");
+        assert_drawn(&stem);
+    }
+}
