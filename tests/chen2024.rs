@@ -77,7 +77,7 @@ fn bad_frames_are_diagnosed_by_name_and_the_run_goes_on() {
     let whole = std::fs::read(frames.join("L00_F0031.png")).unwrap();
     std::fs::write(frames.join("L00_F0031.png"), &whole[..whole.len() / 3]).unwrap(); // truncated
     std::fs::write(frames.join("L00_F0032.png"), png16(160, 120, 0)).unwrap(); // no reading anywhere: all NaN
-    // Frame 34 claims to have been recorded before frame 33: out of order.
+                                                                               // Frame 34 claims to have been recorded before frame 33: out of order.
     let csv = std::fs::read_to_string(dir.join("seq/frames.csv")).unwrap();
     let csv = csv.replace("0,34,4.250000,", "0,34,4.100000,");
     std::fs::write(dir.join("seq/frames.csv"), csv).unwrap();

@@ -173,11 +173,7 @@ impl FrameRows {
     }
 }
 
-fn truth_frame<'a>(
-    truth: &'a ThermalTruth,
-    layer: i64,
-    frame: i64,
-) -> Option<&'a datasets::thermal::sequence::TruthFrame> {
+fn truth_frame(truth: &ThermalTruth, layer: i64, frame: i64) -> Option<&datasets::thermal::sequence::TruthFrame> {
     truth.frames.iter().find(|f| f.layer as i64 == layer && f.frame as i64 == frame)
 }
 

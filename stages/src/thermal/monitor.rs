@@ -159,6 +159,9 @@ impl Settings {
     }
 }
 
+/// A detection: (matched vertex or −1, undistorted pixel, temperature °C).
+type DetectionRow = (i64, [f64; 2], f64);
+
 /// One frame's outcome.
 struct FrameOutcome {
     entry: FrameEntry,
@@ -601,7 +604,7 @@ fn write_frame_tables(
     ctx.write_table("frames", &mut frame(columns)?)?;
     let camera = camera_model(&seq.camera);
     let undistorter = Undistorter::new(&camera).map_err(StageError::domain)?;
-    let rows: Vec<(&FrameOutcome, &(i64, [f64; 2], f64))> =
+    let rows: Vec<(&FrameOutcome, &DetectionRow)> =
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
     let raw: Vec<[f64; 2]> = rows.iter().map(|(_, d)| undistorter.distort_px(d.1)).collect();
     let mut detections = frame(vec![
