@@ -152,6 +152,7 @@ pub struct FrameWorkspace {
     matches: Vec<CornerMatch>,
     image_px: Vec<[f64; 2]>,
     plane_mm: Vec<[f64; 2]>,
+    on_ridges: Vec<bool>,
 }
 
 impl FrameWorkspace {
@@ -165,6 +166,7 @@ impl FrameWorkspace {
             matches: Vec::new(),
             image_px: Vec::new(),
             plane_mm: Vec::new(),
+            on_ridges: Vec::new(),
         })
     }
 
@@ -298,7 +300,10 @@ pub fn process_frame(
 }
 
 /// The pairs of eq. 27: each match's image point (ridge intersection where found, else
-/// the heat peak) with its path vertex. Returns how many were placed by the ridges.
+/// the heat peak) with its path vertex. When at least four were placed by the ridges,
+/// the others are dropped (a peak is biased by up to ~0.5 mm, and with few pairs one
+/// biased pair moves the whole H); `ws.matches` keeps only the pairs used. Returns how
+/// many were placed by the ridges.
 fn fill_correspondences(
     ws: &mut FrameWorkspace,
     predicted: &[PredictedCorner],
@@ -306,6 +311,7 @@ fn fill_correspondences(
 ) -> usize {
     ws.image_px.clear();
     ws.plane_mm.clear();
+    ws.on_ridges.clear();
     let mut refined = 0;
     for m in &ws.matches {
         let d = &ws.detections[m.detection];
@@ -316,8 +322,18 @@ fn fill_correspondences(
             vertex_from_ridges(&ws.undistorted, peak, &arms, params)
         });
         refined += usize::from(ridge.is_some());
+        ws.on_ridges.push(ridge.is_some());
         ws.image_px.push(ridge.unwrap_or(peak));
         ws.plane_mm.push(pred.plane_mm);
+    }
+    if refined >= crate::homography::MIN_CORRESPONDENCES {
+        let keep = &ws.on_ridges;
+        let mut i = 0;
+        ws.matches.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        ws.image_px.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        ws.plane_mm.retain(|_| (keep[i], i += 1).0);
     }
     refined
 }
