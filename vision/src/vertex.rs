@@ -85,7 +85,7 @@ impl CornerArms {
         for k in 0..2 {
             let d = [arm_px[k][0] - vertex_px[0], arm_px[k][1] - vertex_px[1]];
             let len = d[0].hypot(d[1]);
-            if !(len > 1e-9) {
+            if len.is_nan() || len <= 1e-9 {
                 return None;
             }
             dirs[k] = [d[0] / len, d[1] / len];
