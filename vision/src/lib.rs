@@ -1,7 +1,8 @@
 //! The thermal frame pipeline of paper 003 (Chen et al.), Sec. 2.3-2.4, on kornia-rs:
 //! decode radiometric frames ([`frame`]), undistort them and relate pixels to the printing
 //! plane ([`camera`]), find the hot corners of the freshly printed path ([`corners`]),
-//! match them to the known path corners ([`matching`]), estimate each frame's homography
+//! match them to the known path corners ([`matching`]), place each matched corner on its path
+//! vertex by intersecting the two bead ridges ([`vertex`]), estimate each frame's homography
 //! (eq. 27, [`homography`]), localize the frame in time (eqs 29-30, [`localize`]) and
 //! extract the left/right deposited half-widths along the deposition directions
 //! (Sec. 2.4, [`widths`]); [`pipeline`] runs one frame end to end.
@@ -18,4 +19,5 @@ pub mod localize;
 pub mod matching;
 pub mod pipeline;
 pub mod synth;
+pub mod vertex;
 pub mod widths;

@@ -20,7 +20,14 @@ pub struct PredictedCorner {
     pub plane_mm: [f64; 2],
     /// Predicted undistorted pixel.
     pub px: [f64; 2],
+    /// Predicted undistorted pixels of the points [`ARM_PROBE_MM`] along each arm from
+    /// the vertex (None when the arms are not known); used to locate the vertex from the
+    /// bead ridges ([`crate::vertex`]).
+    pub arm_px: Option<[[f64; 2]; 2]>,
 }
+
+/// Distance along each arm of the probe points of [`PredictedCorner::arm_px`] (mm).
+pub const ARM_PROBE_MM: f64 = 1.0;
 
 /// One accepted pair.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,7 +95,7 @@ mod tests {
     }
 
     fn pred(id: u32, u: f64, v: f64) -> PredictedCorner {
-        PredictedCorner { id, plane_mm: [0.0, 0.0], px: [u, v] }
+        PredictedCorner { id, plane_mm: [0.0, 0.0], px: [u, v], arm_px: None }
     }
 
     #[test]

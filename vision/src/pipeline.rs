@@ -1,12 +1,19 @@
 //! One thermal frame end to end, paper 003 Sec. 2.3-2.4: undistort, detect the hot
 //! corners in the 140-150 °C band, pair them with the path corners predicted from the
-//! recorded time, estimate the frame's homography H(i) (eq. 27), place the nozzle
+//! recorded time, move each matched corner from its heat peak onto the path vertex by
+//! intersecting the two bead ridges ([`crate::vertex`]: the peak sits inside the corner,
+//! where material piles up; the paper does not say which point of a detection it pairs
+//! with the CAD corner), estimate the frame's homography H(i) (eq. 27), place the nozzle
 //! (eq. 29), estimate the capture time (eq. 30) and extract the half-widths along the
 //! deposition directions (Sec. 2.4).
 //!
 //! A frame that cannot be used (too few corners, no homography, wrong size) is a
 //! [`FrameSkip`] with its reason, never an error: the sequence goes on (Sec. 3.2 keeps
-//! only "thermal images with sufficient newly printed corners"). All image buffers live
+//! only "thermal images with sufficient newly printed corners"). A frame whose nozzle
+//! position (eq. 29) lies more than `max_nozzle_offset_mm` from the commanded position at
+//! the recorded time is skipped too: the camera is rigid on the nozzle and the timing
+//! jitter is milliseconds, so such an H(i) is a wrong fit, not a measurement (ours; the
+//! paper has no such check). All image buffers live
 //! in a [`FrameWorkspace`] reused across frames.
 
 use rand_chacha::ChaCha8Rng;
@@ -16,7 +23,8 @@ use crate::corners::{CornerDetection, CornerDetector, CornerParams};
 use crate::frame::ThermalFrame;
 use crate::homography::{estimate_homography, Homography, HomographyError, HomographyFit, HomographyParams};
 use crate::localize::{estimate_capture_time, nozzle_position_mm, CaptureTimeEstimate, TrajectoryView, PAPER_WINDOW_S};
-use crate::matching::{match_corners_into, CornerMatch, PredictedCorner};
+use crate::matching::{match_corners_into, CornerMatch, PredictedCorner, ARM_PROBE_MM};
+use crate::vertex::{vertex_from_ridges, CornerArms, VertexParams};
 use crate::widths::{extract_widths_into, WidthParams, WidthQuery};
 
 /// Settings of every step.
@@ -32,6 +40,11 @@ pub struct PipelineParams {
     pub window_s: f64,
     /// Width extraction (threshold T_t).
     pub widths: WidthParams,
+    /// Vertex location from the bead ridges; None: pair the heat peaks as detected.
+    pub vertex: Option<VertexParams>,
+    /// Largest plausible distance of the eq. 29 nozzle position from the commanded
+    /// position at the recorded time (mm).
+    pub max_nozzle_offset_mm: f64,
 }
 
 impl PipelineParams {
@@ -45,6 +58,8 @@ impl PipelineParams {
             homography: HomographyParams::paper_defaults(),
             window_s: PAPER_WINDOW_S,
             widths: WidthParams::with_threshold(threshold_c),
+            vertex: Some(VertexParams::defaults()),
+            max_nozzle_offset_mm: 1.0,
         }
     }
 }
@@ -84,6 +99,11 @@ pub struct FrameResult {
     pub corners_found: usize,
     /// Corners paired with path corners.
     pub matches: Vec<CornerMatch>,
+    /// Image points paired with the path corners in eq. 27, one per match (undistorted
+    /// px): the ridge intersection where it was found, else the heat peak.
+    pub corner_px: Vec<[f64; 2]>,
+    /// Matches placed by the ridge intersection.
+    pub refined: usize,
     /// H(i) with inliers and RMS error (mm).
     pub homography: HomographyFit,
     /// Nozzle position P_N,i (world mm, eq. 29).
@@ -113,6 +133,12 @@ pub enum FrameSkip {
     /// The homography could not be estimated.
     #[error("homography failed: {0}")]
     HomographyFailed(HomographyError),
+    /// H(i) places the nozzle implausibly far from where the recorded time puts it.
+    #[error("implausible homography: nozzle {offset_mm:.2} mm from its commanded position at t_r")]
+    Implausible {
+        /// Distance (mm).
+        offset_mm: f64,
+    },
     /// H(i) sends the nozzle pixel to infinity.
     #[error("nozzle pixel maps off the plane")]
     NozzleOffPlane,
@@ -126,6 +152,7 @@ pub struct FrameWorkspace {
     matches: Vec<CornerMatch>,
     image_px: Vec<[f64; 2]>,
     plane_mm: Vec<[f64; 2]>,
+    on_ridges: Vec<bool>,
 }
 
 impl FrameWorkspace {
@@ -139,6 +166,7 @@ impl FrameWorkspace {
             matches: Vec::new(),
             image_px: Vec::new(),
             plane_mm: Vec::new(),
+            on_ridges: Vec::new(),
         })
     }
 
@@ -166,8 +194,65 @@ pub fn predict_corners_into(
     for &(id, c) in corners {
         let px = inv.apply([c[0] - nozzle_mm[0], c[1] - nozzle_mm[1]]);
         if px[0].is_finite() && px[1].is_finite() {
-            out.push(PredictedCorner { id, plane_mm: c, px });
+            out.push(PredictedCorner { id, plane_mm: c, px, arm_px: None });
         }
+    }
+}
+
+/// A path corner with the unit plane directions of its two arms (towards the previous
+/// and the next vertex).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathCorner {
+    /// Caller's id.
+    pub id: u32,
+    /// Vertex (world mm).
+    pub vertex_mm: [f64; 2],
+    /// Unit directions of the two arms on the plane.
+    pub arm_dirs: [[f64; 2]; 2],
+}
+
+impl PathCorner {
+    /// The corners of a closed polygon, ids = vertex indices; None for vertices whose
+    /// neighbour coincides with them.
+    pub fn of_closed_path(path_mm: &[[f64; 2]]) -> Vec<PathCorner> {
+        let n = path_mm.len();
+        let unit = |from: [f64; 2], to: [f64; 2]| {
+            let d = [to[0] - from[0], to[1] - from[1]];
+            let len = d[0].hypot(d[1]);
+            (len > 1e-12).then(|| [d[0] / len, d[1] / len])
+        };
+        (0..n)
+            .filter_map(|i| {
+                let v = path_mm[i];
+                let prev = unit(v, path_mm[(i + n - 1) % n])?;
+                let next = unit(v, path_mm[(i + 1) % n])?;
+                Some(PathCorner { id: i as u32, vertex_mm: v, arm_dirs: [prev, next] })
+            })
+            .collect()
+    }
+}
+
+/// As [`predict_corners_into`], with the probe points of both arms (see
+/// [`PredictedCorner::arm_px`]).
+pub fn predict_path_corners_into(
+    h0: &Homography,
+    nozzle_mm: [f64; 2],
+    corners: &[PathCorner],
+    out: &mut Vec<PredictedCorner>,
+) {
+    out.clear();
+    let Some(inv) = h0.inverse() else { return };
+    let to_px = |p: [f64; 2]| inv.apply([p[0] - nozzle_mm[0], p[1] - nozzle_mm[1]]);
+    let finite = |p: [f64; 2]| p[0].is_finite() && p[1].is_finite();
+    for c in corners {
+        let px = to_px(c.vertex_mm);
+        if !finite(px) {
+            continue;
+        }
+        let probe = |d: [f64; 2]| to_px([c.vertex_mm[0] + ARM_PROBE_MM * d[0], c.vertex_mm[1] + ARM_PROBE_MM * d[1]]);
+        let arms = [probe(c.arm_dirs[0]), probe(c.arm_dirs[1])];
+        let arm_px = (finite(arms[0]) && finite(arms[1])).then_some(arms);
+        out.push(PredictedCorner { id: c.id, plane_mm: c.vertex_mm, px, arm_px });
     }
 }
 
@@ -186,12 +271,17 @@ pub fn process_frame(
     if matched < crate::homography::MIN_CORRESPONDENCES {
         return Err(FrameSkip::TooFewCorners { found, matched, needed: crate::homography::MIN_CORRESPONDENCES });
     }
-    fill_correspondences(ws, input.predicted);
+    let refined = fill_correspondences(ws, input.predicted, p.vertex.as_ref());
     let fit =
         estimate_homography(&ws.image_px, &ws.plane_mm, &p.homography, rng).map_err(FrameSkip::HomographyFailed)?;
     let nozzle_mm = nozzle_position_mm(&fit.homography, ctx.undistorter.undistort_px(ctx.nozzle_px));
     if !nozzle_mm[0].is_finite() || !nozzle_mm[1].is_finite() {
         return Err(FrameSkip::NozzleOffPlane);
+    }
+    let commanded = ctx.trajectory.position_mm(input.t_recorded_s);
+    let offset_mm = (nozzle_mm[0] - commanded[0]).hypot(nozzle_mm[1] - commanded[1]);
+    if offset_mm > p.max_nozzle_offset_mm {
+        return Err(FrameSkip::Implausible { offset_mm });
     }
     let capture = estimate_capture_time(&ctx.trajectory, nozzle_mm, input.t_recorded_s, p.window_s);
     let plane_to_px = fit.homography.inverse().ok_or(FrameSkip::NozzleOffPlane)?;
@@ -200,6 +290,8 @@ pub fn process_frame(
     Ok(FrameResult {
         corners_found: found,
         matches: ws.matches.clone(),
+        corner_px: ws.image_px.clone(),
+        refined,
         homography: fit,
         nozzle_mm,
         capture,
@@ -207,14 +299,43 @@ pub fn process_frame(
     })
 }
 
-fn fill_correspondences(ws: &mut FrameWorkspace, predicted: &[PredictedCorner]) {
+/// The pairs of eq. 27: each match's image point (ridge intersection where found, else
+/// the heat peak) with its path vertex. When at least four were placed by the ridges,
+/// the others are dropped (a peak is biased by up to ~0.5 mm, and with few pairs one
+/// biased pair moves the whole H); `ws.matches` keeps only the pairs used. Returns how
+/// many were placed by the ridges.
+fn fill_correspondences(
+    ws: &mut FrameWorkspace,
+    predicted: &[PredictedCorner],
+    vertex: Option<&VertexParams>,
+) -> usize {
     ws.image_px.clear();
     ws.plane_mm.clear();
+    ws.on_ridges.clear();
+    let mut refined = 0;
     for m in &ws.matches {
         let d = &ws.detections[m.detection];
-        ws.image_px.push([d.u_px, d.v_px]);
-        ws.plane_mm.push(predicted[m.predicted].plane_mm);
+        let pred = &predicted[m.predicted];
+        let peak = [d.u_px, d.v_px];
+        let ridge = vertex.zip(pred.arm_px).and_then(|(params, arm_px)| {
+            let arms = CornerArms::from_points(pred.px, arm_px, ARM_PROBE_MM)?;
+            vertex_from_ridges(&ws.undistorted, peak, &arms, params)
+        });
+        refined += usize::from(ridge.is_some());
+        ws.on_ridges.push(ridge.is_some());
+        ws.image_px.push(ridge.unwrap_or(peak));
+        ws.plane_mm.push(pred.plane_mm);
     }
+    if refined >= crate::homography::MIN_CORRESPONDENCES {
+        let keep = &ws.on_ridges;
+        let mut i = 0;
+        ws.matches.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        ws.image_px.retain(|_| (keep[i], i += 1).0);
+        let mut i = 0;
+        ws.plane_mm.retain(|_| (keep[i], i += 1).0);
+    }
+    refined
 }
 
 #[cfg(test)]

@@ -5,7 +5,9 @@
 //!    commanded flow through the nominal G(s) of eq. 34) → `directions.parquet`.
 //! 2. Every frame: decode (a bad frame becomes a diagnostic row, never an abort),
 //!    undistort, detect the hot corners in the 140-150 °C band, pair them with the CAD
-//!    corners predicted from the recorded time through the nominal mount, estimate the
+//!    corners predicted from the recorded time through the nominal mount, place each
+//!    paired corner on its path vertex by intersecting its two bead ridges (the heat
+//!    peak sits inside the corner; see `vision::vertex`), estimate the
 //!    frame's homography (eq. 27, DLT + RANSAC), place the nozzle (eq. 29) and estimate
 //!    the capture time (eq. 30) → `frames.parquet`, `detections.parquet`.
 //! 3. Widths (Sec. 2.4): each trajectory sample is read in the localised frame in which
@@ -40,7 +42,9 @@ use vision::frame::ThermalFrame;
 use vision::homography::Homography;
 use vision::localize::TrajectoryView;
 use vision::matching::PredictedCorner;
-use vision::pipeline::{predict_corners_into, process_frame, FrameContext, FrameInput, FrameWorkspace, PipelineParams};
+use vision::pipeline::{
+    predict_path_corners_into, process_frame, FrameContext, FrameInput, FrameWorkspace, PathCorner, PipelineParams,
+};
 use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 
 use super::common::{
@@ -186,7 +190,7 @@ struct Analysis<'a> {
     undistorter: Undistorter,
     h0: Homography,
     params: PipelineParams,
-    corners: Vec<(u32, [f64; 2])>,
+    path_corners: Vec<PathCorner>,
     passage_s: Vec<f64>,
     queries: Vec<WidthQuery>,
     straight: Vec<bool>,
@@ -226,7 +230,7 @@ impl<'a> Analysis<'a> {
             undistorter,
             params,
             passage_s: vertex_passage_times(seq, trajectory),
-            corners,
+            path_corners: PathCorner::of_closed_path(&seq.path_mm),
             queries,
             straight,
             settings,
@@ -284,10 +288,10 @@ impl<'a> Analysis<'a> {
         };
         let t_r = entry.recorded_time_s;
         let nozzle = ctx.trajectory.position_mm(t_r);
-        let printed: Vec<(u32, [f64; 2])> =
-            self.corners.iter().copied().filter(|(id, _)| self.passage_s[*id as usize] <= t_r).collect();
+        let printed: Vec<PathCorner> =
+            self.path_corners.iter().copied().filter(|c| self.passage_s[c.id as usize] <= t_r).collect();
         let mut predicted: Vec<PredictedCorner> = Vec::new();
-        predict_corners_into(&self.h0, nozzle, &printed, &mut predicted);
+        predict_path_corners_into(&self.h0, nozzle, &printed, &mut predicted);
         let input = FrameInput { frame: &frame, t_recorded_s: t_r, predicted: &predicted, width_queries: &[] };
         let result = process_frame(ctx, &input, workspace, rng);
         let detections = collect_detections(workspace, result.as_ref().ok(), &predicted);
