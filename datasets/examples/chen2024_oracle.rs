@@ -65,6 +65,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     before.print("before", 0);
     let lagged = first_order_lag(&v_e, trajectory.dt_s, setup.tau_s, 0.0);
     let excess: Vec<f64> = lagged.iter().zip(&v_e).map(|(l, v)| l - v).collect();
+    let a_fil_dt = setup.filament_area_mm2() * trajectory.dt_s;
+    let flow_over_mm3: f64 = excess.iter().map(|e| e.max(0.0)).sum::<f64>() * a_fil_dt;
+    let flow_under_mm3: f64 = excess.iter().map(|e| (-e).max(0.0)).sum::<f64>() * a_fil_dt;
+    let dv = velocity_change_from_sweep_mm_s(
+        &truth.measured,
+        &truth.cad_desired,
+        &truth.sweep,
+        setup.layer_height_mm,
+        setup.filament_area_mm2(),
+        1.0,
+    );
+    let seen_over_mm3: f64 = dv.iter().map(|e| e.max(0.0)).sum::<f64>() * a_fil_dt;
+    let seen_under_mm3: f64 = dv.iter().map(|e| (-e).max(0.0)).sum::<f64>() * a_fil_dt;
+    println!(
+        "flow excess of the lag: +{flow_over_mm3:.3} / -{flow_under_mm3:.3} mm³; seen in true widths (cad, sweep): \
+         +{seen_over_mm3:.3} / -{seen_under_mm3:.3} mm³; A_o·h summed over corners {:.3} mm³",
+        before.over_mm2 * setup.layer_height_mm
+    );
     let whole = vec![1.0; trajectory.len()];
     let fbs = FbsParams { tail_s: 3.0 * setup.tau_s, ..FbsParams::paper_defaults() };
     let spans = compensate_spans(&whole, &excess, trajectory.dt_s, &span_params(fbs, 0.0), |_| 1.0)?;
@@ -196,6 +214,7 @@ fn edge_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
 struct Score {
     oe_pct: Vec<f64>,
     under_mm2: f64,
+    over_mm2: f64,
     max_mm: f64,
     rms_mm: f64,
 }
@@ -204,7 +223,7 @@ fn score(setup: &PrintSetup, path: &[[f64; 2]], bead: &IdealBead, layers: &[Depo
     let w = setup.bead_width_mm;
     let n = path.len();
     let mut oe_pct = Vec::with_capacity(n);
-    let mut under_mm2 = 0.0;
+    let (mut under_mm2, mut over_mm2) = (0.0, 0.0);
     for i in 0..n {
         let (a, b) = (sub(path[(i + n - 1) % n], path[i]), sub(path[(i + 1) % n], path[i]));
         let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
@@ -212,11 +231,12 @@ fn score(setup: &PrintSetup, path: &[[f64; 2]], bead: &IdealBead, layers: &[Depo
         let c = corner_deposition(&layers[0], bead, path[i], CORNER_RADIUS_MM);
         oe_pct.push(100.0 * c.over_area_mm2 / polytope);
         under_mm2 += c.under_area_mm2;
+        over_mm2 += c.over_area_mm2;
     }
     let cad = bead.contour_points(0.05);
     let errors: Vec<_> = layers.iter().map(|g| contour_errors(g, &cad)).collect();
     let summary = summarize(&errors);
-    Score { oe_pct, under_mm2, max_mm: summary.max_mm, rms_mm: summary.rms_mm }
+    Score { oe_pct, under_mm2, over_mm2, max_mm: summary.max_mm, rms_mm: summary.rms_mm }
 }
 
 fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
