@@ -26,6 +26,20 @@
 //!   Cholesky. The fit covers the extended window only, as eq. 39 does; the lag's tail
 //!   after Δt̂1 is left to the extension.
 //! - Eq. 37: the compensated command is v_ef = v_e − Δv_er.
+//!
+//! Choices of ours beside the paper's text (found with the oracle study
+//! `datasets/examples/chen2024_oracle.rs`, true widths in place of the camera's):
+//! - Eq. 33 by swept area ([`velocity_change_from_sweep_mm_s`]). Paper: "ΔE(t) =
+//!   K_e(w_l + w_r − 2w_d)". Read literally as h|v|Δw it treats every sample as a slice
+//!   of a straight bead; at a sharp apex the allocated directions fan round a nearly
+//!   fixed point, and neighbouring directions cross the same bulge, so summing lengths
+//!   counts it several times. The area swept by the turning segments, eqs 5-6 in the
+//!   rotated frame, counts every point once (with the sign of the sweep).
+//! - Tail ([`solve_fbs_with_tail`], `FbsParams::tail_s`). Paper: the fit (eq. 39) runs
+//!   over [Δt̂0, Δt̂1] only. The lag's response to an input that ends at Δt̂1 goes on
+//!   for ~3τ and starves the bead after a corner; fitting it to zero there removes that.
+//!   Spans are solved in print order with the earlier spans' tails subtracted
+//!   ([`compensate_spans`]), which superposition through the linear G allows.
 
 use faer::prelude::*;
 use faer::{Mat, Side};
@@ -68,18 +82,25 @@ pub struct FbsParams {
     pub dv_min_mm_s: f64,
     /// Upper bound ΔV_max (mm/s), Sec. 3.2: +4 mm/s.
     pub dv_max_mm_s: f64,
+    /// Time after the window over which the lagged output is still fitted to zero (s).
+    /// The paper fits over the extended window only (0); the lag's response to the
+    /// input keeps going for a few τ after Δt̂1 (module doc).
+    pub tail_s: f64,
 }
 
 impl FbsParams {
     /// Sec. 3.2 of the paper, with our knot spacing (see the module doc).
     pub fn paper_defaults() -> Self {
-        Self { knot_spacing_s: 0.02, tau_s: 0.0873, dv_min_mm_s: -2.0, dv_max_mm_s: 4.0 }
+        Self { knot_spacing_s: 0.02, tau_s: 0.0873, dv_min_mm_s: -2.0, dv_max_mm_s: 4.0, tail_s: 0.0 }
     }
 
     /// Checks spacing and τ positive and ΔV_min ≤ 0 ≤ ΔV_max (the fixed ends must be feasible).
     pub fn check(self) -> Result<Self, ThermalError> {
         positive("knot_spacing_s", self.knot_spacing_s)?;
         positive("tau_s", self.tau_s)?;
+        if !(self.tail_s >= 0.0 && self.tail_s.is_finite()) {
+            return Err(ThermalError::NotPositive { name: "tail_s", value: self.tail_s });
+        }
         if !(self.dv_min_mm_s <= 0.0 && self.dv_max_mm_s >= 0.0) {
             return Err(ThermalError::BadBounds { min: self.dv_min_mm_s, max: self.dv_max_mm_s });
         }
@@ -157,6 +178,125 @@ pub fn desired_velocity_change_mm_s(
         .collect()
 }
 
+/// Per-sample geometry of the deposition frame: what the swept-area form of eq. 33 needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweepSample {
+    /// Path speed |v| (mm/s).
+    pub speed_mm_s: f64,
+    /// Angle ψ of the deposition direction from the path normal (rad).
+    pub psi_rad: f64,
+    /// Effective curvature κ_eff = κ + κ_φ (1/mm), eq. 14: the deposition direction
+    /// turns at κ_eff·|v| rad/s.
+    pub kappa_eff_per_mm: f64,
+}
+
+/// Area swept per second by the left and right deposition segments of lengths `left_mm`
+/// and `right_mm` (mm²/s): |v|(cos ψ·w_l − ½κ_eff·w_l²) + |v|(cos ψ·w_r + ½κ_eff·w_r²),
+/// eqs 5-6 in the rotated frame of the allocation (a segment whose foot moves at |v|
+/// and which turns at κ_eff|v| sweeps cos ψ·|v| per unit length, less the sector it
+/// turns back over on the inner side, plus the one it fans out over on the outer side).
+/// With ψ = 0 and w_l = w_r = w on a straight line this is 2w|v|, eq. 2. Integrated
+/// over time it counts every point of the plane once, with the sign of the sweep, even
+/// where neighbouring segments cross at a sharp apex: the signed sweep, not the sum of
+/// lengths, is what mass conservation relates to the flow.
+pub fn swept_area_rate_mm2_s(left_mm: f64, right_mm: f64, sample: &SweepSample) -> f64 {
+    let (v, c, k) = (sample.speed_mm_s, sample.psi_rad.cos(), sample.kappa_eff_per_mm);
+    v * (c * left_mm - 0.5 * k * left_mm * left_mm) + v * (c * right_mm + 0.5 * k * right_mm * right_mm)
+}
+
+/// Eq. 33 by mass conservation in the deposition frame: the flow excess
+/// ΔE = K_e·h·(swept rate of the measured − of the desired half widths) (mm³/s) at
+/// every sample, converted to a deposition velocity by `flow_per_velocity_mm2`
+/// (E = that × v_e: the filament area for an E-axis velocity). Unmeasured samples
+/// (NaN) ask for no change.
+pub fn velocity_change_from_sweep_mm_s(
+    measured_mm: &[(f64, f64)],
+    desired_mm: &[(f64, f64)],
+    sweep: &[SweepSample],
+    layer_height_mm: f64,
+    flow_per_velocity_mm2: f64,
+    gain: f64,
+) -> Vec<f64> {
+    measured_mm
+        .iter()
+        .zip(desired_mm)
+        .zip(sweep)
+        .map(|((m, d), g)| {
+            let excess = swept_area_rate_mm2_s(m.0, m.1, g) - swept_area_rate_mm2_s(d.0, d.1, g);
+            if excess.is_finite() {
+                gain * layer_height_mm * excess / flow_per_velocity_mm2
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// One compensated span of [`compensate_spans`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpanCompensation {
+    /// Samples with |Δw| ≥ ε.
+    pub span: SampleSpan,
+    /// The span extended at both ends (Sec. 3.2): where the input lives.
+    pub window: SampleSpan,
+    /// Gain K_e used.
+    pub gain: f64,
+    /// Desired output change Δv_e over the window and its tail, after subtracting the
+    /// lagged tails of earlier spans (mm/s).
+    pub desired_mm_s: Vec<f64>,
+    /// The FBS solution over the window and its tail.
+    pub solution: FbsSolution,
+}
+
+/// Settings of [`compensate_spans`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpanParams {
+    /// ε (mm): samples with |Δw| ≥ ε need compensation (Sec. 2.4).
+    pub epsilon_mm: f64,
+    /// Extension of each span at both ends (s), Sec. 3.2: 0.1 s.
+    pub extension_s: f64,
+    /// The FBS solve (its `tail_s` also sets how far a span's lagged output reaches).
+    pub fbs: FbsParams,
+}
+
+/// Sec. 2.4 over one layer: spans of |`width_error_mm`| ≥ ε, extended, merged where the
+/// extended windows touch; for each, the desired output `desired_unit_gain_mm_s` (Δv_e
+/// with K_e = 1) times `gain(span)` over the window, solved by FBS. Spans are solved in
+/// print order and each one's desired output has the lagged tails of the earlier ones
+/// subtracted (G is linear, so their responses add).
+pub fn compensate_spans(
+    width_error_mm: &[f64],
+    desired_unit_gain_mm_s: &[f64],
+    dt_s: f64,
+    params: &SpanParams,
+    mut gain: impl FnMut(SampleSpan) -> f64,
+) -> Result<Vec<SpanCompensation>, ThermalError> {
+    let n = width_error_mm.len();
+    let merge_gap = (2.0 * params.extension_s / dt_s).ceil() as usize + 1;
+    let tail = (params.fbs.tail_s / dt_s).round() as usize;
+    let mut planned = vec![0.0; n];
+    let mut out = Vec::new();
+    for span in error_spans(width_error_mm, params.epsilon_mm, merge_gap) {
+        let window = extend_span(span, params.extension_s, dt_s, n);
+        let end = (window.last + 1 + tail).min(n);
+        let k_e = gain(span);
+        let desired: Vec<f64> = (window.first..end)
+            .map(|k| k_e * desired_unit_gain_mm_s[k] * f64::from(k <= window.last) - planned[k])
+            .collect();
+        let solution = solve_fbs_with_tail(&desired, end - window.last - 1, dt_s, &params.fbs)?;
+        planned[window.first..end].iter_mut().zip(&solution.output_mm_s).for_each(|(p, o)| *p += o);
+        out.push(SpanCompensation { span, window, gain: k_e, desired_mm_s: desired, solution });
+    }
+    Ok(out)
+}
+
+/// The compensated command v_ef = v_e − Σ Δv_er over all spans (eq. 37).
+pub fn apply_spans(v_e_mm_s: &[f64], spans: &[SpanCompensation]) -> Vec<f64> {
+    spans
+        .iter()
+        .fold(v_e_mm_s.to_vec(), |command, s| compensated_command(&command, s.window.first, &s.solution.input_mm_s))
+}
+
 /// Compensated command v_ef = v_e − Δv_er (eq. 37), with `input_mm_s` applied from
 /// sample `window_first` on.
 pub fn compensated_command(v_e_mm_s: &[f64], window_first: usize, input_mm_s: &[f64]) -> Vec<f64> {
@@ -170,11 +310,28 @@ pub fn compensated_command(v_e_mm_s: &[f64], window_first: usize, input_mm_s: &[
 /// Eqs 36-39: the bounded filtered-B-spline fit of `desired_mm_s` (Δv_e on the extended
 /// window's samples, period `dt_s`).
 pub fn solve_fbs(desired_mm_s: &[f64], dt_s: f64, params: &FbsParams) -> Result<FbsSolution, ThermalError> {
+    solve_fbs_with_tail(desired_mm_s, 0, dt_s, params)
+}
+
+/// [`solve_fbs`] where the last `tail` samples of `desired_mm_s` lie after the window:
+/// the input spline lives on the first `len − tail` samples and is zero after them,
+/// while its lagged output is fitted over all samples (the tail's desired values are
+/// what the output should be there, usually 0).
+pub fn solve_fbs_with_tail(
+    desired_mm_s: &[f64],
+    tail: usize,
+    dt_s: f64,
+    params: &FbsParams,
+) -> Result<FbsSolution, ThermalError> {
     let params = params.check()?;
     positive("dt_s", dt_s)?;
     let samples = desired_mm_s.len();
-    let knots_s = clamped_uniform_knots((samples.max(2) - 1) as f64 * dt_s, params.knot_spacing_s);
-    let basis = sampled_basis(&knots_s, samples, dt_s);
+    let window = samples.saturating_sub(tail).max(2);
+    let knots_s = clamped_uniform_knots((window - 1) as f64 * dt_s, params.knot_spacing_s);
+    let mut basis = sampled_basis(&knots_s, samples, dt_s);
+    for r in window..samples {
+        (0..basis.ncols()).for_each(|c| basis[(r, c)] = 0.0);
+    }
     let filtered = filter_columns(&basis, dt_s, params.tau_s);
     let n_basis = basis.ncols();
     // Interior control points only: ΔV_0 = ΔV_n = 0 (eq. 39).
@@ -496,6 +653,78 @@ mod tests {
         let extended = extend_span(spans[0], 0.1, DT, 1000);
         assert_eq!(extended, SampleSpan { first: 200, last: 439 });
         assert_eq!(extend_span(spans[1], 0.5, DT, 1000).last, 999);
+    }
+
+    #[test]
+    fn swept_area_is_eq_2_on_a_line_and_a_disc_sector_on_a_pivot() {
+        // Straight line, ψ = 0: 2w|v| (eq. 2 per unit time).
+        let line = SweepSample { speed_mm_s: 20.0, psi_rad: 0.0, kappa_eff_per_mm: 0.0 };
+        assert!((swept_area_rate_mm2_s(0.225, 0.225, &line) - 2.0 * 0.225 * 20.0).abs() < 1e-12);
+        // A fan turning through π at a nearly fixed foot (κ_eff|v| = π rad/s for 1 s) with
+        // w_l = w_r = r sweeps the outer half disc (+πr²/2) and the inner one backwards
+        // (−πr²/2) on top of the 2r|v| strip: the net is 2r|v|, each point counted once.
+        let (r, v) = (0.3, 1e-3);
+        let pivot = SweepSample { speed_mm_s: v, psi_rad: 0.0, kappa_eff_per_mm: std::f64::consts::PI / v };
+        let outer_only = swept_area_rate_mm2_s(0.0, r, &pivot);
+        assert!((outer_only - (r * v + std::f64::consts::FRAC_PI_2 * r * r)).abs() < 1e-12);
+        assert!((swept_area_rate_mm2_s(r, r, &pivot) - 2.0 * r * v).abs() < 1e-12);
+        // A measured bead equal to the desired one asks for nothing; 0.1 mm more on a line
+        // at 20 mm/s is ΔE = h·20·0.1 mm³/s, Δv_e = ΔE/A_fil.
+        let dv = velocity_change_from_sweep_mm_s(
+            &[(0.225, 0.225), (0.275, 0.275), (f64::NAN, 0.2)],
+            &[(0.225, 0.225); 3],
+            &[line; 3],
+            0.25,
+            2.405,
+            1.0,
+        );
+        assert!(dv[0].abs() < 1e-15 && (dv[1] - 0.25 * 20.0 * 0.1 / 2.405).abs() < 1e-12 && dv[2] == 0.0);
+    }
+
+    #[test]
+    fn tail_fit_brings_the_lagged_output_back_to_zero_after_the_window() {
+        // A bump that ends at the window's end: without the tail the lag's response keeps
+        // going after Δt̂1; fitted over 3τ more it must be much smaller there.
+        let desired = bump(1.0);
+        let tail = 262;
+        let mut extended = desired.clone();
+        extended.extend(std::iter::repeat_n(0.0, tail));
+        let params = FbsParams::paper_defaults();
+        let after = |sol: &FbsSolution| -> f64 {
+            // The lagged response after the window, continued from the window's last output.
+            let last = *sol.output_mm_s[..desired.len()].last().unwrap();
+            let decay = (-DT / params.tau_s).exp();
+            (1..=tail).map(|j| (last * decay.powi(j as i32)).powi(2)).sum::<f64>().sqrt()
+        };
+        let plain = solve_fbs(&desired, DT, &params).unwrap();
+        let with_tail = solve_fbs_with_tail(&extended, tail, DT, &params).unwrap();
+        assert!(with_tail.input_mm_s[desired.len()..].iter().all(|v| *v == 0.0));
+        let tail_norm: f64 = with_tail.output_mm_s[desired.len()..].iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(tail_norm < 0.5 * after(&plain), "{tail_norm} vs {}", after(&plain));
+    }
+
+    #[test]
+    fn spans_add_their_lagged_responses() {
+        // Two error spans close in time: the second's desired output has the first's tail
+        // subtracted, so the summed lagged input matches the desired output better than
+        // solving each alone would.
+        let n = 1500;
+        let mut dw = vec![0.0; n];
+        dw[300..400].iter_mut().for_each(|v| *v = 0.2);
+        dw[800..900].iter_mut().for_each(|v| *v = 0.2);
+        let desired: Vec<f64> = dw.iter().map(|d| 5.0 * d).collect();
+        let params = SpanParams {
+            epsilon_mm: 0.05,
+            extension_s: 0.1,
+            fbs: FbsParams { tail_s: 0.26, ..FbsParams::paper_defaults() },
+        };
+        let spans = compensate_spans(&dw, &desired, DT, &params, |_| 1.0).unwrap();
+        assert_eq!(spans.len(), 2);
+        let command = apply_spans(&vec![0.0; n], &spans);
+        let output = first_order_lag(&command, DT, params.fbs.tau_s, 0.0);
+        let err: f64 = output.iter().zip(&desired).map(|(o, d)| (-o - d).powi(2)).sum::<f64>().sqrt();
+        let norm: f64 = desired.iter().map(|d| d * d).sum::<f64>().sqrt();
+        assert!(err < 0.35 * norm, "{err} vs {norm}");
     }
 
     #[test]

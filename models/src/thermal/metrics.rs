@@ -103,6 +103,23 @@ impl IdealBead {
         point_in_polygon(point_mm, &self.outer_mm) && !point_in_polygon(point_mm, &self.inner_mm)
     }
 
+    /// Distance (mm) from `point_mm` along the unit direction `dir` to the first
+    /// crossing of the bead's boundary (either offset polygon); 0 if `point_mm` lies
+    /// outside the bead. This is the ideal deposit's half width along a deposition
+    /// direction, the exact form of eq. 31's w0/cos φ (which assumes a straight bead).
+    pub fn edge_distance_mm(&self, point_mm: [f64; 2], dir: [f64; 2]) -> f64 {
+        if !self.contains(point_mm) {
+            return 0.0;
+        }
+        [&self.outer_mm, &self.inner_mm]
+            .iter()
+            .flat_map(|polygon| {
+                (0..polygon.len())
+                    .filter_map(|i| ray_segment_mm(point_mm, dir, polygon[i], polygon[(i + 1) % polygon.len()]))
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// CAD contour points P_t: both offset polygons sampled every `spacing_mm`.
     pub fn contour_points(&self, spacing_mm: f64) -> Vec<[f64; 2]> {
         let mut points = sample_polygon(&self.outer_mm, spacing_mm);
@@ -132,6 +149,19 @@ pub fn offset_polygon(vertices: &[[f64; 2]], left_offset_mm: f64) -> Vec<[f64; 2
             [vertices[i][0] + scale * (np[0] + nn[0]), vertices[i][1] + scale * (np[1] + nn[1])]
         })
         .collect()
+}
+
+/// Distance along the ray p + r·dir (r > 0, `dir` unit) to the segment a-b, if it meets it.
+fn ray_segment_mm(p: [f64; 2], dir: [f64; 2], a: [f64; 2], b: [f64; 2]) -> Option<f64> {
+    let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+    let denom = dir[0] * ey - dir[1] * ex;
+    if denom.abs() < 1e-15 {
+        return None;
+    }
+    let (qx, qy) = (a[0] - p[0], a[1] - p[1]);
+    let r = (qx * ey - qy * ex) / denom;
+    let u = (qx * dir[1] - qy * dir[0]) / denom;
+    (r > 0.0 && (0.0..=1.0).contains(&u)).then_some(r)
 }
 
 /// Even-odd point-in-polygon test.
@@ -454,6 +484,20 @@ mod tests {
         let errors = contour_errors(&grid, &cad);
         assert!(errors.iter().all(|e| (e.error_mm - d).abs() < cell), "{:?}", errors[0]);
         assert!((summarize(&[errors]).max_mm - d).abs() < cell);
+    }
+
+    #[test]
+    fn edge_distance_is_the_strip_width_over_cos_and_the_mitre_at_a_corner() {
+        // Bottom edge of a square, w0 = 0.2: along a direction tilted by φ from the normal
+        // the strip's half width is w0/cos φ (eq. 31); at the vertex along the inner
+        // bisector the mitred inner corner lies w0·√2 away.
+        let (w0, phi) = (0.2_f64, 0.4_f64);
+        let bead = IdealBead::new(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]], w0).unwrap();
+        let d = bead.edge_distance_mm([5.0, 0.0], [phi.sin(), phi.cos()]);
+        assert!((d - w0 / phi.cos()).abs() < 1e-12, "{d}");
+        let inner = bead.edge_distance_mm([0.0, 0.0], [0.5_f64.sqrt(), 0.5_f64.sqrt()]);
+        assert!((inner - w0 * 2.0_f64.sqrt()).abs() < 1e-12, "{inner}");
+        assert_eq!(bead.edge_distance_mm([5.0, 5.0], [0.0, 1.0]), 0.0);
     }
 
     #[test]
