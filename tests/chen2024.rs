@@ -60,6 +60,8 @@ fn chen2024_writes_its_tables_figures_and_section() {
     }
     let report = std::fs::read_to_string(tmp.path().join("out/report/index.html")).unwrap();
     assert!(report.contains("Paper 003"), "the report has the paper-003 section");
+    assert!(!report.contains("frames/L00_F"), "the virtual camera's frames are data, not figures of the report");
+    assert!(report.matches("<figure>").count() >= 5, "the five paper-003 figures");
 }
 
 /// Writes a 16-bit grayscale PNG of `width` × `height` filled with `value`.

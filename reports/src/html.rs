@@ -108,8 +108,13 @@ fn sections(out_dir: &Path, m: &Manifest, stage: &ManifestStage) -> Result<Strin
     Ok(s)
 }
 
+/// The figures a `figure.*` stage drew (other stages' images, e.g. a virtual camera's
+/// frames in a generated dataset, are data, not figures).
 fn figures(m: &Manifest, stage: &ManifestStage) -> String {
     let mut s = String::new();
+    if !stage.record.kind.starts_with("figure.") {
+        return s;
+    }
     for out in stage.record.outputs.iter().filter(|o| o.path.extension().is_some_and(|e| e == "png")) {
         let rel = format!("../runs/{}/{}/{}", m.run, stage.record.stage, out.path.display());
         let svg = rel.trim_end_matches(".png").to_string() + ".svg";

@@ -486,13 +486,21 @@ stage reprint), with A_c the corner polytope, the rhombus where the two edges' i
 (mitred) bead within a disc around the vertex. Our test path has eighteen corners (45° to 120° apexes on two zig-zags, their valleys and four side corners) where \
 the paper's has four types. Two things make corners over-deposit on the virtual printer: the flow lag (τ = 0.0873 s, eq. 34) while the head slows, and, at \
 the sharp apexes, the outgoing bead running into the incoming one, whose material then has nowhere to go but sideways. Only corners covered by a localised \
-frame get a width reading and a compensation; the others keep O_E before = after in the table above. Where the width along the allocated deposition \
-directions fans across a sharp apex it counts the bulge several times, so the compensation there over-corrects and starves the corner (Fig. 10).</p>\n\
+frame get a width reading and a compensation; the others keep O_E before = after in the table above.</p>\n\
 <p><b>Deposition velocity.</b> We read the paper's deposition velocity v_e as the extruder's filament velocity (E = A_fil·v_e, 1.75 mm filament), the reading \
 under which its w0 = K·α + b (K = 3.44 mm, b = 0.67 mm) gives a sub-millimetre bead and its bounds ΔV ∈ [−2, 4] mm/s allow the short retraction a corner needs; \
-the virtual printer lets a negative command pull the melt pressure down and extrudes only while it is positive. The paper's gain K_e = 1 + (150 − T_p)/15 is \
-used with T_p clamped to its 140-150 °C band, and only over-deposition (Δw > 0) is compensated: near sharp corners eq. 31's w0/cos ψ grows without bound, \
-so a \"too narrow\" reading there is an artefact of the desired width, not missing material.</p>\n\
+the virtual printer lets a negative command pull the melt pressure down and extrudes only while it is positive. \
+Where the stage's defaults depart from eqs 31-33 (stage compensate's parameters, in the source column), they do so for reasons measured on the virtual printer \
+with its true widths: the desired width is the CAD bead's extent along each allocated direction (at a sharp corner's inner side eq. 31's w0/cos ψ is far \
+narrower than the overlapping beads, so a perfect corner would read as over-deposited); the flow excess is the area the bead boundaries sweep (eqs 5-6 in the \
+rotated frame), so a bulge at the fanned apex is counted once, not once per direction crossing it; the fit runs 3τ past each window so the lagged tail does \
+not starve the bead after the corner; and K_e = 1, since the paper's K_e was identified for corners read at 140-150 °C and ours are read in a wider band.</p>\n\
+<p><b>Why the targets are not met.</b> With the virtual printer's true widths in place of the thermal ones (datasets/examples/chen2024_oracle.rs), the same \
+compensation lowers the mean O_E by only a third; driven instead by the lag model of eq. 34 itself (the exact excess lag(v_e) − v_e, no widths) it lowers it \
+by 86 %. Over one layer the lag delivers +0.76 mm³ too much at the corners and −0.92 mm³ too little elsewhere, but the true widths see only +0.51 and −0.73 mm³: \
+this printer's melt fills the nearest free space, so the excess of a slow apex spreads onto its flanks and into the thin stretch after the corner, while eq. 7 \
+assumes material stays where, and when, it was extruded. Width feedback sees the net result shifted in space and time and cannot rebuild the flow error \
+from it. That is the model discrepancy this reproduction names: the slender-deposition assumption of eqs 5-7, not the dynamics of eq. 34.</p>\n\
 <p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
 0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the outer surface \
 of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary on every layer, with no profiler noise. \
