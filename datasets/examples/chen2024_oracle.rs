@@ -24,7 +24,7 @@
 //!
 //! Run: `cargo run --release -p datasets --example chen2024_oracle`.
 
-use datasets::thermal::deposition::{conventional_command, fill_at, print_part};
+use datasets::thermal::deposition::{conventional_command, edge_distance_mm, print_part};
 use datasets::thermal::effects::Effects;
 use models::thermal::compensation::{
     apply_spans, compensate_spans, velocity_change_from_sweep_mm_s, FbsParams, SpanParams, SweepSample,
@@ -144,7 +144,7 @@ impl TrueWidths {
             let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
             let (sin, cos) = dirs.deposition_heading_rad[k].sin_cos();
             let (left, right) = ([-sin, cos], [sin, -cos]);
-            out.measured.push((edge_mm(grid, p, left), edge_mm(grid, p, right)));
+            out.measured.push((edge_distance_mm(grid, p, left), edge_distance_mm(grid, p, right)));
             let wd = w0 / dirs.psi_rad[k].cos();
             out.paper_desired.push((wd, wd));
             out.cad_desired.push((bead.edge_distance_mm(p, left), bead.edge_distance_mm(p, right)));
@@ -188,26 +188,6 @@ impl TrueWidths {
         let spans = compensate_spans(&dw, &dv, trajectory.dt_s, &span_params(fbs, EPSILON_MM), |_| 1.0)?;
         Ok((apply_spans(v_e, &spans), spans.len()))
     }
-}
-
-/// Distance from `p` along `dir` to where the fill drops below one half (as
-/// `thermal.accuracy_evaluate` measures the true width).
-fn edge_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
-    const STEP_MM: f64 = 0.005;
-    let mut prev = fill_at(grid, p);
-    if prev < 0.5 {
-        return 0.0;
-    }
-    let mut r = 0.0;
-    while r < 3.0 {
-        let f = fill_at(grid, [p[0] + (r + STEP_MM) * dir[0], p[1] + (r + STEP_MM) * dir[1]]);
-        if f < 0.5 {
-            return r + STEP_MM * (prev - 0.5) / (prev - f);
-        }
-        prev = f;
-        r += STEP_MM;
-    }
-    r
 }
 
 /// The evaluation of `thermal.reprint_evaluate`.

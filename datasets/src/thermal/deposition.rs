@@ -262,8 +262,10 @@ fn unit_tangents(trajectory: &Trajectory) -> Vec<[f64; 2]> {
     out
 }
 
-/// Distance from `p` along `dir` to the first crossing of fill = 0.5 (0 if `p` is empty).
-fn edge_distance_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
+/// Distance from `p` along the unit direction `dir` to the first crossing of fill = 0.5
+/// (linear between 0.005 mm steps, up to 3 mm; 0 if `p` is empty): the true half width
+/// of the deposit along any direction, as the truth tables and the evaluation use it.
+pub fn edge_distance_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
     const STEP_MM: f64 = 0.005;
     let mut prev = fill_at(grid, p);
     if prev < 0.5 {

@@ -133,7 +133,7 @@ fn draw_titled<DB: DrawingBackend>(
     for (panel, print) in maps.split_evenly((1, 2)).iter().zip(prints) {
         draw_aerial(panel, print, max_um, column).map_err(|e| e.to_string())?;
     }
-    draw_colour_bar(&bar, max_um).map_err(|e| e.to_string())?;
+    super::draw_viridis_bar(&bar, (0.0, max_um), "part top (µm)", 0, 120).map_err(|e| e.to_string())?;
     for (panel, print) in bottom.split_evenly((1, 2)).iter().zip(prints) {
         draw_section(panel, print, column, max_um).map_err(|e| e.to_string())?;
     }
@@ -183,36 +183,6 @@ fn draw_aerial<DB: DrawingBackend>(
     chart.draw_series(print.tops.iter().map(cell))?;
     let c = column as f64;
     chart.draw_series(DashedLineSeries::new([(c, -0.5), (c, n - 0.5)], 6, 4, WHITE.stroke_width(2)))?;
-    Ok(())
-}
-
-fn draw_colour_bar<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    max_um: f64,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    const SLICES: usize = 120;
-    let mut chart = ChartBuilder::on(area)
-        .margin_top(40)
-        .margin_bottom(54)
-        .margin_left(4)
-        .margin_right(10)
-        .right_y_label_area_size(72)
-        .build_cartesian_2d(0.0..1.0, 0.0..max_um)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .disable_x_axis()
-        .y_desc("part top (µm)")
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
-        .y_label_formatter(&|y| format!("{y:.0}"))
-        .draw()?;
-    let step = max_um / SLICES as f64;
-    let slice = |k: usize| {
-        let y = k as f64 * step;
-        Rectangle::new([(0.0, y), (1.0, y + step)], viridis(k as f64 / (SLICES - 1) as f64).filled())
-    };
-    chart.draw_series((0..SLICES).map(slice))?;
     Ok(())
 }
 

@@ -70,3 +70,40 @@ fn draw_width_profile_mesh<DB: DrawingBackend>(
         .y_label_formatter(&|y| format!("{y:.1}"))
         .draw()
 }
+
+/// A vertical viridis colour bar for `lo..hi` in `bands` equal bands (band k has
+/// viridis(k / (bands − 1)), as the heat maps colour their cells), labelled `desc`
+/// with `decimals` decimals. The one colour bar of every heat-map figure.
+pub(crate) fn draw_viridis_bar<DB: DrawingBackend>(
+    area: &plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
+    (lo, hi): (f64, f64),
+    desc: &str,
+    decimals: usize,
+    bands: usize,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::prelude::{ChartBuilder, Rectangle};
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(12)
+        .margin_bottom(52)
+        .margin_left(4)
+        .margin_right(10)
+        .right_y_label_area_size(72)
+        .build_cartesian_2d(0.0..1.0, lo..hi)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc(desc)
+        .label_style(crate::style::text(14.0))
+        .axis_desc_style(crate::style::text(15.0))
+        .y_label_formatter(&|y| format!("{y:.decimals$}"))
+        .draw()?;
+    let step = (hi - lo) / bands as f64;
+    let band = |k: usize| {
+        let y = lo + k as f64 * step;
+        let colour = r_surface::viridis(k as f64 / (bands.max(2) - 1) as f64);
+        Rectangle::new([(0.0, y), (1.0, y + step)], plotters::style::Color::filled(&colour))
+    };
+    chart.draw_series((0..bands).map(band))?;
+    Ok(())
+}

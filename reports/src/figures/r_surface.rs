@@ -172,7 +172,7 @@ fn draw_panel<DB: DrawingBackend>(
     let (map, bar) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(COLOUR_BAR_PX));
     let range = rmse_range_mm(&surface.cells);
     draw_heat_map(&map, surface, range)?;
-    draw_colour_bar(&bar, range)
+    super::draw_viridis_bar(&bar, range, "training RMSE (mm)", label_decimals(range.1 - range.0), 120)
 }
 
 fn draw_heat_map<DB: DrawingBackend>(
@@ -226,37 +226,6 @@ fn mark_minimum<DB: DrawingBackend>(
     let label = format!("min {rmse:.4} mm at ({a:.2}, {f:.2})");
     let style = text(15.0).color(&WHITE).pos(pos);
     chart.draw_series([Text::new(label, anchor, style)])?;
-    Ok(())
-}
-
-fn draw_colour_bar<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    (lo, hi): (f64, f64),
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    const SLICES: usize = 120;
-    let decimals = label_decimals(hi - lo);
-    let mut chart = ChartBuilder::on(area)
-        .margin_top(10)
-        .margin_bottom(54)
-        .margin_left(4)
-        .margin_right(14)
-        .right_y_label_area_size(62)
-        .build_cartesian_2d(0.0..1.0, lo..hi)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .disable_x_axis()
-        .y_desc("training RMSE (mm)")
-        .label_style(text(13.0))
-        .axis_desc_style(text(14.0))
-        .y_label_formatter(&|y| format!("{y:.decimals$}"))
-        .draw()?;
-    let step = (hi - lo) / SLICES as f64;
-    let slice = |k: usize| {
-        let y = lo + k as f64 * step;
-        Rectangle::new([(0.0, y), (1.0, y + step)], viridis(k as f64 / (SLICES - 1) as f64).filled())
-    };
-    chart.draw_series((0..SLICES).map(slice))?;
     Ok(())
 }
 

@@ -192,38 +192,6 @@ pub fn finite_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     }
 }
 
-/// A vertical viridis colour bar for `lo..hi`, labelled `desc`, with `decimals` decimals.
-pub fn draw_colour_bar<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    (lo, hi): (f64, f64),
-    desc: &str,
-    decimals: usize,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let mut chart = ChartBuilder::on(area)
-        .margin_top(12)
-        .margin_bottom(48)
-        .margin_left(4)
-        .margin_right(8)
-        .right_y_label_area_size(74)
-        .build_cartesian_2d(0.0..1.0, lo..hi)?;
-    chart
-        .configure_mesh()
-        .disable_mesh()
-        .disable_x_axis()
-        .y_desc(desc)
-        .label_style(text(14.0))
-        .axis_desc_style(text(15.0))
-        .y_label_formatter(&|y| format!("{y:.decimals$}"))
-        .draw()?;
-    let step = (hi - lo) / COLOUR_LEVELS as f64;
-    let slice = |k: usize| {
-        let y = lo + k as f64 * step;
-        Rectangle::new([(0.0, y), (1.0, y + step)], level_colour(k).filled())
-    };
-    chart.draw_series((0..COLOUR_LEVELS).map(slice))?;
-    Ok(())
-}
-
 /// Clips the segment `a`-`b` to the box `xs` × `ys` (Liang-Barsky); None when it
 /// lies wholly outside. Plotters does not clip elements to the plotting area, so
 /// anything drawn on a zoomed chart goes through this.

@@ -22,9 +22,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::{
-    closed_outline, colour_level, draw_colour_bar, level_colour, load_polygon, plane_chart, Vertex,
-};
+use crate::figures::thermal_common::{closed_outline, colour_level, level_colour, load_polygon, plane_chart, Vertex};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
 
@@ -192,7 +190,8 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
         let caption = format!("{}: max {max:.4} mm, RMS {rms:.4} mm (all layers); {}", VARIANTS[k], plot.layer_label());
         draw_panel(row, &caption, &drawn[k], &plot.polygon, max_mm).map_err(e)?;
     }
-    draw_colour_bar(&bar, (0.0, max_mm), "contour error e_t (mm)", 2).map_err(e)
+    super::draw_viridis_bar(&bar, (0.0, max_mm), "contour error e_t (mm)", 2, super::thermal_common::COLOUR_LEVELS)
+        .map_err(e)
 }
 
 fn draw_panel<DB: DrawingBackend>(

@@ -27,8 +27,8 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::thermal_common::{
-    closed_outline, colour_level, draw_colour_bar, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour,
-    load_polygon, merge_runs, plane_chart, KeySwatch, PlaneChart, Vertex,
+    closed_outline, colour_level, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour, load_polygon,
+    merge_runs, plane_chart, KeySwatch, PlaneChart, Vertex,
 };
 use crate::read::{f64s, ints, no_rows, read_parquet};
 use crate::style::{draw_png_and_svg, house_mesh, text};
@@ -235,7 +235,8 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, data
     draw_frame_panel(&b, data, range, "(b) detected corners and nozzle", true).map_err(|e| e.to_string())?;
     draw_mosaic(&bottom, data, range).map_err(|e| e.to_string())?;
     draw_key(&key, &key_items(data)).map_err(|e| e.to_string())?;
-    draw_colour_bar(&bar, range, "temperature (°C)", 0).map_err(|e| e.to_string())
+    super::draw_viridis_bar(&bar, range, "temperature (°C)", 0, super::thermal_common::COLOUR_LEVELS)
+        .map_err(|e| e.to_string())
 }
 
 fn key_items(data: &FrameData) -> Vec<(String, KeySwatch)> {

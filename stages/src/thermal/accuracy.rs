@@ -18,7 +18,7 @@
 
 use std::path::Path;
 
-use datasets::thermal::deposition::fill_at;
+use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::thermal::DepositGrid;
 use pipeline::params::ParamDefault;
@@ -250,7 +250,7 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
         let grid = deposits[l].as_ref().expect("just loaded");
         let k = sample[i] as usize;
         let d = [dep_x[k], dep_y[k]];
-        let true_width = edge_mm(grid, [x[i], y[i]], d) + edge_mm(grid, [x[i], y[i]], [-d[0], -d[1]]);
+        let true_width = edge_distance_mm(grid, [x[i], y[i]], d) + edge_distance_mm(grid, [x[i], y[i]], [-d[0], -d[1]]);
         let err = wl[i] + wr[i] - true_width;
         abs_err.push(err.abs());
         signed.push(err);
@@ -265,25 +265,6 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
     );
     metrics.push("width_bias_median_mm", quantile(&mut signed, 0.5), "mm", n, "median of the signed width error");
     Ok(())
-}
-
-/// Distance from `p` along `dir` to where the true fill drops below one half.
-fn edge_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
-    const STEP_MM: f64 = 0.005;
-    let mut prev = fill_at(grid, p);
-    if prev < 0.5 {
-        return 0.0;
-    }
-    let mut r = 0.0;
-    while r < 3.0 {
-        let f = fill_at(grid, [p[0] + (r + STEP_MM) * dir[0], p[1] + (r + STEP_MM) * dir[1]]);
-        if f < 0.5 {
-            return r + STEP_MM * (prev - 0.5) / (prev - f);
-        }
-        prev = f;
-        r += STEP_MM;
-    }
-    r
 }
 
 fn detection_metrics(
