@@ -11,7 +11,7 @@
 //! input that produces it through G(s) within the bounds (eqs 36-39).
 //!
 //! Choices of ours, each beside the paper's text (numbers: the oracle study
-//! `datasets/examples/chen2024_oracle.rs` and the report of branch `comp`):
+//! `datasets/examples/chen2024_oracle.rs`, which runs them with the true widths):
 //! - Desired width (`desired_width = "cad"`). Paper eq. 31: "w_d(t) = w0/cos(φ_eff(t))",
 //!   the width of a straight bead along a direction tilted by φ. At a sharp corner the
 //!   inner deposition directions point into the wedge where the incoming and outgoing
