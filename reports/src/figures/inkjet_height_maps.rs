@@ -32,12 +32,7 @@ const TOP_ROW_FRACTION: f64 = 0.58;
 const NO_MATERIAL: RGBColor = RGBColor(225, 225, 225);
 
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
     ParamSpec {
         name: "desired_height_um",
         ty: ParamType::Float { min: 0.0, max: 10_000.0 },
@@ -116,10 +111,9 @@ impl StageKind for InkjetHeightMapsFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let prints = [load(&ctx.inputs[0].dir)?, load(&ctx.inputs[1].dir)?];
         let desired = ctx.params.f64("desired_height_um");
-        let title = match ctx.params.str("title") {
-            "" => "Printed part: aerial views and middle-row side view, open vs closed loop".to_string(),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Printed part: aerial views and middle-row side view, open vs closed loop".to_string()
+        });
         let stem = ctx.output_path("inkjet_height_maps")?;
         draw_png_and_svg(
             &stem,

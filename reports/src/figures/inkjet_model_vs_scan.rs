@@ -27,12 +27,7 @@ const SIZE_PX: (u32, u32) = (1400, 900);
 pub const NO_MATERIAL_FRACTION: f64 = 0.05;
 
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
     ParamSpec {
         name: "layer",
         ty: ParamType::Int { min: 0, max: 100_000 },
@@ -70,10 +65,7 @@ impl StageKind for InkjetModelVsScanFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let desired = ctx.params.f64("desired_height_um");
         let prints = load(&ctx.inputs[0].dir.join("profiles.parquet"), ctx.params.i64("layer"), desired)?;
-        let title = match ctx.params.str("title") {
-            "" => "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string(),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string());
         let stem = ctx.output_path("inkjet_model_vs_scan")?;
         draw_png_and_svg(
             &stem,

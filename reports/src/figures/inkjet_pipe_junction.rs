@@ -28,12 +28,7 @@ const NO_PART: RGBColor = RGBColor(225, 225, 225);
 const SUPPORT: RGBColor = RGBColor(240, 190, 120);
 
 const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
     ParamSpec {
         name: "section_x_index",
         ty: ParamType::Int { min: 0, max: 100_000 },
@@ -76,10 +71,9 @@ impl StageKind for InkjetPipeJunctionFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let column = ctx.params.i64("section_x_index");
         let prints = [load(&ctx.inputs[0].dir, column)?, load(&ctx.inputs[1].dir, column)?];
-        let title = match ctx.params.str("title") {
-            "" => "Two-material pipe junction: part top and material cross-section, open vs closed loop".to_string(),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Two-material pipe junction: part top and material cross-section, open vs closed loop".to_string()
+        });
         let stem = ctx.output_path("inkjet_pipe_junction")?;
         draw_png_and_svg(
             &stem,

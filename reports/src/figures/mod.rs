@@ -34,7 +34,8 @@ pub use thermal_overdeposition::ThermalOverdepositionFigure;
 pub use transfer_cv::TransferCvFigure;
 pub use width_profiles::WidthProfilesFigure;
 
-use pipeline::Registry;
+use pipeline::params::ParamDefault;
+use pipeline::{ParamSpec, ParamType, Registry};
 use plotters::coord::cartesian::Cartesian2d;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::{ChartContext, DrawingAreaErrorKind, DrawingBackend};
@@ -56,6 +57,22 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(ThermalContourErrorFigure));
     registry.register(Box::new(InkjetModelVsScanFigure));
     registry.register(Box::new(InkjetPipeJunctionFigure));
+}
+
+/// The `title` parameter of a figure whose default title is a fixed description.
+const TITLE: ParamSpec = ParamSpec {
+    name: "title",
+    ty: ParamType::Text,
+    default: ParamDefault::Str(""),
+    doc: "Figure title (default: a generic description).",
+};
+
+/// The figure's `title` parameter, or `default()` when the spec leaves it empty.
+fn title_or(ctx: &pipeline::StageContext, default: impl FnOnce() -> String) -> String {
+    match ctx.params.str("title") {
+        "" => default(),
+        title => title.to_string(),
+    }
 }
 
 /// The axes of a line-width profile (paper 000 Figs 3, 6): position along the line

@@ -43,12 +43,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(-1),
         doc: "Layer to draw; −1: the layer with the largest max error over both prints; −2: every layer overlaid.",
     },
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
 ];
 
 /// One contour point.
@@ -111,12 +106,9 @@ impl StageKind for ThermalContourErrorFigure {
             polygon: load_polygon(dir)?,
             layer,
         };
-        let title = match ctx.params.str("title") {
-            "" => {
-                "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".into()
-            }
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".to_string()
+        });
         let stem = ctx.output_path("thermal_contour_error")?;
         draw_png_and_svg(&stem, SIZE_PX, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))
     }

@@ -71,12 +71,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(4.0),
         doc: "Upper bound ΔV_max of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: 4 mm/s.",
     },
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
 ];
 
 /// One compensated span (a row of `spans.parquet`).
@@ -185,10 +180,9 @@ impl StageKind for ThermalCornersFigure {
             pad_s: ctx.params.f64("pad_s"),
             dv_bounds_mm_s: (ctx.params.f64("dv_min_mm_s"), ctx.params.f64("dv_max_mm_s")),
         };
-        let title = match ctx.params.str("title") {
-            "" => "Compensated corners: temperature, extracted vs desired width, compensation sequence".into(),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Compensated corners: temperature, extracted vs desired width, compensation sequence".to_string()
+        });
         let stem = ctx.output_path("thermal_corners")?;
         let size = figure_size_px(plot.rows.len());
         draw_png_and_svg(&stem, size, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))

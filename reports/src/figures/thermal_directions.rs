@@ -68,7 +68,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(8),
         doc: "Draw the deposition direction of every k-th sample (at 1 ms sampling and 20 mm/s, k = 8 is one segment per 0.16 mm on the straights, denser where the head slows).",
     },
-    ParamSpec { name: "title", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "Figure title (default: a generic description)." },
+    super::TITLE,
 ];
 
 /// The columns of `directions.parquet` this figure draws.
@@ -179,12 +179,9 @@ impl StageKind for ThermalDirectionsFigure {
             half_mm: ctx.params.f64("zoom_mm"),
             every_k: ctx.params.i64("every_k_samples") as usize,
         };
-        let title = match ctx.params.str("title") {
-            "" => {
-                "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".into()
-            }
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".to_string()
+        });
         let stem = ctx.output_path("thermal_directions")?;
         let size = figure_size_px(plot.zooms.len());
         draw_png_and_svg(&stem, size, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))

@@ -64,12 +64,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(150.0),
         doc: "Upper edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 150 °C.",
     },
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description).",
-    },
+    super::TITLE,
 ];
 
 /// One pixel or plane cell with its temperature.
@@ -145,10 +140,9 @@ impl StageKind for ThermalFrameFigure {
         if let Some(input) = ctx.inputs.get(1) {
             data.polygon = load_polygon(&input.dir)?;
         }
-        let title = match ctx.params.str("title") {
-            "" => "Thermal frame alignment: undistorted frame, detected corners, aligned frames on the plane".into(),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || {
+            "Thermal frame alignment: undistorted frame, detected corners, aligned frames on the plane".to_string()
+        });
         let stem = ctx.output_path("thermal_frame")?;
         draw_png_and_svg(&stem, SIZE_PX, |a| draw(a, &title, &data), |a| draw(a, &title, &data))
     }

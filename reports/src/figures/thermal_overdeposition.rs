@@ -159,10 +159,7 @@ impl StageKind for ThermalOverdepositionFigure {
             half_mm: ctx.params.f64("zoom_mm"),
             pairs_per_row: ctx.params.i64("pairs_per_row") as usize,
         };
-        let title = match ctx.params.str("title") {
-            "" => default_title(&plot.corners),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || default_title(&plot.corners));
         let stem = ctx.output_path("thermal_overdeposition")?;
         let size = figure_size_px(plot.corners.len(), plot.pairs_per_row);
         draw_png_and_svg(&stem, size, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))

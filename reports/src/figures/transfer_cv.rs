@@ -93,11 +93,9 @@ impl StageKind for TransferCvFigure {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let cv = load(&ctx.inputs[0].dir)?;
-        let title = match ctx.params.str("title") {
-            "" => "Transfer learning to the target printer: held-out RMSE vs training lines (paper 000 Fig. 9)",
-            t => t,
-        }
-        .to_string();
+        let title = super::title_or(ctx, || {
+            "Transfer learning to the target printer: held-out RMSE vs training lines (paper 000 Fig. 9)".to_string()
+        });
         let stem = ctx.output_path("transfer_cv")?;
         draw_png_and_svg(&stem, SIZE_PX, |a| draw(a, &title, &cv), |a| draw(a, &title, &cv))
     }

@@ -70,10 +70,7 @@ impl StageKind for WidthProfilesFigure {
         if let Some(summary) = ctx.inputs.get(1) {
             add_steady_widths(&summary.dir.join("line_summary.parquet"), &printer, &mut profiles)?;
         }
-        let title = match ctx.params.str("title") {
-            "" => format!("Measured line width along the line: {printer}"),
-            t => t.to_string(),
-        };
+        let title = super::title_or(ctx, || format!("Measured line width along the line: {printer}"));
         let stem = ctx.output_path("width_profiles")?;
         let profiles: Vec<Profile> = profiles.into_values().collect();
         draw_png_and_svg(&stem, (1500, 1050), |a| draw(a, &title, &profiles), |a| draw(a, &title, &profiles))
