@@ -142,22 +142,29 @@ pub fn straight_test_point() -> ([f64; 2], [f64; 2]) {
     ([0.0, BASE_HEIGHT_MM / 2.0], [0.0, -1.0])
 }
 
+/// Interior angle of a closed polygon at each vertex (degrees), between its two edges.
+pub fn interior_angles_deg(polygon_mm: &[[f64; 2]]) -> Vec<f64> {
+    let n = polygon_mm.len();
+    (0..n)
+        .map(|i| {
+            let (prev, at, next) = (polygon_mm[(i + n - 1) % n], polygon_mm[i], polygon_mm[(i + 1) % n]);
+            let a = [prev[0] - at[0], prev[1] - at[1]];
+            let b = [next[0] - at[0], next[1] - at[1]];
+            let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
+            cos.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn interior_angle_deg(prev: [f64; 2], at: [f64; 2], next: [f64; 2]) -> f64 {
-        let a = [prev[0] - at[0], prev[1] - at[1]];
-        let b = [next[0] - at[0], next[1] - at[1]];
-        let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
-        cos.acos().to_degrees()
-    }
 
     #[test]
     fn test_path_has_the_stated_corner_angles() {
         let v = corner_test_path();
         let n = v.len();
-        let angles: Vec<f64> = (0..n).map(|i| interior_angle_deg(v[(i + n - 1) % n], v[i], v[(i + 1) % n])).collect();
+        let angles = interior_angles_deg(&v);
         // Top apexes at vertices 2, 4, 6, 8 (valleys 3, 5, 7); bottom apexes at 11, 13, 15, 17
         // (valleys 12, 14, 16), the bottom teeth in reverse order.
         for (k, apex) in TOOTH_APEX_DEG.iter().enumerate() {

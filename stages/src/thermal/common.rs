@@ -83,20 +83,6 @@ pub fn nearest_sample(trajectory: &Trajectory, p_mm: [f64; 2]) -> usize {
         .unwrap_or(0)
 }
 
-/// Interior angle of the CAD polygon at each vertex (degrees).
-pub fn interior_angles_deg(path_mm: &[[f64; 2]]) -> Vec<f64> {
-    let n = path_mm.len();
-    (0..n)
-        .map(|i| {
-            let (prev, at, next) = (path_mm[(i + n - 1) % n], path_mm[i], path_mm[(i + 1) % n]);
-            let a = [prev[0] - at[0], prev[1] - at[1]];
-            let b = [next[0] - at[0], next[1] - at[1]];
-            let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
-            cos.clamp(-1.0, 1.0).acos().to_degrees()
-        })
-        .collect()
-}
-
 /// Reads a Parquet table an upstream stage wrote into `dir`.
 pub fn read_table(dir: &Path, file: &str) -> Result<DataFrame, StageError> {
     pipeline::artifact::read_parquet(&dir.join(file))

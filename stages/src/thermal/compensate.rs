@@ -55,8 +55,9 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use super::common::{f64_column, i64_column, interior_angles_deg, open_sequence, read_table, trajectory_of};
+use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col};
+use models::thermal::setup::interior_angles_deg;
 
 /// The temperature band over which the paper identified K_e (Sec. 3.2): its corners are
 /// measured at 140-150 °C, so K_e runs from 1 to 1.67. A corner measured outside the band

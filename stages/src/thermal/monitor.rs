@@ -131,7 +131,7 @@ impl StageKind for MonitorStage {
         let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, settings)?;
         let frames = analysis.localise_all(ctx.seed)?;
         let widths = analysis.widths(&frames);
-        write_frame_tables(ctx, &seq, &frames)?;
+        write_frame_tables(ctx, &analysis.undistorter, &frames)?;
         let mut table = widths_frame(&trajectory, &with_dda, &setup, &widths)?;
         ctx.write_table("widths", &mut table)?;
         write_figure_tables(ctx, &seq, &analysis, &frames)
@@ -582,7 +582,7 @@ fn widths_frame(
 /// `frames.parquet` and `detections.parquet`.
 fn write_frame_tables(
     ctx: &mut StageContext,
-    seq: &ThermalSequence,
+    undistorter: &Undistorter,
     frames: &[FrameOutcome],
 ) -> Result<(), StageError> {
     let used: Vec<bool> = frames.iter().map(|f| f.skip.is_none()).collect();
@@ -606,8 +606,6 @@ fn write_frame_tables(
     ];
     columns.extend(homography_cols);
     ctx.write_table("frames", &mut frame(columns)?)?;
-    let camera = camera_model(&seq.camera);
-    let undistorter = Undistorter::new(&camera).map_err(StageError::domain)?;
     let rows: Vec<(&FrameOutcome, &DetectionRow)> =
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
     let raw: Vec<[f64; 2]> = rows.iter().map(|(_, d)| undistorter.distort_px(d.1)).collect();

@@ -30,8 +30,9 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::common::{f64_column, interior_angles_deg, open_sequence, read_table, trajectory_of};
+use super::common::{f64_column, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col, str_col};
+use models::thermal::setup::interior_angles_deg;
 
 /// The `thermal.reprint_evaluate` stage kind.
 pub struct ReprintEvaluateStage;
