@@ -351,14 +351,7 @@ pub(crate) mod tests {
 
     /// The trajectory sample nearest the middle of the left side.
     pub(crate) fn straight_sample(trajectory: &Trajectory) -> usize {
-        let (p, _) = models::thermal::setup::straight_test_point();
-        (0..trajectory.len())
-            .min_by(|&a, &b| {
-                let da = (trajectory.x_mm[a] - p[0]).hypot(trajectory.y_mm[a] - p[1]);
-                let db = (trajectory.x_mm[b] - p[0]).hypot(trajectory.y_mm[b] - p[1]);
-                da.total_cmp(&db)
-            })
-            .unwrap()
+        trajectory.nearest_sample(models::thermal::setup::straight_test_point().0)
     }
 
     fn over_deposit_mm2(grid: &DepositGrid, path: &[[f64; 2]], vertex: [f64; 2], radius: f64, half: f64) -> f64 {

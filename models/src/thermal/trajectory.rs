@@ -167,6 +167,12 @@ impl Trajectory {
         self.vx_mm_s.iter().zip(&self.vy_mm_s).map(|(vx, vy)| vx.hypot(*vy)).collect()
     }
 
+    /// Index of the sample nearest to `p_mm` (0 when there are no samples).
+    pub fn nearest_sample(&self, p_mm: [f64; 2]) -> usize {
+        let distance = |k: usize| (self.x_mm[k] - p_mm[0]).hypot(self.y_mm[k] - p_mm[1]);
+        (0..self.len()).min_by(|&a, &b| distance(a).total_cmp(&distance(b))).unwrap_or(0)
+    }
+
     /// Duration of the move (s).
     pub fn duration_s(&self) -> f64 {
         self.t_s.last().copied().unwrap_or(0.0)

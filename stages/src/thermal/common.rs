@@ -66,21 +66,10 @@ pub fn vertex_passage_times(seq: &ThermalSequence, trajectory: &Trajectory) -> V
     seq.path_mm
         .iter()
         .map(|v| {
-            let k = nearest_sample(trajectory, *v);
+            let k = trajectory.nearest_sample(*v);
             trajectory.t_s[k]
         })
         .collect()
-}
-
-/// Index of the trajectory sample nearest to `p_mm`.
-pub fn nearest_sample(trajectory: &Trajectory, p_mm: [f64; 2]) -> usize {
-    (0..trajectory.len())
-        .min_by(|&a, &b| {
-            let da = (trajectory.x_mm[a] - p_mm[0]).hypot(trajectory.y_mm[a] - p_mm[1]);
-            let db = (trajectory.x_mm[b] - p_mm[0]).hypot(trajectory.y_mm[b] - p_mm[1]);
-            da.total_cmp(&db)
-        })
-        .unwrap_or(0)
 }
 
 /// Reads a Parquet table an upstream stage wrote into `dir`.
