@@ -216,6 +216,20 @@ fn score(setup: &PrintSetup, path: &[[f64; 2]], bead: &IdealBead, layers: &[Depo
     let cad = bead.contour_points(0.05);
     let errors: Vec<_> = layers.iter().map(|g| contour_errors(g, &cad)).collect();
     let summary = summarize(&errors);
+    let mut worst: Vec<(f64, usize, f64, f64)> =
+        errors.iter().enumerate().flat_map(|(l, e)| e.iter().map(move |p| (p.error_mm, l, p.x_mm, p.y_mm))).collect();
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut seen: Vec<(f64, f64)> = Vec::new();
+    for w in &worst {
+        if seen.iter().all(|s| (s.0 - w.2).hypot(s.1 - w.3) > 1.0) {
+            seen.push((w.2, w.3));
+            eprint!("  [{:.3} L{} ({:.2},{:.2})]", w.0, w.1, w.2, w.3);
+        }
+        if seen.len() >= 4 {
+            break;
+        }
+    }
+    eprintln!();
     Score { oe_pct, under_mm2, over_mm2, max_mm: summary.max_mm, rms_mm: summary.rms_mm }
 }
 

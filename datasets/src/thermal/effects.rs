@@ -11,14 +11,15 @@
 //! | `tau_mismatch` | actual τ = nominal τ·(1 + strength) | deposition |
 //! | `heat_diffusion_widening` | lateral diffusivity × (1 + strength) | heat |
 //! | `layer_heat_accumulation` | fraction of a layer's residual excess heat carried into the next layer's substrate | heat |
+//! | `melt_squeeze_out` | fraction of the extruded volume that flows to the nearest free space instead of staying along the deposition direction | deposition |
 
 use std::collections::BTreeMap;
 
 use thiserror::Error;
 
 /// Names of the known effects, in the order of the table above.
-pub const KNOWN_EFFECTS: [&str; 4] =
-    ["camera_latency", "tau_mismatch", "heat_diffusion_widening", "layer_heat_accumulation"];
+pub const KNOWN_EFFECTS: [&str; 5] =
+    ["camera_latency", "tau_mismatch", "heat_diffusion_widening", "layer_heat_accumulation", "melt_squeeze_out"];
 
 /// An effect setting that cannot be used.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -52,6 +53,8 @@ pub struct Effects {
     pub heat_diffusion_widening: f64,
     /// Fraction of residual heat carried into the next layer's substrate, in [0, 1].
     pub layer_heat_accumulation: f64,
+    /// Fraction of each sample's volume that squeezes out to the nearest free space, in [0, 1].
+    pub melt_squeeze_out: f64,
 }
 
 impl Effects {
@@ -78,6 +81,7 @@ impl Effects {
                 (&mut self.heat_diffusion_widening, (0.0..=20.0).contains(&strength), "[0, 20]")
             }
             "layer_heat_accumulation" => (&mut self.layer_heat_accumulation, (0.0..=1.0).contains(&strength), "[0, 1]"),
+            "melt_squeeze_out" => (&mut self.melt_squeeze_out, (0.0..=1.0).contains(&strength), "[0, 1]"),
             _ => return Err(EffectError::Unknown { name: name.to_string() }),
         };
         if !(strength.is_finite() && ok) {
@@ -94,6 +98,7 @@ impl Effects {
             ("tau_mismatch", self.tau_mismatch),
             ("heat_diffusion_widening", self.heat_diffusion_widening),
             ("layer_heat_accumulation", self.layer_heat_accumulation),
+            ("melt_squeeze_out", self.melt_squeeze_out),
         ];
         all.iter().filter(|(_, s)| *s != 0.0).map(|(n, s)| (n.to_string(), *s)).collect()
     }

@@ -17,6 +17,13 @@
 //! heat, so thick deposits (corner bulges, where several cells of material lie within a
 //! diffusion length) stay hotter than a thin bead, whose heat spreads into the empty
 //! surroundings. σ0 spreads each cell's heat over about a nozzle radius at deposition.
+//! Where material piles above the layer height (fill f > 1, where the printer's
+//! deposition quadrilaterals overlap at a corner) the pile carries f times the heat but
+//! also has f times the heat capacity: the temperature at a point p of a pile is the sum
+//! above divided by f(p) (1 off the piles and before the pile is laid), so a pile is
+//! laid at the nozzle temperature, not above it, and stays hot because its neighbours
+//! hold heat too. It also cools through the same top surface, so its Newton time
+//! constant is τ_c·f (τ_c = ρ·c·h/h_conv grows with the thickness h).
 //!
 //! Numbers and why: D = 0.06 mm²/s is PLA's thermal diffusivity k/(ρc) = 0.13/(1240·1800)
 //! m²/s; τ_c = 8 s is ρ·c·h/h_conv for a 0.25 mm layer under a part-cooling fan
@@ -39,6 +46,9 @@
 //! layer's mean residual excess); the previous layers' own heat field is not rendered;
 //! latent heat of PLA (amorphous, small) is ignored; the bead's temperature is uniform
 //! through its height.
+
+use std::collections::HashMap;
+use std::sync::Arc;
 
 use super::deposition::LayerDeposit;
 use super::effects::Effects;
@@ -81,12 +91,15 @@ struct HotCell {
     t_dep_s: f32,
     /// Cell area × fill (mm²).
     heat_mm2: f32,
+    /// Cooling time constant of the cell: τ_c × max(fill, 1) (s).
+    cooling_tau_s: f32,
 }
 
 /// The heat sources of one layer.
 #[derive(Debug, Clone)]
 pub struct LayerHeat {
     cells: Vec<HotCell>,
+    piles: Arc<Piles>,
     params: HeatParams,
     /// Temperature of deposited material (°C).
     pub nozzle_temp_c: f64,
@@ -94,10 +107,49 @@ pub struct LayerHeat {
     pub substrate_c: f64,
 }
 
+/// The cells whose fill exceeds the layer height, with their fill and deposit time: the
+/// heat capacity (in layer heights) of the deposit at a point.
+#[derive(Debug, Clone)]
+struct Piles {
+    origin_mm: [f64; 2],
+    cell_mm: f64,
+    nx: usize,
+    ny: usize,
+    /// Cell index → (fill, deposit time in s).
+    cells: HashMap<usize, (f32, f32)>,
+}
+
+impl Piles {
+    fn of(deposit: &LayerDeposit) -> Self {
+        let grid = &deposit.grid;
+        let cells = (0..grid.fill.len())
+            .filter(|&i| grid.fill[i] > 1.0)
+            .map(|i| (i, (grid.fill[i], deposit.deposit_time_s[i])))
+            .collect();
+        Self { origin_mm: grid.origin_mm, cell_mm: grid.cell_mm, nx: grid.nx, ny: grid.ny, cells }
+    }
+
+    /// Heat capacity at `p_mm` and `t_s` in layer heights: the fill of a pile laid by
+    /// then, 1 elsewhere.
+    fn capacity(&self, p_mm: [f64; 2], t_s: f64) -> f64 {
+        let fx = (p_mm[0] - self.origin_mm[0]) / self.cell_mm;
+        let fy = (p_mm[1] - self.origin_mm[1]) / self.cell_mm;
+        if fx < 0.0 || fy < 0.0 || fx >= self.nx as f64 || fy >= self.ny as f64 {
+            return 1.0;
+        }
+        match self.cells.get(&(fy as usize * self.nx + fx as usize)) {
+            Some(&(fill, t_dep_s)) if f64::from(t_dep_s) <= t_s => f64::from(fill),
+            _ => 1.0,
+        }
+    }
+}
+
 /// The binned temperature field of one instant over a region.
 #[derive(Debug, Clone)]
 pub struct TemperatureField {
     rungs: Vec<Rung>,
+    piles: Arc<Piles>,
+    t_s: f64,
     substrate_c: f64,
     excess_c: f64,
 }
@@ -123,18 +175,20 @@ impl LayerHeat {
                 let i = grid.index(ix, iy);
                 if grid.fill[i] > 0.0 {
                     let c = grid.cell_center_mm(ix, iy);
-                    let heat_mm2 = (f64::from(grid.fill[i]) * area) as f32;
+                    let fill = f64::from(grid.fill[i]);
                     cells.push(HotCell {
                         x_mm: c[0] as f32,
                         y_mm: c[1] as f32,
                         t_dep_s: deposit.deposit_time_s[i],
-                        heat_mm2,
+                        heat_mm2: (fill * area) as f32,
+                        cooling_tau_s: (params.cooling_tau_s * fill.max(1.0)) as f32,
                     });
                 }
             }
         }
         cells.sort_by(|a, b| a.t_dep_s.total_cmp(&b.t_dep_s));
-        Self { cells, params, nozzle_temp_c, substrate_c }
+        let piles = Arc::new(Piles::of(deposit));
+        Self { cells, piles, params, nozzle_temp_c, substrate_c }
     }
 
     /// The model parameters.
@@ -150,10 +204,11 @@ impl LayerHeat {
             let age = t_s - f64::from(c.t_dep_s);
             let s2 = self.params.sigma_mm(age).powi(2);
             let r2 = (p_mm[0] - f64::from(c.x_mm)).powi(2) + (p_mm[1] - f64::from(c.y_mm)).powi(2);
-            let decay = (-age / self.params.cooling_tau_s).exp();
+            let decay = (-age / f64::from(c.cooling_tau_s)).exp();
             sum += f64::from(c.heat_mm2) * decay * (-r2 / (2.0 * s2)).exp() / (std::f64::consts::TAU * s2);
         }
-        self.substrate_c + (self.nozzle_temp_c - self.substrate_c) * sum
+        let capacity = self.piles.capacity(p_mm, t_s);
+        self.substrate_c + (self.nozzle_temp_c - self.substrate_c) * sum / capacity
     }
 
     /// The binned field at `t_s` over the rectangle `[min_mm, max_mm]`.
@@ -182,14 +237,15 @@ impl LayerHeat {
             rung.cover(*lo, *hi, min_mm, max_mm);
         }
         for (c, &(k, frac)) in sources.iter().zip(&places) {
-            let heat = f64::from(c.heat_mm2) * (-(t_s - f64::from(c.t_dep_s)) / p.cooling_tau_s).exp();
+            let heat = f64::from(c.heat_mm2) * (-(t_s - f64::from(c.t_dep_s)) / f64::from(c.cooling_tau_s)).exp();
             let at = [f64::from(c.x_mm), f64::from(c.y_mm)];
             rungs[k].splat(at, heat * (1.0 - frac));
             rungs[k + 1].splat(at, heat * frac);
         }
         rungs.retain(|r| !r.values.is_empty());
         rungs.iter_mut().for_each(Rung::blur);
-        TemperatureField { rungs, substrate_c: self.substrate_c, excess_c: self.nozzle_temp_c - self.substrate_c }
+        let excess_c = self.nozzle_temp_c - self.substrate_c;
+        TemperatureField { rungs, piles: Arc::clone(&self.piles), t_s, substrate_c: self.substrate_c, excess_c }
     }
 
     /// Fill-weighted mean excess over the substrate of the layer's material at `t_s` (K),
@@ -235,7 +291,7 @@ impl TemperatureField {
     /// Temperature at `p_mm` (°C); the substrate temperature outside all rungs.
     pub fn temp_c(&self, p_mm: [f64; 2]) -> f64 {
         let sum: f64 = self.rungs.iter().map(|r| r.sample(p_mm)).sum();
-        self.substrate_c + self.excess_c * sum
+        self.substrate_c + self.excess_c * sum / self.piles.capacity(p_mm, self.t_s)
     }
 
     /// The substrate temperature (°C).

@@ -34,6 +34,9 @@ pub const KIND: &str = "thermal-sequence";
 pub const FORMAT_VERSION: u32 = 1;
 /// Name of the ground-truth subfolder.
 pub const TRUTH_DIR: &str = "truth";
+/// Fill fraction stored as 65535 in `truth/deposit_L*.png`: a deposit piles up to this
+/// many layer heights (corner piles reach about 3).
+pub const DEPOSIT_PNG_FULL_FILL: f64 = 4.0;
 
 /// `camera.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -298,7 +301,7 @@ impl ThermalTruth {
             let expected = format!("expected {}×{} px (truth.toml), got {w}×{h}", t.deposit_nx, t.deposit_ny);
             return Err(DatasetError::Malformed { file, location: None, expected });
         }
-        let fill = data.iter().map(|v| f32::from(*v) / 65535.0).collect();
+        let fill = data.iter().map(|v| (f64::from(*v) / 65535.0 * DEPOSIT_PNG_FULL_FILL) as f32).collect();
         Ok(DepositGrid { origin_mm: t.deposit_origin_mm, cell_mm: t.deposit_cell_mm, nx: w, ny: h, fill })
     }
 }

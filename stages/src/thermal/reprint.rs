@@ -91,7 +91,8 @@ impl StageKind for ReprintEvaluateStage {
                 print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
             Ok(printed.into_iter().map(|l| l.grid).collect())
         };
-        let (before, after) = (print(&commands.0)?, print(&commands.1)?);
+        let (before, after) = rayon::join(|| print(&commands.0), || print(&commands.1));
+        let (before, after) = (before?, after?);
         let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
         let radius_mm = ctx.params.f64("corner_radius_mm");
         let mut corners = corners_frame(&seq, &setup, &bead, radius_mm, &before[0], &after[0])?;
