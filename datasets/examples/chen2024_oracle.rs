@@ -50,6 +50,7 @@ struct Variant {
     sweep: bool,
     signed: bool,
     tail: bool,
+    gain: f64,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -89,12 +90,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let after = score(&setup, &path, &bead, &print(&setup, &trajectory, &apply_spans(&v_e, &spans))?);
     after.print("flow", spans.len());
     let variants = [
-        Variant { name: "paper", cad_desired: false, sweep: false, signed: false, tail: false },
-        Variant { name: "signed", cad_desired: false, sweep: false, signed: true, tail: false },
-        Variant { name: "cad", cad_desired: true, sweep: false, signed: true, tail: false },
-        Variant { name: "sweep", cad_desired: true, sweep: true, signed: true, tail: false },
-        Variant { name: "tail", cad_desired: true, sweep: true, signed: true, tail: true },
-        Variant { name: "cad+ovr", cad_desired: true, sweep: true, signed: false, tail: true },
+        Variant { name: "paper", cad_desired: false, sweep: false, signed: false, tail: false, gain: 1.0 },
+        Variant { name: "signed", cad_desired: false, sweep: false, signed: true, tail: false, gain: 1.0 },
+        Variant { name: "cad", cad_desired: true, sweep: false, signed: true, tail: false, gain: 1.0 },
+        Variant { name: "sweep", cad_desired: true, sweep: true, signed: true, tail: false, gain: 1.0 },
+        Variant { name: "tail", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.0 },
+        Variant { name: "cad+ovr", cad_desired: true, sweep: true, signed: false, tail: true, gain: 1.0 },
+        Variant { name: "tail1.33", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.33 },
+        Variant { name: "tail1.67", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.67 },
+        Variant { name: "cad1.33", cad_desired: true, sweep: false, signed: true, tail: true, gain: 1.33 },
     ];
     for variant in variants {
         let (command, count) = truth.command(&setup, &trajectory, &v_e, variant)?;
@@ -177,7 +181,7 @@ impl TrueWidths {
             &sweep,
             setup.layer_height_mm,
             setup.filament_area_mm2(),
-            1.0,
+            variant.gain,
         );
         if !variant.signed {
             dw.iter_mut().for_each(|d| *d = d.max(0.0));

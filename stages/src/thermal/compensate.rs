@@ -35,6 +35,14 @@
 //! - Tail (`tail_s` = 3τ): the lagged output is fitted to zero for 0.26 s after each
 //!   extended window (the paper fits the window only).
 //!
+//! Extension (`source = "lag_model"`, not the paper's method): the same filtered
+//! B-spline solve, but the desired output is the flow excess eq. 34 predicts for the
+//! nominal command, lag(v_e) − v_e, over the whole layer, with no widths. The paper
+//! identifies τ (Sec. 3.2) and then corrects only what the camera sees; on the virtual
+//! printer the footprint the camera sees misses the material that piles up in height
+//! at a sharp apex (see the report), so the model-based feed-forward is run beside the
+//! paper's width feedback and both are scored by their own re-print.
+//!
 //! Units: the deposition velocity v_e is the extruder's (E-axis) velocity in mm/s of
 //! filament, E = A_fil·v_e. This is the reading under which the paper's numbers fit
 //! together: w0 = K·α + b with K = 3.44 mm, b = 0.67 mm only gives a sub-millimetre
@@ -49,6 +57,7 @@ use models::thermal::compensation::{
     apply_spans, compensate_spans, desired_half_width_mm, paper_gain, velocity_change_from_sweep_mm_s, FbsParams,
     SampleSpan, SpanCompensation, SpanParams, SweepSample,
 };
+use models::thermal::dynamics::first_order_lag;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
 use pipeline::params::ParamDefault;
@@ -69,6 +78,12 @@ const PAPER_BAND_C: (f64, f64) = (140.0, 150.0);
 pub struct CompensateStage;
 
 const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "source",
+        ty: ParamType::Choice(&["widths", "lag_model"]),
+        default: ParamDefault::Str("widths"),
+        doc: "What the compensation cancels: `widths` = the measured width errors (the paper, eqs 31-33); `lag_model` = our extension, the flow excess the deposition dynamics of eq. 34 predict for the nominal command, lag(v_e) − v_e over the whole layer, with no widths (feed-forward; module doc).",
+    },
     ParamSpec {
         name: "layer",
         ty: ParamType::Int { min: 0, max: 19 },
@@ -142,7 +157,7 @@ impl StageKind for CompensateStage {
         "thermal.compensate"
     }
     fn version(&self) -> u32 {
-        2
+        3
     }
     fn summary(&self) -> &'static str {
         "Width-error spans, corner gains and filtered-B-spline compensation → spans, compensation, command"
@@ -208,8 +223,16 @@ impl StageKind for CompensateStage {
                 1.0
             }
         };
-        let spans = compensate_spans(&dw, &dv, trajectory.dt_s, &params, gain).map_err(StageError::domain)?;
         let nominal = conventional_command(&setup, &trajectory);
+        let spans = if ctx.params.str("source") == "lag_model" {
+            let excess = lag_model_excess_mm_s(&nominal, trajectory.dt_s, setup.tau_s);
+            let whole_layer = vec![f64::INFINITY; trajectory.len()];
+            let params = SpanParams { epsilon_mm: 0.0, ..params };
+            compensate_spans(&whole_layer, &excess, trajectory.dt_s, &params, |_| 1.0)
+        } else {
+            compensate_spans(&dw, &dv, trajectory.dt_s, &params, gain)
+        }
+        .map_err(StageError::domain)?;
         let command = apply_spans(&nominal, &spans);
         let angles = interior_angles_deg(&seq.path_mm);
         let mut rows = Rows::default();
@@ -230,6 +253,14 @@ impl StageKind for CompensateStage {
         ctx.write_table("command", &mut table)?;
         Ok(())
     }
+}
+
+/// The flow excess the deposition dynamics predict for the command `v_e_mm_s`: the
+/// lagged deposition velocity G(s)·v_e (eq. 34, from rest) minus the command itself
+/// (mm/s of filament), which the filtered B-spline then cancels (eqs 36-39).
+fn lag_model_excess_mm_s(v_e_mm_s: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
+    let lagged = first_order_lag(v_e_mm_s, dt_s, tau_s, 0.0);
+    lagged.iter().zip(v_e_mm_s).map(|(l, v)| l - v).collect()
 }
 
 /// The monitored half widths (left, right) of one layer, indexed by trajectory sample;
