@@ -60,7 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let bead = IdealBead::new(&path, setup.bead_width_mm / 2.0)?;
     let v_e = conventional_command(&setup, &trajectory);
     let conventional = print(&setup, &trajectory, &v_e)?;
-    let truth = TrueWidths::read(&setup, &trajectory, &bead, &conventional[0])?;
+    let monitored: usize = std::env::var("ORACLE_LAYER").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
+    let truth = TrueWidths::read(&setup, &trajectory, &bead, &conventional[monitored])?;
     let before = score(&setup, &path, &bead, &conventional);
     println!("variant  mean_OE%  contour_max_mm  contour_rms_mm  under_mm2(sum)  spans | O_E per corner %");
     before.print("before", 0);
@@ -98,7 +99,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Variant { name: "cad+ovr", cad_desired: true, sweep: true, signed: false, tail: true, gain: 1.0 },
         Variant { name: "tail1.33", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.33 },
         Variant { name: "tail1.67", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.67 },
-        Variant { name: "cad1.33", cad_desired: true, sweep: false, signed: true, tail: true, gain: 1.33 },
+        Variant { name: "cad+tail", cad_desired: true, sweep: false, signed: true, tail: true, gain: 1.0 },
+        Variant { name: "paper+tail", cad_desired: false, sweep: false, signed: false, tail: true, gain: 1.0 },
+        Variant { name: "eq31sgn+t", cad_desired: false, sweep: true, signed: true, tail: true, gain: 1.0 },
     ];
     for variant in variants {
         let (command, count) = truth.command(&setup, &trajectory, &v_e, variant)?;

@@ -88,7 +88,13 @@ const PARAMS: &[ParamSpec] = &[
         name: "layer",
         ty: ParamType::Int { min: 0, max: 19 },
         default: ParamDefault::Int(0),
-        doc: "Monitored layer whose widths drive the compensation (the paper's one-layer verification print).",
+        doc: "First monitored layer whose widths drive the compensation (the paper's one-layer verification print is layer 0).",
+    },
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 1, max: 20 },
+        default: ParamDefault::Int(1),
+        doc: "Number of consecutive monitored layers from `layer` whose widths are combined (per sample, the median over the layers that read it); 1 = the paper's single layer.",
     },
     ParamSpec {
         name: "epsilon_mm",
@@ -177,7 +183,9 @@ impl StageKind for CompensateStage {
         let setup = seq.process.print_setup();
         let trajectory = trajectory_of(&seq)?;
         let monitor_dir = ctx.inputs[1].dir.clone();
-        let measured = MeasuredWidths::read(&monitor_dir, ctx.params.i64("layer"), trajectory.len())?;
+        let first_layer = ctx.params.i64("layer");
+        let layers = first_layer..first_layer + ctx.params.i64("layers");
+        let measured = MeasuredWidths::read(&monitor_dir, layers, trajectory.len())?;
         let frame_geometry = DepositionFrame::read(&monitor_dir, trajectory.len())?;
         let corner_temps = corner_temperatures(&monitor_dir, seq.path_mm.len())?;
         let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
@@ -263,35 +271,54 @@ fn lag_model_excess_mm_s(v_e_mm_s: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
     lagged.iter().zip(v_e_mm_s).map(|(l, v)| l - v).collect()
 }
 
-/// The monitored half widths (left, right) of one layer, indexed by trajectory sample;
-/// NaN where the sample was not read.
+/// The monitored half widths (left, right) of a run of consecutive layers, indexed by
+/// trajectory sample: per sample and side, the median over the layers that read it
+/// (every layer prints the same path, so a sample a frame missed in one layer may be
+/// read in another); NaN where no layer read it.
 struct MeasuredWidths {
     sides_mm: Vec<(f64, f64)>,
 }
 
 impl MeasuredWidths {
-    fn read(monitor_dir: &Path, layer: i64, samples: usize) -> Result<Self, StageError> {
+    fn read(monitor_dir: &Path, layers: std::ops::Range<i64>, samples: usize) -> Result<Self, StageError> {
         let file = monitor_dir.join("widths.parquet");
         let df = read_table(monitor_dir, "widths.parquet")?;
-        let layers = i64_column(&df, &file, "layer")?;
+        let layer = i64_column(&df, &file, "layer")?;
         let sample = i64_column(&df, &file, "sample")?;
         let left = f64_column(&df, &file, "w_left_mm")?;
         let right = f64_column(&df, &file, "w_right_mm")?;
-        let mut out = Self { sides_mm: vec![(f64::NAN, f64::NAN); samples] };
+        let mut readings: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); samples];
         let mut found = 0;
-        for i in (0..layers.len()).filter(|&i| layers[i] == layer) {
+        for i in (0..layer.len()).filter(|&i| layers.contains(&layer[i])) {
             let k = sample_index(&file, i, sample[i], samples)?;
-            out.sides_mm[k] = (left[i], right[i]);
+            readings[k].0.push(left[i]);
+            readings[k].1.push(right[i]);
             found += 1;
         }
         if found == 0 {
             return Err(StageError::BadInput {
                 file,
                 location: Some("column layer".into()),
-                expected: format!("rows of layer {layer}"),
+                expected: format!("rows of layers {}..={}", layers.start, layers.end - 1),
             });
         }
-        Ok(out)
+        let sides_mm = readings.into_iter().map(|(l, r)| (finite_median(l), finite_median(r))).collect();
+        Ok(Self { sides_mm })
+    }
+}
+
+/// Median of the finite values (mean of the middle pair for an even count); NaN if none.
+fn finite_median(mut values: Vec<f64>) -> f64 {
+    values.retain(|v| v.is_finite());
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        0.5 * (values[mid - 1] + values[mid])
     }
 }
 

@@ -19,7 +19,8 @@
 //! contour at any fixed temperature drifts with age; we calibrate T_t per layer the way
 //! the paper identifies w0 (Sec. 3.2, experimentally, on straight lines): the T_t at
 //! which the median width of the straight samples (more than `straight_clearance_mm`
-//! from any corner) equals the nominal bead width. Set `calibrate_threshold = false` to
+//! from any corner, and where eq. 34 with the nominal τ says the flow has settled after
+//! the last corner) equals the nominal bead width. Set `calibrate_threshold = false` to
 //! use `threshold_c` as given instead.
 //!
 //! Also written for the figures (Fig. 4): the undistorted frame with the most matched
@@ -27,9 +28,11 @@
 
 use std::path::Path;
 
+use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
+use models::thermal::dynamics::first_order_lag;
 use models::thermal::geometry::half_widths_mm;
 use models::thermal::{PrintSetup, Trajectory};
 use pipeline::params::ParamDefault;
@@ -105,7 +108,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -217,10 +220,12 @@ impl<'a> Analysis<'a> {
             .map(|k| WidthQuery { p_mm: [trajectory.x_mm[k], trajectory.y_mm[k]], n_left: left[k] })
             .collect();
         let corners: Vec<(u32, [f64; 2])> = seq.path_mm.iter().enumerate().map(|(i, p)| (i as u32, *p)).collect();
+        let settled = settled_flow(setup, trajectory);
         let straight = (0..trajectory.len())
             .map(|k| {
                 let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
-                corners.iter().all(|(_, c)| (c[0] - p[0]).hypot(c[1] - p[1]) > settings.straight_clearance_mm)
+                settled[k]
+                    && corners.iter().all(|(_, c)| (c[0] - p[0]).hypot(c[1] - p[1]) > settings.straight_clearance_mm)
             })
             .collect();
         Ok(Self {
@@ -419,6 +424,22 @@ impl Default for Measured {
     fn default() -> Self {
         Self { left_mm: f64::NAN, right_mm: f64::NAN, temp_c: f64::NAN }
     }
+}
+
+/// Largest relative gap between the lagged and the commanded flow at which a sample's
+/// bead counts as settled for the T_t calibration.
+const SETTLED_FLOW_TOLERANCE: f64 = 0.02;
+
+/// Samples where the nominal deposition dynamics (eq. 34 with the nominal τ) have
+/// settled: the lagged conventional command is within [`SETTLED_FLOW_TOLERANCE`] of the
+/// command. After each corner the head accelerates while the flow still lags, so a short
+/// leg of the test path is thinner than the nominal bead along most of its length; only
+/// settled samples may calibrate T_t to the nominal width.
+fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
+    let command = conventional_command(setup, trajectory);
+    let lagged = first_order_lag(&command, trajectory.dt_s, setup.tau_s, 0.0);
+    let steady = setup.nominal_deposition_velocity_mm_s(setup.feed_mm_s);
+    lagged.iter().zip(&command).map(|(l, c)| (l - c).abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
 }
 
 fn skipped(entry: &FrameEntry, reason: String) -> FrameOutcome {
