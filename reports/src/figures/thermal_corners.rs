@@ -2,7 +2,9 @@
 //! compensation commands, in the style of paper 003 (Chen et al.) Figs 5 and 8
 //! (Sec. 2.4, eqs 31-39): (a) the temperature at the path around the corner against
 //! time, with the 140-150 °C band of Sec. 3.2; (b) the extracted width w_l + w_r
-//! against the desired width 2·w_d (eqs 31-32); (c) the compensation sequence: the
+//! against the desired width (eqs 31-32), both as the compensation used them (the
+//! measured width combined over the monitored layers, the desired width of the
+//! stage's `desired_width` choice), over the extended window; (c) the compensation sequence: the
 //! desired output change Δv_e (eq. 33), the input Δv_er (eq. 36) and the filtered
 //! B-spline output (eq. 38), with the bounds of eq. 39 (−2 / +4 mm/s) dashed. The
 //! compensation span is shaded and its extensions (0.1 s each side, Sec. 3.2) lighter.
@@ -114,10 +116,6 @@ pub struct Widths {
     pub t_s: Vec<f64>,
     /// Temperature at the path (°C).
     pub temp_c: Vec<f64>,
-    /// Extracted width w_l + w_r (mm; NaN where not measured).
-    pub width_mm: Vec<f64>,
-    /// Desired width 2·w_d (mm).
-    pub desired_mm: Vec<f64>,
 }
 
 /// The compensation sequence of one span.
@@ -125,6 +123,10 @@ pub struct Widths {
 pub struct Sequence {
     /// Time (s).
     pub t_s: Vec<f64>,
+    /// Measured width w_l + w_r the compensation used (mm; NaN where not measured).
+    pub measured_mm: Vec<f64>,
+    /// Desired width the compensation aimed at (mm).
+    pub wanted_mm: Vec<f64>,
     /// Desired output change Δv_e (mm/s).
     pub desired_mm_s: Vec<f64>,
     /// Input Δv_er (mm/s).
@@ -153,7 +155,7 @@ impl StageKind for ThermalCornersFigure {
         "figure.thermal_corners"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "Per compensated corner: temperature at the path, extracted vs desired width, and the compensation sequence with its bounds → thermal_corners.png/.svg"
@@ -197,15 +199,8 @@ pub fn figure_size_px(rows: usize) -> (u32, u32) {
 /// Reads `widths.parquet`.
 pub fn load_widths(path: &Path) -> Result<Widths, StageError> {
     let df = read_parquet(path)?;
-    let (wl, wr, wd) =
-        (f64s(&df, "w_left_mm", path)?, f64s(&df, "w_right_mm", path)?, f64s(&df, "w_desired_mm", path)?);
-    let widths = Widths {
-        layer: ints(&df, "layer", path)?,
-        t_s: f64s(&df, "t_s", path)?,
-        temp_c: f64s(&df, "temp_c", path)?,
-        width_mm: wl.iter().zip(&wr).map(|(l, r)| l + r).collect(),
-        desired_mm: wd.iter().map(|d| 2.0 * d).collect(),
-    };
+    let widths =
+        Widths { layer: ints(&df, "layer", path)?, t_s: f64s(&df, "t_s", path)?, temp_c: f64s(&df, "temp_c", path)? };
     if widths.t_s.is_empty() {
         return Err(no_rows(path, "t_s", "one row per monitored sample"));
     }
@@ -249,12 +244,15 @@ fn load_sequences(path: &Path, spans: &[Span]) -> Result<Vec<Sequence>, StageErr
     let df = read_parquet(path)?;
     let id = ints(&df, "span", path)?;
     let (t, want) = (f64s(&df, "t_s", path)?, f64s(&df, "dv_desired_mm_s", path)?);
+    let (measured, wanted) = (f64s(&df, "w_measured_mm", path)?, f64s(&df, "w_desired_mm", path)?);
     let (input, output) = (f64s(&df, "dv_input_mm_s", path)?, f64s(&df, "dv_output_mm_s", path)?);
     let mut sequences = vec![Sequence::default(); spans.len()];
     for i in 0..df.height() {
         if let Some(k) = spans.iter().position(|s| s.span == id[i]) {
             let q = &mut sequences[k];
             q.t_s.push(t[i]);
+            q.measured_mm.push(measured[i]);
+            q.wanted_mm.push(wanted[i]);
             q.desired_mm_s.push(want[i]);
             q.input_mm_s.push(input[i]);
             q.output_mm_s.push(output[i]);
@@ -307,8 +305,9 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
         let series =
             |v: &[f64]| -> Vec<(f64, f64)> { picked.iter().map(|&i| (plot.widths.t_s[i] - t0, v[i])).collect() };
         let legend = k == 0;
-        let (temp, width, desired) =
-            (series(&plot.widths.temp_c), series(&plot.widths.width_mm), series(&plot.widths.desired_mm));
+        let temp = series(&plot.widths.temp_c);
+        let along = |v: &[f64]| -> Vec<(f64, f64)> { sequence.t_s.iter().zip(v).map(|(t, w)| (t - t0, *w)).collect() };
+        let (width, desired) = (along(&sequence.measured_mm), along(&sequence.wanted_mm));
         let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
         draw_temperature(&panels[0], span, xs.clone(), &temp, legend).map_err(e)?;
         draw_width(&panels[1], span, xs.clone(), &width, &desired, legend).map_err(e)?;
@@ -407,14 +406,14 @@ fn draw_width<DB: DrawingBackend>(
     }
     chart
         .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-        .label("extracted w_l + w_r")
+        .label("extracted w_l + w_r (used)")
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], blue));
     for piece in finite_pieces(desired.iter().copied()) {
         chart.draw_series(DashedLineSeries::new(piece, 7, 4, black))?;
     }
     chart
         .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())?
-        .label("desired 2·w_d")
+        .label("desired width")
         .legend(move |(x, y)| PathElement::new([(x, y), (x + 24, y)], black));
     finish(&mut chart, legend)
 }
@@ -483,13 +482,7 @@ mod tests {
 
     #[test]
     fn window_takes_the_lowest_layer_unless_told() {
-        let w = Widths {
-            layer: vec![1, 0, 0, 1],
-            t_s: vec![0.5, 0.6, 0.4, 0.55],
-            temp_c: vec![0.0; 4],
-            width_mm: vec![0.0; 4],
-            desired_mm: vec![0.0; 4],
-        };
+        let w = Widths { layer: vec![1, 0, 0, 1], t_s: vec![0.5, 0.6, 0.4, 0.55], temp_c: vec![0.0; 4] };
         assert_eq!(w.in_window(&(0.0..1.0), None), vec![2, 1], "layer 0, sorted by time");
         assert_eq!(w.in_window(&(0.0..1.0), Some(1)), vec![0, 3]);
         assert!(w.in_window(&(2.0..3.0), None).is_empty());
@@ -501,9 +494,9 @@ mod tests {
         write_compensate(dir.path());
         let err = load_spans(dir.path(), &[7]).expect_err("no span 7").to_string();
         assert!(err.contains("spans.parquet") && err.contains("span 7"), "{err}");
-        write_table(dir.path(), "widths", widths(&corner_path()).drop("w_desired_mm").expect("drops"));
-        let err = load_widths(&dir.path().join("widths.parquet")).expect_err("no w_desired_mm").to_string();
-        assert!(err.contains("widths.parquet") && err.contains("w_desired_mm"), "{err}");
+        write_table(dir.path(), "widths", widths(&corner_path()).drop("temp_c").expect("drops"));
+        let err = load_widths(&dir.path().join("widths.parquet")).expect_err("no temp_c").to_string();
+        assert!(err.contains("widths.parquet") && err.contains("temp_c"), "{err}");
     }
 
     #[test]

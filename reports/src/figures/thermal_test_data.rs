@@ -273,6 +273,7 @@ pub fn write_compensate(dir: &Path) {
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let (mut temp, mut gain, mut max_dw) = (vec![], vec![], vec![]);
     let (mut c_span, mut c_vertex, mut c_t, mut c_dw) = (vec![], vec![], vec![], vec![]);
+    let (mut c_measured, mut c_wanted) = (Vec::new(), Vec::new());
     let (mut desired, mut output, mut input) = (vec![], vec![], vec![]);
     for (k, &apex) in APEXES.iter().enumerate() {
         let tc = vertex_time_s(&poly, apex);
@@ -300,6 +301,8 @@ pub fn write_compensate(dir: &Path) {
             c_vertex.push(apex as i32);
             c_t.push(t);
             c_dw.push(dw_mm);
+            c_measured.push(0.45 + dw_mm);
+            c_wanted.push(0.45);
             desired.push(want);
             input.push(command);
             output.push(lagged);
@@ -312,8 +315,8 @@ pub fn write_compensate(dir: &Path) {
     )
     .expect("frame");
     let comp = df!(
-        "span" => c_span, "vertex" => c_vertex, "t_s" => c_t, "dw_mm" => c_dw,
-        "dv_desired_mm_s" => desired, "dv_output_mm_s" => output, "dv_input_mm_s" => input
+        "span" => c_span, "vertex" => c_vertex, "t_s" => c_t, "dw_mm" => c_dw, "w_measured_mm" => c_measured,
+        "w_desired_mm" => c_wanted, "dv_desired_mm_s" => desired, "dv_output_mm_s" => output, "dv_input_mm_s" => input
     )
     .expect("frame");
     write_table(dir, "spans", spans);

@@ -163,7 +163,7 @@ impl StageKind for CompensateStage {
         "thermal.compensate"
     }
     fn version(&self) -> u32 {
-        3
+        4
     }
     fn summary(&self) -> &'static str {
         "Width-error spans, corner gains and filtered-B-spline compensation → spans, compensation, command"
@@ -197,7 +197,9 @@ impl StageKind for CompensateStage {
         if ctx.params.str("volume") == "linear" {
             sweep.iter_mut().for_each(|s| s.kappa_eff_per_mm = 0.0);
         }
-        let mut dw: Vec<f64> = measured.sides_mm.iter().zip(&desired).map(|(m, d)| m.0 + m.1 - d.0 - d.1).collect();
+        let widths_mm: Vec<(f64, f64)> =
+            measured.sides_mm.iter().zip(&desired).map(|(m, d)| (m.0 + m.1, d.0 + d.1)).collect();
+        let mut dw: Vec<f64> = widths_mm.iter().map(|(m, d)| m - d).collect();
         let mut dv = velocity_change_from_sweep_mm_s(
             &measured.sides_mm,
             &desired,
@@ -249,7 +251,7 @@ impl StageKind for CompensateStage {
             let max_dw = dw[s.span.first..=s.span.last].iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
             let temp = corner_temps[vertex];
             rows.span(index, vertex, angles[vertex], &trajectory.t_s, s.span, s.window, temp, s.gain, max_dw);
-            rows.samples(index, vertex, &trajectory.t_s, s, &dw);
+            rows.samples(index, vertex, &trajectory.t_s, s, &widths_mm);
         }
         rows.write(ctx)?;
         let mut table = frame(vec![
@@ -424,6 +426,8 @@ struct Rows {
     s_vertex: Vec<i64>,
     s_t: Vec<f64>,
     s_dw: Vec<f64>,
+    s_measured: Vec<f64>,
+    s_wanted: Vec<f64>,
     s_desired: Vec<f64>,
     s_output: Vec<f64>,
     s_input: Vec<f64>,
@@ -455,12 +459,17 @@ impl Rows {
         self.max_dw_mm.push(max_dw);
     }
 
-    fn samples(&mut self, index: usize, vertex: usize, t_s: &[f64], s: &SpanCompensation, dw: &[f64]) {
+    /// The window's samples; `widths_mm` holds each trajectory sample's (measured,
+    /// desired) full width w_l + w_r.
+    fn samples(&mut self, index: usize, vertex: usize, t_s: &[f64], s: &SpanCompensation, widths_mm: &[(f64, f64)]) {
         for j in 0..s.window.len() {
+            let k = s.window.first + j;
             self.s_span.push(index as i64);
             self.s_vertex.push(vertex as i64);
-            self.s_t.push(t_s[s.window.first + j]);
-            self.s_dw.push(dw[s.window.first + j]);
+            self.s_t.push(t_s[k]);
+            self.s_dw.push(widths_mm[k].0 - widths_mm[k].1);
+            self.s_measured.push(widths_mm[k].0);
+            self.s_wanted.push(widths_mm[k].1);
             self.s_desired.push(s.desired_mm_s[j]);
             self.s_output.push(s.solution.output_mm_s[j]);
             self.s_input.push(s.solution.input_mm_s[j]);
@@ -486,6 +495,8 @@ impl Rows {
             i64_col("vertex", self.s_vertex),
             f64_col("t_s", self.s_t),
             f64_col("dw_mm", self.s_dw),
+            f64_col("w_measured_mm", self.s_measured),
+            f64_col("w_desired_mm", self.s_wanted),
             f64_col("dv_desired_mm_s", self.s_desired),
             f64_col("dv_output_mm_s", self.s_output),
             f64_col("dv_input_mm_s", self.s_input),
