@@ -2,27 +2,32 @@
 //! the compensation computed from the TRUE deposit instead of the thermal camera, so
 //! that what is left is the method's limit on this printer, apart from measurement.
 //!
-//! The first layer is printed conventionally; its true half widths are read along the
-//! allocated deposition directions (eqs 13-26, nominal lagged flow) where the fill drops
-//! below one half, as `thermal.accuracy_evaluate` does; each variant turns them into a
-//! compensated command; 20 layers are re-printed with and without it (same flow draws)
-//! and scored like `thermal.reprint_evaluate`: O_E per corner (eq. 40, A_c = W²/sin θ,
-//! window radius 1 mm) and the contour error (eq. 41) over all layers.
+//! The part is printed conventionally (20 layers); the true half widths of the monitored
+//! layers are read along the allocated deposition directions (eqs 13-26, nominal lagged
+//! flow) where the fill drops below one half, as `thermal.accuracy_evaluate` does, and
+//! combined per sample by the median over the monitored layers, as `thermal.compensate`
+//! does; each variant turns them into a compensated command; the 20 layers are printed
+//! again with it (same flow draws) and scored like `thermal.reprint_evaluate`: O_E per
+//! corner on the first layer (eq. 40, A_c = W²/sin θ, window radius 1 mm) and the contour
+//! error (eq. 41) over all layers, with where its maximum lies.
 //!
-//! Variants (each changes one thing from the line above):
-//! - `flow`: no widths: the desired output is the exact flow excess of the lagged
-//!   deposition over the nominal, lag(v_e) − v_e, on the whole layer. The limit of
-//!   eqs 34-39 themselves (bounds, spline, lag model) on this printer.
-//! - `paper`: Δw = w_l + w_r − 2w0/cos ψ (eqs 31-32), ΔE = h|v|cos ψ·Δw (eq. 33 with
-//!   K_e = 1), only Δw > 0, FBS over the extended window only (the stage before this study).
-//! - `signed`: also Δw < 0 (material added where the bead is thin).
-//! - `cad`: desired half widths = the ideal (CAD, mitred) bead's extent along each
+//! Two monitorings: layer 0 alone (the paper's one-layer verification), and layers 1-4
+//! (what `specs/chen2024.toml` reads: from the second layer on, the nozzle squeezes the
+//! corner pile of the layer below into the bead, where a width can see it).
+//!
+//! Variants:
+//! - `lag model`: no widths: the desired output is the flow excess eq. 34 predicts,
+//!   lag(v_e) − v_e, on the whole layer (the extension, stage `compensate_lag`).
+//! - `eqs 31-33`: Δw = w_l + w_r − 2w0/cos ψ (eqs 31-32), ΔE = h|v|cos ψ·Δw (eq. 33 with
+//!   K_e = 1), only Δw > 0, the fit over the extended window only: the paper as printed.
+//! - `+signed`: also Δw < 0 (material added where the bead is thin).
+//! - `+cad`: desired half widths = the ideal (CAD, mitred) bead's extent along each
 //!   deposition direction instead of w0/cos ψ.
-//! - `sweep`: ΔE from the swept area of the deposition segments (with the ½κ_eff w² sectors).
-//! - `tail`: the FBS also fits the lagged output to zero for 3τ after each window, and
-//!   later spans account for the tails of earlier ones.
+//! - `+sweep`: ΔE from the swept area of the deposition segments (with the ½κ_eff w² sectors).
+//! - `+tail`: the fit also drives the lagged output to zero for 3τ after each window, and
+//!   later spans account for the tails of earlier ones (the defaults of `thermal.compensate`).
 //!
-//! Run: `cargo run --release -p datasets --example chen2024_oracle`.
+//! Run: `cargo run --release -p datasets --example chen2024_oracle` (about a minute).
 
 use datasets::thermal::deposition::{conventional_command, edge_distance_mm, print_part};
 use datasets::thermal::effects::Effects;
@@ -50,7 +55,6 @@ struct Variant {
     sweep: bool,
     signed: bool,
     tail: bool,
-    gain: f64,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -60,55 +64,53 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let bead = IdealBead::new(&path, setup.bead_width_mm / 2.0)?;
     let v_e = conventional_command(&setup, &trajectory);
     let conventional = print(&setup, &trajectory, &v_e)?;
-    let monitored: usize = std::env::var("ORACLE_LAYER").ok().and_then(|v| v.parse().ok()).unwrap_or(0);
-    let truth = TrueWidths::read(&setup, &trajectory, &bead, &conventional[monitored])?;
     let before = score(&setup, &path, &bead, &conventional);
-    println!("variant  mean_OE%  contour_max_mm  contour_rms_mm  under_mm2(sum)  spans | O_E per corner %");
+    let excess = lag_excess_mm_s(&setup, &trajectory, &v_e);
+    println!("variant       mean_OE%  contour_max_mm (where)        contour_rms_mm  spans | O_E per corner %");
     before.print("before", 0);
-    let lagged = first_order_lag(&v_e, trajectory.dt_s, setup.tau_s, 0.0);
-    let excess: Vec<f64> = lagged.iter().zip(&v_e).map(|(l, v)| l - v).collect();
-    let a_fil_dt = setup.filament_area_mm2() * trajectory.dt_s;
-    let flow_over_mm3: f64 = excess.iter().map(|e| e.max(0.0)).sum::<f64>() * a_fil_dt;
-    let flow_under_mm3: f64 = excess.iter().map(|e| (-e).max(0.0)).sum::<f64>() * a_fil_dt;
-    let dv = velocity_change_from_sweep_mm_s(
-        &truth.measured,
-        &truth.cad_desired,
-        &truth.sweep,
-        setup.layer_height_mm,
-        setup.filament_area_mm2(),
-        1.0,
-    );
-    let seen_over_mm3: f64 = dv.iter().map(|e| e.max(0.0)).sum::<f64>() * a_fil_dt;
-    let seen_under_mm3: f64 = dv.iter().map(|e| (-e).max(0.0)).sum::<f64>() * a_fil_dt;
-    println!(
-        "flow excess of the lag: +{flow_over_mm3:.3} / -{flow_under_mm3:.3} mm³; seen in true widths (cad, sweep): \
-         +{seen_over_mm3:.3} / -{seen_under_mm3:.3} mm³; A_o·h summed over corners {:.3} mm³",
-        before.over_mm2 * setup.layer_height_mm
-    );
-    let whole = vec![1.0; trajectory.len()];
     let fbs = FbsParams { tail_s: 3.0 * setup.tau_s, ..FbsParams::paper_defaults() };
+    let whole = vec![1.0; trajectory.len()];
     let spans = compensate_spans(&whole, &excess, trajectory.dt_s, &span_params(fbs, 0.0), |_| 1.0)?;
     let after = score(&setup, &path, &bead, &print(&setup, &trajectory, &apply_spans(&v_e, &spans))?);
-    after.print("flow", spans.len());
-    let variants = [
-        Variant { name: "paper", cad_desired: false, sweep: false, signed: false, tail: false, gain: 1.0 },
-        Variant { name: "signed", cad_desired: false, sweep: false, signed: true, tail: false, gain: 1.0 },
-        Variant { name: "cad", cad_desired: true, sweep: false, signed: true, tail: false, gain: 1.0 },
-        Variant { name: "sweep", cad_desired: true, sweep: true, signed: true, tail: false, gain: 1.0 },
-        Variant { name: "tail", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.0 },
-        Variant { name: "cad+ovr", cad_desired: true, sweep: true, signed: false, tail: true, gain: 1.0 },
-        Variant { name: "tail1.33", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.33 },
-        Variant { name: "tail1.67", cad_desired: true, sweep: true, signed: true, tail: true, gain: 1.67 },
-        Variant { name: "cad+tail", cad_desired: true, sweep: false, signed: true, tail: true, gain: 1.0 },
-        Variant { name: "paper+tail", cad_desired: false, sweep: false, signed: false, tail: true, gain: 1.0 },
-        Variant { name: "eq31sgn+t", cad_desired: false, sweep: true, signed: true, tail: true, gain: 1.0 },
-    ];
-    for variant in variants {
-        let (command, count) = truth.command(&setup, &trajectory, &v_e, variant)?;
-        let after = score(&setup, &path, &bead, &print(&setup, &trajectory, &command)?);
-        after.print(variant.name, count);
+    after.print("lag model", spans.len());
+    for monitored in [0..1, 1..5] {
+        let truth = TrueWidths::read(&setup, &trajectory, &bead, &conventional[monitored.clone()])?;
+        let (over, under) = truth.seen_excess_mm3(&setup, trajectory.dt_s);
+        let (lag_over, lag_under) = split_volume_mm3(&excess, setup.filament_area_mm2() * trajectory.dt_s);
+        println!(
+            "-- true widths of layers {}..={}: the lag delivers +{lag_over:.3} / -{lag_under:.3} mm³ per layer, \
+             the widths see +{over:.3} / -{under:.3} mm³",
+            monitored.start,
+            monitored.end - 1
+        );
+        for variant in VARIANTS {
+            let (command, count) = truth.command(&setup, &trajectory, &v_e, variant)?;
+            let after = score(&setup, &path, &bead, &print(&setup, &trajectory, &command)?);
+            after.print(variant.name, count);
+        }
     }
     Ok(())
+}
+
+const VARIANTS: [Variant; 5] = [
+    Variant { name: "eqs 31-33", cad_desired: false, sweep: false, signed: false, tail: false },
+    Variant { name: "+signed", cad_desired: false, sweep: false, signed: true, tail: false },
+    Variant { name: "+cad", cad_desired: true, sweep: false, signed: true, tail: false },
+    Variant { name: "+sweep", cad_desired: true, sweep: true, signed: true, tail: false },
+    Variant { name: "+tail", cad_desired: true, sweep: true, signed: true, tail: true },
+];
+
+/// The flow excess eq. 34 predicts for the command (mm/s of filament).
+fn lag_excess_mm_s(setup: &PrintSetup, trajectory: &Trajectory, v_e: &[f64]) -> Vec<f64> {
+    let lagged = first_order_lag(v_e, trajectory.dt_s, setup.tau_s, 0.0);
+    lagged.iter().zip(v_e).map(|(l, v)| l - v).collect()
+}
+
+/// Positive and negative parts of a velocity series as volumes (mm³).
+fn split_volume_mm3(velocity_mm_s: &[f64], mm3_per_step: f64) -> (f64, f64) {
+    let over: f64 = velocity_mm_s.iter().map(|e| e.max(0.0)).sum();
+    let under: f64 = velocity_mm_s.iter().map(|e| (-e).max(0.0)).sum();
+    (over * mm3_per_step, under * mm3_per_step)
 }
 
 fn span_params(fbs: FbsParams, epsilon_mm: f64) -> SpanParams {
@@ -138,7 +140,7 @@ impl TrueWidths {
         setup: &PrintSetup,
         trajectory: &Trajectory,
         bead: &IdealBead,
-        grid: &DepositGrid,
+        layers: &[DepositGrid],
     ) -> Result<Self, Box<dyn std::error::Error>> {
         let command: Vec<f64> =
             conventional_command(setup, trajectory).iter().map(|v| v * setup.filament_area_mm2()).collect();
@@ -151,7 +153,8 @@ impl TrueWidths {
             let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
             let (sin, cos) = dirs.deposition_heading_rad[k].sin_cos();
             let (left, right) = ([-sin, cos], [sin, -cos]);
-            out.measured.push((edge_distance_mm(grid, p, left), edge_distance_mm(grid, p, right)));
+            let side = |dir: [f64; 2]| median(layers.iter().map(|g| edge_distance_mm(g, p, dir)).collect());
+            out.measured.push((side(left), side(right)));
             let wd = w0 / dirs.psi_rad[k].cos();
             out.paper_desired.push((wd, wd));
             out.cad_desired.push((bead.edge_distance_mm(p, left), bead.edge_distance_mm(p, right)));
@@ -184,7 +187,7 @@ impl TrueWidths {
             &sweep,
             setup.layer_height_mm,
             setup.filament_area_mm2(),
-            variant.gain,
+            1.0,
         );
         if !variant.signed {
             dw.iter_mut().for_each(|d| *d = d.max(0.0));
@@ -197,12 +200,39 @@ impl TrueWidths {
     }
 }
 
+impl TrueWidths {
+    /// The flow excess the widths show over one layer, positive and negative (mm³),
+    /// with the stage's defaults (CAD desired width, swept area).
+    fn seen_excess_mm3(&self, setup: &PrintSetup, dt_s: f64) -> (f64, f64) {
+        let area = setup.filament_area_mm2();
+        let dv = velocity_change_from_sweep_mm_s(
+            &self.measured,
+            &self.cad_desired,
+            &self.sweep,
+            setup.layer_height_mm,
+            area,
+            1.0,
+        );
+        split_volume_mm3(&dv, area * dt_s)
+    }
+}
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len() % 2 == 1 {
+        values[mid]
+    } else {
+        0.5 * (values[mid - 1] + values[mid])
+    }
+}
+
 /// The evaluation of `thermal.reprint_evaluate`.
 struct Score {
     oe_pct: Vec<f64>,
-    under_mm2: f64,
-    over_mm2: f64,
     max_mm: f64,
+    /// Layer and CAD point of the largest contour error.
+    max_at: (usize, [f64; 2]),
     rms_mm: f64,
 }
 
@@ -210,34 +240,23 @@ fn score(setup: &PrintSetup, path: &[[f64; 2]], bead: &IdealBead, layers: &[Depo
     let w = setup.bead_width_mm;
     let n = path.len();
     let mut oe_pct = Vec::with_capacity(n);
-    let (mut under_mm2, mut over_mm2) = (0.0, 0.0);
     for i in 0..n {
         let (a, b) = (sub(path[(i + n - 1) % n], path[i]), sub(path[(i + 1) % n], path[i]));
         let cos = (a[0] * b[0] + a[1] * b[1]) / (a[0].hypot(a[1]) * b[0].hypot(b[1]));
         let polytope = w * w / cos.clamp(-1.0, 1.0).acos().sin();
         let c = corner_deposition(&layers[0], bead, path[i], CORNER_RADIUS_MM);
         oe_pct.push(100.0 * c.over_area_mm2 / polytope);
-        under_mm2 += c.under_area_mm2;
-        over_mm2 += c.over_area_mm2;
     }
     let cad = bead.contour_points(0.05);
     let errors: Vec<_> = layers.iter().map(|g| contour_errors(g, &cad)).collect();
     let summary = summarize(&errors);
-    let mut worst: Vec<(f64, usize, f64, f64)> =
-        errors.iter().enumerate().flat_map(|(l, e)| e.iter().map(move |p| (p.error_mm, l, p.x_mm, p.y_mm))).collect();
-    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut seen: Vec<(f64, f64)> = Vec::new();
-    for w in &worst {
-        if seen.iter().all(|s| (s.0 - w.2).hypot(s.1 - w.3) > 1.0) {
-            seen.push((w.2, w.3));
-            eprint!("  [{:.3} L{} ({:.2},{:.2})]", w.0, w.1, w.2, w.3);
-        }
-        if seen.len() >= 4 {
-            break;
-        }
-    }
-    eprintln!();
-    Score { oe_pct, under_mm2, over_mm2, max_mm: summary.max_mm, rms_mm: summary.rms_mm }
+    let max_at = errors
+        .iter()
+        .enumerate()
+        .flat_map(|(l, e)| e.iter().map(move |p| (p.error_mm, l, [p.x_mm, p.y_mm])))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or((0, [f64::NAN; 2]), |(_, l, p)| (l, p));
+    Score { oe_pct, max_mm: summary.max_mm, max_at, rms_mm: summary.rms_mm }
 }
 
 fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
@@ -248,12 +267,8 @@ impl Score {
     fn print(&self, name: &str, spans: usize) {
         let mean = self.oe_pct.iter().sum::<f64>() / self.oe_pct.len() as f64;
         let per: Vec<String> = self.oe_pct.iter().map(|v| format!("{v:.0}")).collect();
-        println!(
-            "{name:8} {mean:8.1} {:14.3} {:15.4} {:15.3} {spans:6} | {}",
-            self.max_mm,
-            self.rms_mm,
-            self.under_mm2,
-            per.join(" ")
-        );
+        let (layer, [x, y]) = self.max_at;
+        let at = format!("(L{layer} {x:.2}, {y:.2})");
+        println!("{name:12} {mean:8.1} {:8.3} {at:22} {:12.4} {spans:6} | {}", self.max_mm, self.rms_mm, per.join(" "));
     }
 }

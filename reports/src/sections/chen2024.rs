@@ -622,13 +622,16 @@ narrower than the overlapping beads, so a perfect corner would read as over-depo
 rotated frame), so a bulge at the fanned apex is counted once, not once per direction crossing it; the fit runs 3τ past each window so the lagged tail does \
 not starve the bead after the corner; and K_e = 1, since the paper's K_e was identified for corners read at 140-150 °C and ours are read in a wider band.</p>\n\
 <p><b>What limits width feedback here.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
-so the paper's geometric model is the printer's own. With the printer's true widths in place of the thermal ones (datasets/examples/chen2024_oracle.rs, \
-seed 3, 20 layers), our defaults lower the mean O_E by 44 % and the RMS contour error by 36 %; eqs 31-33 as printed (desired width w0/cos ψ, \
+so the paper's geometric model is the printer's own. With the printer's true widths in place of the thermal ones \
+(datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 44 % and the RMS contour error by 36 % when the \
+widths come from the first layer, and by 52 % and 43 % from layers 1-4, which is what the spec reads; eqs 31-33 as printed (desired width w0/cos ψ, \
 over-deposition only) lower O_E by 84 % but raise the RMS by 8 %, because they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much \
-and −0.92 mm³ too little, but the footprint of the true deposit shows only +0.34 mm³ of that excess: at a sharp apex the deposition quadrilaterals \
-overlap even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it. A width read from a thermal \
-footprint is blind to that volume, so width feedback under-corrects exactly the corners where the excess is largest. That is the discrepancy this \
-reproduction names: eqs 31-33 map a width error to a flow error, which holds only where the bead stays one layer high. {extension}\
+and −0.92 mm³ too little, but the footprint of the first layer shows only +0.34 mm³ of that excess: at a sharp apex the deposition quadrilaterals \
+overlap even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it. From the second layer on \
+the nozzle squeezes that pile sideways into the bead, and layers 1-4 show +0.66 mm³. A width read from a thermal \
+footprint is blind to the volume still piled in height, so width feedback under-corrects exactly the corners where the excess is largest, most of all \
+on the paper's one-layer verification print. That is the discrepancy this reproduction names: eqs 31-33 map a width error to a flow error, which holds \
+only where the bead stays one layer high. {extension}\
 With the <code>melt_squeeze_out</code> effect of the virtual printer (melt flows into the nearest free space instead of along the deposition direction), \
 true widths gave only a third less O_E in our previous release: the more the melt moves after it leaves the nozzle, the less a width says about the flow.</p>\n\
 <p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
