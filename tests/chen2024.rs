@@ -45,9 +45,16 @@ fn chen2024_writes_its_tables_figures_and_section() {
     for metric in ["capture_time_err_median_ms", "capture_time_err_baseline_median_ms", "width_err_median_mm"] {
         assert!(metrics.iter().any(|m| m == metric), "accuracy.parquet lacks {metric}");
     }
-    for table in ["widths", "compensation", "spans", "paper_comparison"] {
+    for table in ["widths", "compensation", "spans", "paper_comparison", "lag_model_corners", "lag_model_contour"] {
         assert!(out.join(format!("{table}.parquet")).is_file(), "{table}.parquet");
     }
+    // Five layers are filmed; the compensation reads layers 1-4.
+    let layers = frames.column("layer").unwrap().i64().unwrap().into_no_null_iter().max();
+    assert_eq!(layers, Some(4));
+    // The extension is scored beside the paper's method, with its own rows.
+    let comparison = read(&out.join("paper_comparison.parquet"));
+    let items = strs(&comparison, "item");
+    assert!(items.iter().any(|i| i.starts_with("extension (lag model)")), "{items:?}");
     let runs = tmp.path().join("out/runs/chen2024");
     for (stage, stem) in [
         ("fig3", "thermal_directions"),
