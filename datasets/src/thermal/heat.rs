@@ -474,4 +474,27 @@ mod tests {
         let field = plane.field(0.0, [centre[0] - 1.0, centre[1] - 1.0], [centre[0] + 1.0, centre[1] + 1.0]);
         assert!((field.temp_c(centre) - 230.0).abs() < 0.5, "{}", field.temp_c(centre));
     }
+
+    #[test]
+    fn a_pile_is_laid_at_the_nozzle_temperature_and_cools_slower() {
+        // A uniform pile 2.5 layers high holds 2.5 times the heat in 2.5 times the
+        // capacity: it starts at T_nozzle, and with τ_c·2.5 it is warmer than a single
+        // layer once Newton cooling has acted (lateral diffusion is the same for both).
+        let (_, deposit, heat) = heat_of_conventional_layer();
+        let plane_of = |fill: f32| {
+            let mut d = deposit.clone();
+            d.grid.fill.iter_mut().for_each(|f| *f = fill);
+            d.deposit_time_s.iter_mut().for_each(|t| *t = 0.0);
+            LayerHeat::new(&d, heat.nozzle_temp_c, heat.substrate_c, *heat.params())
+        };
+        let (single, pile) = (plane_of(1.0), plane_of(2.5));
+        let centre = deposit.grid.cell_center_mm(deposit.grid.nx / 2, deposit.grid.ny / 2);
+        assert!((pile.exact_temp_c(centre, 0.0) - 230.0).abs() < 1e-3);
+        let excess = |plane: &LayerHeat, t: f64| plane.exact_temp_c(centre, t) - heat.substrate_c;
+        // Uniform planes: excess(t) = ΔT·e^(−t/(τ_c·f)), so the ratio is e^(t/τ_c·(1 − 1/f)).
+        let t = 4.0;
+        let ratio = excess(&pile, t) / excess(&single, t);
+        let expected = (t / heat.params().cooling_tau_s * (1.0 - 1.0 / 2.5)).exp();
+        assert!((ratio - expected).abs() < 1e-6 * expected, "{ratio} vs {expected}");
+    }
 }
