@@ -532,3 +532,27 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
     let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
     values[rank - 1]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_gaps_are_zero_for_the_same_map_and_the_shift_for_a_translated_one() {
+        let h = Homography { m: [[0.15, 0.01, -12.0], [0.002, 0.21, -13.0], [0.0001, 0.0012, 1.0]] };
+        assert!(image_gaps_mm(&h, &h, 160, 120).iter().all(|&d| d == 0.0));
+        // T(0.3, −0.4)·H moves every plane point by 0.5 mm.
+        let shifted = Homography { m: [[1.0, 0.0, 0.3], [0.0, 1.0, -0.4], [0.0, 0.0, 1.0]] }.then_after(&h);
+        let gaps = image_gaps_mm(&shifted, &h, 160, 120);
+        assert_eq!(gaps.len(), 20 * 15, "an 8-pixel grid over 160 × 120");
+        assert!(gaps.iter().all(|d| (d - 0.5).abs() < 1e-9));
+    }
+
+    #[test]
+    fn quantile_is_the_nearest_rank() {
+        let mut v = [4.0, 1.0, 3.0, 2.0];
+        assert_eq!(quantile(&mut v, 0.5), 2.0);
+        assert_eq!(quantile(&mut v, 0.9), 4.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+    }
+}
