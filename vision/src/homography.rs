@@ -77,7 +77,7 @@ impl Homography {
         Homography { m: out }.normalized()
     }
 
-    /// The same projective map scaled so that m[2][2] = 1 (unchanged if m[2][2] ≈ 0).
+    /// The same projective map scaled so that `m[2][2]` = 1 (unchanged if `m[2][2]` ≈ 0).
     pub fn normalized(&self) -> Homography {
         let s = self.m[2][2];
         if s.abs() < 1e-15 || !s.is_finite() {

@@ -7,6 +7,11 @@
 //! extract the left/right deposited half-widths along the deposition directions
 //! (Sec. 2.4, [`widths`]); [`pipeline`] runs one frame end to end.
 //!
+//! Our extension of Sec. 2.3: the camera is rigid on a head that only translates, so one
+//! mount homography fitted to the whole sequence ([`mount`]) and one translation per
+//! frame replace the per-frame homography; [`rigid`] localises a frame that way from any
+//! number of corners, one included.
+//!
 //! The crate takes plain slices and structs: no tables, no datasets, no I/O beyond
 //! reading a frame file.
 #![deny(missing_docs)]
@@ -17,7 +22,9 @@ pub mod frame;
 pub mod homography;
 pub mod localize;
 pub mod matching;
+pub mod mount;
 pub mod pipeline;
+pub mod rigid;
 pub mod synth;
 pub mod vertex;
 pub mod widths;

@@ -15,6 +15,10 @@
 //! jitter is milliseconds, so such an H(i) is a wrong fit, not a measurement (ours; the
 //! paper has no such check). All image buffers live
 //! in a [`FrameWorkspace`] reused across frames.
+//!
+//! [`process_frame`] is [`observe_frame`] (undistort, detect, pair, place on the ridges)
+//! followed by [`localise_dlt`] (eqs 27, 29, 30, widths); the rigid-mount extension
+//! ([`crate::rigid`]) localises the same observation under one mount for the sequence.
 
 use rand_chacha::ChaCha8Rng;
 
@@ -24,6 +28,7 @@ use crate::frame::ThermalFrame;
 use crate::homography::{estimate_homography, Homography, HomographyError, HomographyFit, HomographyParams};
 use crate::localize::{estimate_capture_time, nozzle_position_mm, CaptureTimeEstimate, TrajectoryView, PAPER_WINDOW_S};
 use crate::matching::{match_corners_into, CornerMatch, PredictedCorner, ARM_PROBE_MM};
+use crate::mount::{MountError, MountParams};
 use crate::vertex::{vertex_from_ridges, CornerArms, VertexParams};
 use crate::widths::{extract_widths_into, WidthParams, WidthQuery};
 
@@ -45,12 +50,19 @@ pub struct PipelineParams {
     /// Largest plausible distance of the eq. 29 nozzle position from the commanded
     /// position at the recorded time (mm).
     pub max_nozzle_offset_mm: f64,
+    /// Rigid-mount fit and nozzle placement (our extension, [`crate::mount`]).
+    pub mount: MountParams,
+    /// How far a ridge vertex searched from a mount prediction may move (px), see
+    /// [`crate::rigid`].
+    pub predicted_shift_px: f64,
 }
 
 impl PipelineParams {
     /// Paper settings (band 140-150 °C, δt = 10 ms) with the width threshold `threshold_c`.
     /// The 6 px gate covers ±10 ms of timing error at 20 mm/s (0.2 mm ≈ 1.5 px) plus a
-    /// mounting error of about half a millimetre.
+    /// mounting error of about half a millimetre. The rigid-mount settings are ours: a
+    /// prediction through the fitted mount is good to about a pixel, so a ridge vertex
+    /// searched from it may move 3 px.
     pub fn paper_defaults(threshold_c: f64) -> Self {
         Self {
             corners: CornerParams::paper_defaults(),
@@ -60,6 +72,8 @@ impl PipelineParams {
             widths: WidthParams::with_threshold(threshold_c),
             vertex: Some(VertexParams::defaults()),
             max_nozzle_offset_mm: 1.0,
+            mount: MountParams::defaults(),
+            predicted_shift_px: 3.0,
         }
     }
 }
@@ -142,6 +156,48 @@ pub enum FrameSkip {
     /// H(i) sends the nozzle pixel to infinity.
     #[error("nozzle pixel maps off the plane")]
     NozzleOffPlane,
+    /// The rigid-mount localisation could not place the nozzle: no corner pairs, or
+    /// pairs that disagree (see [`crate::rigid`]).
+    #[error("rigid mount: {0}")]
+    Mount(MountError),
+}
+
+/// Corner pairs of one frame: path corner ids, undistorted image points and their
+/// vertices on the plane (world mm), index-aligned.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CornerPairs {
+    /// Path corner ids.
+    pub ids: Vec<u32>,
+    /// Undistorted image points (px).
+    pub image_px: Vec<[f64; 2]>,
+    /// Path vertices (world mm).
+    pub plane_mm: Vec<[f64; 2]>,
+}
+
+impl CornerPairs {
+    /// Appends one pair.
+    pub fn push(&mut self, id: u32, image_px: [f64; 2], plane_mm: [f64; 2]) {
+        self.ids.push(id);
+        self.image_px.push(image_px);
+        self.plane_mm.push(plane_mm);
+    }
+
+    /// Number of pairs.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// True without pairs.
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// Empties it.
+    pub fn clear(&mut self) {
+        self.ids.clear();
+        self.image_px.clear();
+        self.plane_mm.clear();
+    }
 }
 
 /// Buffers reused from frame to frame.
@@ -153,6 +209,8 @@ pub struct FrameWorkspace {
     image_px: Vec<[f64; 2]>,
     plane_mm: Vec<[f64; 2]>,
     on_ridges: Vec<bool>,
+    found: usize,
+    refined: usize,
 }
 
 impl FrameWorkspace {
@@ -167,7 +225,31 @@ impl FrameWorkspace {
             image_px: Vec::new(),
             plane_mm: Vec::new(),
             on_ridges: Vec::new(),
+            found: 0,
+            refined: 0,
         })
+    }
+
+    /// Empties the per-frame results (the undistorted image is marked all NaN).
+    fn clear(&mut self) {
+        self.undistorted.temp_c.fill(f32::NAN);
+        self.detections.clear();
+        self.matches.clear();
+        self.image_px.clear();
+        self.plane_mm.clear();
+        self.on_ridges.clear();
+        (self.found, self.refined) = (0, 0);
+    }
+
+    /// The last observed frame's pairs whose image point is a ridge intersection (the
+    /// heat peaks are left out: they sit up to ~0.5 mm inside their corner), with the
+    /// path corner ids of `predicted` (the slice the frame was observed with).
+    pub fn ridge_pairs(&self, predicted: &[PredictedCorner]) -> CornerPairs {
+        let mut out = CornerPairs::default();
+        for (k, m) in self.matches.iter().enumerate().filter(|(k, _)| self.on_ridges[*k]) {
+            out.push(predicted[m.predicted].id, self.image_px[k], self.plane_mm[k]);
+        }
+        out
     }
 
     /// The last undistorted frame.
@@ -178,6 +260,12 @@ impl FrameWorkspace {
     /// The last frame's detections.
     pub fn detections(&self) -> &[CornerDetection] {
         &self.detections
+    }
+
+    /// The last observed frame's pairs of detections with predicted corners (those
+    /// whose peak was dropped for lack of ridges when four others had them are left out).
+    pub fn matches(&self) -> &[CornerMatch] {
+        &self.matches
     }
 }
 
@@ -256,33 +344,54 @@ pub fn predict_path_corners_into(
     }
 }
 
-/// Runs one frame end to end.
+/// Runs one frame end to end: [`observe_frame`] then [`localise_dlt`].
 pub fn process_frame(
     ctx: &FrameContext<'_>,
     input: &FrameInput<'_>,
     ws: &mut FrameWorkspace,
     rng: &mut ChaCha8Rng,
 ) -> Result<FrameResult, FrameSkip> {
-    let p = &ctx.params;
+    observe_frame(ctx, input, ws)?;
+    localise_dlt(ctx, input, ws, rng)
+}
+
+/// What a frame shows, before any homography: undistort it, detect the hot corners in
+/// the band, pair them with `input.predicted` and place each pair's image point on the
+/// ridge intersection where it can (the pairs of eq. 27, below). The results stay in
+/// `ws` ([`FrameWorkspace::undistorted`], [`FrameWorkspace::detections`],
+/// [`FrameWorkspace::ridge_pairs`]); the workspace is emptied first, so a frame that
+/// fails here leaves nothing of the previous one.
+pub fn observe_frame(ctx: &FrameContext<'_>, input: &FrameInput<'_>, ws: &mut FrameWorkspace) -> Result<(), FrameSkip> {
+    ws.clear();
     ctx.undistorter.undistort_into(input.frame, &mut ws.undistorted)?;
     ws.detector.detect_into(&ws.undistorted, &mut ws.detections);
-    match_corners_into(&ws.detections, input.predicted, p.match_gate_px, &mut ws.matches);
-    let (found, matched) = (ws.detections.len(), ws.matches.len());
+    match_corners_into(&ws.detections, input.predicted, ctx.params.match_gate_px, &mut ws.matches);
+    ws.found = ws.detections.len();
+    ws.refined = fill_correspondences(ws, input.predicted, ctx.params.vertex.as_ref());
+    Ok(())
+}
+
+/// The paper's localisation of an observed frame (after [`observe_frame`] on the same
+/// workspace): H(i) by RANSAC + DLT on at least four pairs (eq. 27), the nozzle
+/// (eq. 29), the capture time (eq. 30) and the half-widths (Sec. 2.4).
+pub fn localise_dlt(
+    ctx: &FrameContext<'_>,
+    input: &FrameInput<'_>,
+    ws: &mut FrameWorkspace,
+    rng: &mut ChaCha8Rng,
+) -> Result<FrameResult, FrameSkip> {
+    let p = &ctx.params;
+    let (found, matched) = (ws.found, ws.matches.len());
     if matched < crate::homography::MIN_CORRESPONDENCES {
         return Err(FrameSkip::TooFewCorners { found, matched, needed: crate::homography::MIN_CORRESPONDENCES });
     }
-    let refined = fill_correspondences(ws, input.predicted, p.vertex.as_ref());
     let fit =
         estimate_homography(&ws.image_px, &ws.plane_mm, &p.homography, rng).map_err(FrameSkip::HomographyFailed)?;
     let nozzle_mm = nozzle_position_mm(&fit.homography, ctx.undistorter.undistort_px(ctx.nozzle_px));
     if !nozzle_mm[0].is_finite() || !nozzle_mm[1].is_finite() {
         return Err(FrameSkip::NozzleOffPlane);
     }
-    let commanded = ctx.trajectory.position_mm(input.t_recorded_s);
-    let offset_mm = (nozzle_mm[0] - commanded[0]).hypot(nozzle_mm[1] - commanded[1]);
-    if offset_mm > p.max_nozzle_offset_mm {
-        return Err(FrameSkip::Implausible { offset_mm });
-    }
+    check_plausible(ctx, nozzle_mm, input.t_recorded_s)?;
     let capture = estimate_capture_time(&ctx.trajectory, nozzle_mm, input.t_recorded_s, p.window_s);
     let plane_to_px = fit.homography.inverse().ok_or(FrameSkip::NozzleOffPlane)?;
     let mut widths_mm = Vec::with_capacity(input.width_queries.len());
@@ -291,12 +400,24 @@ pub fn process_frame(
         corners_found: found,
         matches: ws.matches.clone(),
         corner_px: ws.image_px.clone(),
-        refined,
+        refined: ws.refined,
         homography: fit,
         nozzle_mm,
         capture,
         widths_mm,
     })
+}
+
+/// A nozzle position is plausible when it lies within `max_nozzle_offset_mm` of the
+/// commanded position at the recorded time (the camera is rigid on the nozzle and the
+/// timing error is milliseconds, so a larger offset is a wrong fit).
+pub fn check_plausible(ctx: &FrameContext<'_>, nozzle_mm: [f64; 2], t_recorded_s: f64) -> Result<(), FrameSkip> {
+    let commanded = ctx.trajectory.position_mm(t_recorded_s);
+    let offset_mm = (nozzle_mm[0] - commanded[0]).hypot(nozzle_mm[1] - commanded[1]);
+    if offset_mm > ctx.params.max_nozzle_offset_mm {
+        return Err(FrameSkip::Implausible { offset_mm });
+    }
+    Ok(())
 }
 
 /// The pairs of eq. 27: each match's image point (ridge intersection where found, else
@@ -334,6 +455,7 @@ fn fill_correspondences(
         ws.image_px.retain(|_| (keep[i], i += 1).0);
         let mut i = 0;
         ws.plane_mm.retain(|_| (keep[i], i += 1).0);
+        ws.on_ridges.retain(|&r| r);
     }
     refined
 }

@@ -65,6 +65,20 @@ impl VertexParams {
             max_shift_px: 6.0,
         }
     }
+
+    /// Distance of the first cross-section from the vertex (mm) for arms whose directions
+    /// have cosine `cos_between`: where the arms are `min_arm_gap_mm` apart
+    /// (gap = 2 s sin(θ/2)), and at least `min_offset_mm`.
+    pub fn first_offset_mm(&self, cos_between: f64) -> f64 {
+        let half_sin = ((1.0 - cos_between) / 2.0).sqrt().max(1e-6);
+        self.min_offset_mm.max(self.min_arm_gap_mm / (2.0 * half_sin))
+    }
+
+    /// How far along each arm the cross-sections reach (mm): a corner can be placed only
+    /// once both arms are printed (and visible) this far from it.
+    pub fn arm_reach_mm(&self, cos_between: f64) -> f64 {
+        self.first_offset_mm(cos_between) + self.span_mm
+    }
 }
 
 /// The two arms of a corner as seen in the undistorted image.
@@ -131,9 +145,7 @@ fn intersect_ridges(
     arms: &CornerArms,
     params: &VertexParams,
 ) -> Option<([f64; 2], CornerArms)> {
-    // Distance along each arm where the arms are min_arm_gap apart: gap = 2 s sin(θ/2).
-    let half_sin = ((1.0 - arms.cos_between()) / 2.0).sqrt().max(1e-6);
-    let s0_mm = params.min_offset_mm.max(params.min_arm_gap_mm / (2.0 * half_sin));
+    let s0_mm = params.first_offset_mm(arms.cos_between());
     let mut lines = [([0.0; 2], [0.0; 2]); 2];
     for k in 0..2 {
         lines[k] = ridge_line(image, apex_px, arms.dirs[k], arms.px_per_mm[k], s0_mm, params)?;

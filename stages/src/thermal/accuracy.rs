@@ -7,7 +7,16 @@
 //!
 //! Metrics (`accuracy.parquet`, one row each, long format):
 //! - capture time (eq. 30): |t̂_c − t_c| over the localised frames, median and 90th
-//!   percentile, beside the baseline |t_r − t_c| of taking the recorded time as is;
+//!   percentile, beside the baseline |t_r − t_c| of taking the recorded time as is; the
+//!   same for each estimator `frames.parquet` carries (`dlt_*`, `rigid_mount_*`), and the
+//!   signed median offsets t̂_c − t_r and t_c − t_r (a constant capture delay such as the
+//!   `camera_latency` effect shows in both; the recorded time cannot see it);
+//! - nozzle (eq. 29): distance of P_N,i from the true nozzle at the capture time (mm);
+//! - rigid mount: the fitted mount H_m against the true mount of `truth.toml`, median
+//!   over the image of the distance between the plane points they give one pixel, beside
+//!   the same for the nominal mount anchored at the nozzle pixel (the fit's start);
+//! - corner vertices: the rigid estimator's ridge vertices that placed a nozzle, to the
+//!   true corner pixels (raw px);
 //! - homography (eq. 27): every true corner in a localised frame mapped through the
 //!   frame's estimated H onto the plane, distance to its CAD vertex (mm);
 //! - widths (Sec. 2.4): measured w_l + w_r against the true deposit's width along the
@@ -60,7 +69,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -83,6 +92,10 @@ impl StageKind for AccuracyEvaluateStage {
         let undistorter = Undistorter::new(&camera_model(&seq.camera)).map_err(StageError::domain)?;
         let mut metrics = Metrics::default();
         capture_time_metrics(&frames, &truth, &mut metrics);
+        estimator_metrics(&frames, &truth, &mut metrics);
+        nozzle_metrics(&frames, &truth, &mut metrics);
+        mount_metrics(&monitor, &seq, &truth, &undistorter, &mut metrics)?;
+        vertex_metrics(&monitor, &truth, &mut metrics)?;
         homography_metrics(&frames, &truth, &seq.path_mm, &undistorter, &mut metrics);
         width_metrics(&monitor, &truth, &mut metrics)?;
         let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
@@ -145,7 +158,12 @@ struct FrameRows {
     recorded_s: Vec<f64>,
     estimated_s: Vec<f64>,
     used: Vec<bool>,
+    at_window_edge: Vec<bool>,
     homography: Vec<Option<Homography>>,
+    /// Per estimator in `frames.parquet` (column prefix, capture times; NaN = skipped).
+    estimators: Vec<(&'static str, Vec<f64>)>,
+    /// P_N,i (mm) where the table has it.
+    nozzle_mm: Option<Vec<[f64; 2]>>,
 }
 
 impl FrameRows {
@@ -162,13 +180,36 @@ impl FrameRows {
                 m.iter().flatten().all(|v| v.is_finite()).then_some(Homography { m })
             })
             .collect();
+        let optional = |name: &str| df.column(name).is_ok().then(|| f64_column(&df, &file, name)).transpose();
+        let mut estimators = Vec::new();
+        for prefix in ["dlt", "rigid_mount"] {
+            if let Some(t) = optional(&format!("{prefix}_time_s"))? {
+                estimators.push((prefix, t));
+            }
+        }
+        let nozzle_mm = match (optional("nozzle_x_mm")?, optional("nozzle_y_mm")?) {
+            (Some(x), Some(y)) => Some(x.iter().zip(&y).map(|(x, y)| [*x, *y]).collect()),
+            _ => None,
+        };
+        let at_window_edge = match df.column("at_window_edge") {
+            Ok(c) => c
+                .bool()
+                .map_err(|source| StageError::Table { path: file.clone(), source })?
+                .iter()
+                .map(|v| v == Some(true))
+                .collect(),
+            Err(_) => vec![false; estimated_s.len()],
+        };
         Ok(Self {
             layer: i64_column(&df, &file, "layer")?,
             frame: i64_column(&df, &file, "frame")?,
             recorded_s: f64_column(&df, &file, "recorded_time_s")?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
+            at_window_edge,
             estimated_s,
             homography,
+            estimators,
+            nozzle_mm,
         })
     }
 }
@@ -177,14 +218,21 @@ fn truth_frame(truth: &ThermalTruth, layer: i64, frame: i64) -> Option<&datasets
     truth.frames.iter().find(|f| f.layer as i64 == layer && f.frame as i64 == frame)
 }
 
-fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
+/// |t − t_c| (ms) of the frames with a finite `times` entry, and the recorded-time
+/// baseline |t_r − t_c| on the same frames.
+fn time_errors(frames: &FrameRows, truth: &ThermalTruth, times: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let (mut ours, mut baseline) = (Vec::new(), Vec::new());
-    for i in (0..frames.used.len()).filter(|&i| frames.used[i]) {
+    for i in (0..times.len()).filter(|&i| times[i].is_finite()) {
         if let Some(t) = truth_frame(truth, frames.layer[i], frames.frame[i]) {
-            ours.push(1e3 * (frames.estimated_s[i] - t.capture_time_s).abs());
+            ours.push(1e3 * (times[i] - t.capture_time_s).abs());
             baseline.push(1e3 * (frames.recorded_s[i] - t.capture_time_s).abs());
         }
     }
+    (ours, baseline)
+}
+
+fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
+    let (mut ours, mut baseline) = time_errors(frames, truth, &frames.estimated_s);
     let n = ours.len();
     metrics.push("capture_time_err_median_ms", quantile(&mut ours, 0.5), "ms", n, "|t̂_c − t_c|, eq. 30");
     metrics.push("capture_time_err_p90_ms", quantile(&mut ours, 0.9), "ms", n, "90th percentile of |t̂_c − t_c|");
@@ -195,6 +243,165 @@ fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut 
         n,
         "|t_r − t_c|: the recorded time taken as the capture time",
     );
+    let (mut offset, mut true_offset) = (Vec::new(), Vec::new());
+    for i in (0..frames.used.len()).filter(|&i| frames.used[i]) {
+        if let Some(t) = truth_frame(truth, frames.layer[i], frames.frame[i]) {
+            offset.push(1e3 * (frames.estimated_s[i] - frames.recorded_s[i]));
+            true_offset.push(1e3 * (t.capture_time_s - frames.recorded_s[i]));
+        }
+    }
+    let n = offset.len();
+    metrics.push("capture_offset_median_ms", quantile(&mut offset, 0.5), "ms", n, "median of t̂_c − t_r (signed)");
+    metrics.push(
+        "capture_offset_true_median_ms",
+        quantile(&mut true_offset, 0.5),
+        "ms",
+        n,
+        "median of t_c − t_r (signed): a constant capture delay shows here",
+    );
+    let edge = frames.at_window_edge.iter().zip(&frames.used).filter(|(e, u)| **e && **u).count();
+    metrics.push("frames_at_window_edge", edge as f64, "frames", n, "t̂_c on the edge of t_r ± δt (eq. 30 window)");
+}
+
+/// The capture-time error of each estimator `frames.parquet` carries, on its own frames.
+fn estimator_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
+    for (prefix, times) in &frames.estimators {
+        let (mut ours, mut baseline) = time_errors(frames, truth, times);
+        let n = ours.len();
+        let name = |what: &str| format!("{prefix}_{what}");
+        metrics.push(
+            &name("capture_time_err_median_ms"),
+            quantile(&mut ours, 0.5),
+            "ms",
+            n,
+            "|t̂_c − t_c| of this estimator",
+        );
+        metrics.push(&name("capture_time_err_p90_ms"), quantile(&mut ours, 0.9), "ms", n, "90th percentile");
+        metrics.push(
+            &name("capture_time_err_baseline_median_ms"),
+            quantile(&mut baseline, 0.5),
+            "ms",
+            n,
+            "|t_r − t_c| on the frames this estimator localised",
+        );
+        metrics.push(&name("frames_used"), n as f64, "frames", n, "frames this estimator localised");
+    }
+}
+
+/// Distance of P_N,i (eq. 29) from the true nozzle at the capture time.
+fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
+    let Some(nozzle) = &frames.nozzle_mm else { return };
+    let mut errors: Vec<f64> = (0..nozzle.len())
+        .filter(|&i| frames.used[i] && nozzle[i][0].is_finite())
+        .filter_map(|i| {
+            let t = truth_frame(truth, frames.layer[i], frames.frame[i])?;
+            Some((nozzle[i][0] - t.nozzle_mm[0]).hypot(nozzle[i][1] - t.nozzle_mm[1]))
+        })
+        .collect();
+    let n = errors.len();
+    metrics.push("nozzle_err_median_mm", quantile(&mut errors, 0.5), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
+}
+
+/// The mount that placed the frames (`applied` row of `mount.parquet`) and the nominal
+/// one against the truth.
+fn mount_metrics(
+    monitor: &Path,
+    seq: &datasets::thermal::ThermalSequence,
+    truth: &ThermalTruth,
+    undistorter: &Undistorter,
+    metrics: &mut Metrics,
+) -> Result<(), StageError> {
+    if !monitor.join("mount.parquet").is_file() {
+        return Ok(());
+    }
+    let file = monitor.join("mount.parquet");
+    let df = read_table(monitor, "mount.parquet")?;
+    let h: Vec<Vec<f64>> =
+        (0..9).map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1))).collect::<Result<_, _>>()?;
+    let applied = df.column("applied").map_err(|source| StageError::Table { path: file.clone(), source })?;
+    let applied = applied.bool().map_err(|source| StageError::Table { path: file.clone(), source })?;
+    let Some(last) = applied.iter().position(|a| a == Some(true)) else { return Ok(()) };
+    let fitted = Homography {
+        m: [
+            [h[0][last], h[1][last], h[2][last]],
+            [h[3][last], h[4][last], h[5][last]],
+            [h[6][last], h[7][last], h[8][last]],
+        ],
+    };
+    let true_mount =
+        Homography { m: datasets::thermal::camera::nominal_homography(&seq.camera.intrinsics, &truth.truth.mount) };
+    let nominal =
+        Homography { m: datasets::thermal::camera::nominal_homography(&seq.camera.intrinsics, &seq.camera.mount) };
+    let nozzle_px = undistorter.undistort_px(seq.camera.nozzle_px);
+    let anchored = vision::mount::anchored_at_nozzle(&nominal, nozzle_px).unwrap_or(nominal);
+    let cam = undistorter.camera();
+    for (name, h, note) in [
+        ("mount_err_median_mm", fitted, "applied mount H_m vs the true mount, median over the image"),
+        (
+            "mount_err_nominal_median_mm",
+            anchored,
+            "nominal mount anchored at P_N⁽⁰⁾ vs the true mount, median over the image",
+        ),
+    ] {
+        let mut gaps = image_gaps_mm(&h, &true_mount, cam.width_px, cam.height_px);
+        let n = gaps.len();
+        metrics.push(name, quantile(&mut gaps, 0.5), "mm", n, note);
+    }
+    Ok(())
+}
+
+/// Distances between the plane points two pixel → plane maps give the pixels of an
+/// 8-pixel grid over the image (mm); empty when `a` is not finite.
+fn image_gaps_mm(a: &Homography, b: &Homography, width: usize, height: usize) -> Vec<f64> {
+    let mut out = Vec::new();
+    for v in (4..height).step_by(8) {
+        for u in (4..width).step_by(8) {
+            let (p, q) = (a.apply([u as f64, v as f64]), b.apply([u as f64, v as f64]));
+            let d = (p[0] - q[0]).hypot(p[1] - q[1]);
+            if d.is_finite() {
+                out.push(d);
+            }
+        }
+    }
+    out
+}
+
+/// The rigid estimator's vertices that placed a nozzle against the true corner pixels.
+fn vertex_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -> Result<(), StageError> {
+    if !monitor.join("vertices.parquet").is_file() {
+        return Ok(());
+    }
+    let file = monitor.join("vertices.parquet");
+    let df = read_table(monitor, "vertices.parquet")?;
+    let (layer, frame_no, vertex) =
+        (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?, i64_column(&df, &file, "vertex")?);
+    let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
+    let used = df.column("used").map_err(|source| StageError::Table { path: file.clone(), source })?;
+    let used: Vec<bool> = used
+        .bool()
+        .map_err(|source| StageError::Table { path: file.clone(), source })?
+        .iter()
+        .map(|b| b == Some(true))
+        .collect();
+    let mut errors: Vec<f64> = (0..layer.len())
+        .filter(|&i| used[i])
+        .filter_map(|i| {
+            let c = truth.corners.iter().find(|c| {
+                c.layer as i64 == layer[i] && c.frame as i64 == frame_no[i] && c.vertex as i64 == vertex[i]
+            })?;
+            Some((u[i] - c.pixel[0]).hypot(v[i] - c.pixel[1]))
+        })
+        .collect();
+    let n = errors.len();
+    metrics.push(
+        "vertex_err_median_px",
+        quantile(&mut errors, 0.5),
+        "px",
+        n,
+        "ridge vertices that placed a nozzle, to the true corner pixels (raw)",
+    );
+    metrics.push("vertex_err_p90_px", quantile(&mut errors, 0.9), "px", n, "90th percentile");
+    Ok(())
 }
 
 fn homography_metrics(
@@ -324,4 +531,28 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
     values.sort_by(f64::total_cmp);
     let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
     values[rank - 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_gaps_are_zero_for_the_same_map_and_the_shift_for_a_translated_one() {
+        let h = Homography { m: [[0.15, 0.01, -12.0], [0.002, 0.21, -13.0], [0.0001, 0.0012, 1.0]] };
+        assert!(image_gaps_mm(&h, &h, 160, 120).iter().all(|&d| d == 0.0));
+        // T(0.3, −0.4)·H moves every plane point by 0.5 mm.
+        let shifted = Homography { m: [[1.0, 0.0, 0.3], [0.0, 1.0, -0.4], [0.0, 0.0, 1.0]] }.then_after(&h);
+        let gaps = image_gaps_mm(&shifted, &h, 160, 120);
+        assert_eq!(gaps.len(), 20 * 15, "an 8-pixel grid over 160 × 120");
+        assert!(gaps.iter().all(|d| (d - 0.5).abs() < 1e-9));
+    }
+
+    #[test]
+    fn quantile_is_the_nearest_rank() {
+        let mut v = [4.0, 1.0, 3.0, 2.0];
+        assert_eq!(quantile(&mut v, 0.5), 2.0);
+        assert_eq!(quantile(&mut v, 0.9), 4.0);
+        assert!(quantile(&mut [], 0.5).is_nan());
+    }
 }

@@ -16,6 +16,7 @@ pub mod accuracy;
 pub mod common;
 pub mod compensate;
 pub mod generate;
+pub mod localise;
 pub mod monitor;
 pub mod reprint;
 

@@ -3,13 +3,19 @@
 //! 1. Deposition directions along the commanded trajectory with and without the
 //!    allocation of Sec. 2.2 (eqs 1-26), for the flow the printer should deliver (the
 //!    commanded flow through the nominal G(s) of eq. 34) → `directions.parquet`.
-//! 2. Every frame: decode (a bad frame becomes a diagnostic row, never an abort),
-//!    undistort, detect the hot corners in the 140-150 °C band, pair them with the CAD
-//!    corners predicted from the recorded time through the nominal mount, place each
-//!    paired corner on its path vertex by intersecting its two bead ridges (the heat
-//!    peak sits inside the corner; see `vision::vertex`), estimate the
-//!    frame's homography (eq. 27, DLT + RANSAC), place the nozzle (eq. 29) and estimate
-//!    the capture time (eq. 30) → `frames.parquet`, `detections.parquet`.
+//! 2. Every frame localised twice (`super::localise`; a bad frame becomes a diagnostic
+//!    row, never an abort): by the paper's per-frame homography (undistort, detect the
+//!    hot corners in the band, pair them with the CAD corners predicted through the
+//!    nominal mount from the recorded time, place each on its path vertex by
+//!    intersecting its two bead ridges (`vision::vertex`), eq. 27 by DLT + RANSAC on ≥ 4
+//!    pairs, the nozzle by eq. 29, the capture time by eq. 30), and by our rigid-mount
+//!    estimator (one mount homography fitted to the whole sequence, one translation per
+//!    frame from any number of young corners, then eqs 29-30 alike). The `localisation`
+//!    parameter picks the one the widths and the tables use (default `rigid_mount`: it
+//!    localises about three times as many frames, and its capture times beat the
+//!    recorded time where the DLT's do not; `thermal.accuracy_evaluate` measures both)
+//!    → `frames.parquet` (both capture times), `detections.parquet`, `mount.parquet`,
+//!    `vertices.parquet`.
 //! 3. Widths (Sec. 2.4): each trajectory sample is read in the localised frame in which
 //!    its bead is `measure_age_s` old (± half a frame period), along its deposition
 //!    direction, at the threshold temperature T_t → `widths.parquet` with the desired
@@ -26,10 +32,8 @@
 //! Also written for the figures (Fig. 4): the undistorted frame with the most matched
 //! corners, its detections, and a mosaic of all localised frames on the plane.
 
-use std::path::Path;
-
 use datasets::thermal::deposition::conventional_command;
-use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
+use datasets::thermal::sequence::ThermalSequence;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
 use models::thermal::dynamics::first_order_lag;
@@ -38,21 +42,12 @@ use models::thermal::{PrintSetup, Trajectory};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use vision::camera::Undistorter;
-use vision::frame::ThermalFrame;
-use vision::homography::Homography;
-use vision::localize::TrajectoryView;
-use vision::matching::PredictedCorner;
-use vision::pipeline::{
-    predict_path_corners_into, process_frame, FrameContext, FrameInput, FrameWorkspace, PathCorner, PipelineParams,
-};
+use vision::pipeline::PipelineParams;
 use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 
-use super::common::{
-    camera_model, deposition_directions, left_directions, open_sequence, trajectory_of, vertex_passage_times,
-};
+use super::common::{camera_model, deposition_directions, left_directions, open_sequence, trajectory_of};
+use super::localise::{DetectionRow, FrameOutcome, Localisation, Localiser, MountRow};
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 /// The `thermal.monitor` stage kind.
@@ -96,6 +91,18 @@ const PARAMS: &[ParamSpec] = &[
         doc: "Upper edge of the corner temperature band (°C), Sec. 3.2.",
     },
     ParamSpec {
+        name: "localisation",
+        ty: ParamType::Choice(Localisation::NAMES),
+        default: ParamDefault::Str("rigid_mount"),
+        doc: "Frame localisation used for the widths: `dlt`, the paper's per-frame homography from ≥ 4 corners in the band (eq. 27); `rigid_mount`, ours: one mount homography fitted to the whole sequence, one translation per frame from any ridge-placed corner (see `frames.parquet` for both capture times).",
+    },
+    ParamSpec {
+        name: "max_corner_age_s",
+        ty: ParamType::Float { min: 0.1, max: 100.0 },
+        default: ParamDefault::Float(0.8),
+        doc: "rigid_mount only: corners printed longer ago than this (s, from the commanded trajectory) are not used; as a bead cools its heat spreads and the ridges of a corner's two arms pull each other inwards (≈ 0.1 mm after 2 s).",
+    },
+    ParamSpec {
         name: "window_s",
         ty: ParamType::Float { min: 0.001, max: 0.5 },
         default: ParamDefault::Float(0.010),
@@ -108,7 +115,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        2
+        3
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -132,9 +139,10 @@ impl StageKind for MonitorStage {
         ctx.write_table("directions", &mut directions)?;
         let settings = Settings::from_params(ctx);
         let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, settings)?;
-        let frames = analysis.localise_all(ctx.seed)?;
+        let (frames, mounts) = analysis.localiser.run(ctx.seed, settings.localisation)?;
         let widths = analysis.widths(&frames);
-        write_frame_tables(ctx, &analysis.undistorter, &frames)?;
+        write_frame_tables(ctx, &analysis.localiser.undistorter, &frames, settings.localisation)?;
+        write_mount_tables(ctx, &analysis.localiser.undistorter, &frames, &mounts)?;
         let mut table = widths_frame(&trajectory, &with_dda, &setup, &widths)?;
         ctx.write_table("widths", &mut table)?;
         write_figure_tables(ctx, &seq, &analysis, &frames)
@@ -150,6 +158,8 @@ struct Settings {
     straight_clearance_mm: f64,
     band_c: (f64, f64),
     window_s: f64,
+    localisation: Localisation,
+    max_corner_age_s: f64,
 }
 
 impl Settings {
@@ -162,39 +172,17 @@ impl Settings {
             straight_clearance_mm: p.f64("straight_clearance_mm"),
             band_c: (p.f64("band_low_c"), p.f64("band_high_c")),
             window_s: p.f64("window_s"),
+            localisation: Localisation::from_name(p.str("localisation")),
+            max_corner_age_s: p.f64("max_corner_age_s"),
         }
     }
-}
-
-/// A detection: (matched vertex or −1, undistorted pixel, temperature °C).
-type DetectionRow = (i64, [f64; 2], f64);
-
-/// One frame's outcome.
-struct FrameOutcome {
-    entry: FrameEntry,
-    /// Why it was not used (None: used).
-    skip: Option<String>,
-    corners_found: usize,
-    /// (vertex, u, v (undistorted px), temp) of every detection; vertex −1 if unmatched.
-    detections: Vec<(i64, [f64; 2], f64)>,
-    matched: usize,
-    estimated_time_s: f64,
-    at_window_edge: bool,
-    reproj_err_mm: f64,
-    plane_to_px: Option<Homography>,
-    px_to_plane: Option<Homography>,
-    undistorted: Option<ThermalFrame>,
 }
 
 /// Everything the per-frame work needs, built once.
 struct Analysis<'a> {
     seq: &'a ThermalSequence,
     trajectory: &'a Trajectory,
-    undistorter: Undistorter,
-    h0: Homography,
-    params: PipelineParams,
-    path_corners: Vec<PathCorner>,
-    passage_s: Vec<f64>,
+    localiser: Localiser<'a>,
     queries: Vec<WidthQuery>,
     straight: Vec<bool>,
     settings: Settings,
@@ -231,11 +219,14 @@ impl<'a> Analysis<'a> {
         Ok(Self {
             seq,
             trajectory,
-            h0: camera.nominal_homography(),
-            undistorter,
-            params,
-            passage_s: vertex_passage_times(seq, trajectory),
-            path_corners: PathCorner::of_closed_path(&seq.path_mm),
+            localiser: Localiser::new(
+                seq,
+                trajectory,
+                undistorter,
+                camera.nominal_homography(),
+                params,
+                settings.max_corner_age_s,
+            ),
             queries,
             straight,
             settings,
@@ -243,95 +234,17 @@ impl<'a> Analysis<'a> {
         })
     }
 
-    /// Localises every frame of the sequence, in file order.
-    fn localise_all(&self, seed: u64) -> Result<Vec<FrameOutcome>, StageError> {
-        let view = TrajectoryView::new(&self.trajectory.t_s, &self.trajectory.x_mm, &self.trajectory.y_mm)
-            .map_err(StageError::domain)?;
-        let ctx = FrameContext {
-            undistorter: &self.undistorter,
-            h0: self.h0,
-            nozzle_px: self.seq.camera.nozzle_px,
-            trajectory: view,
-            params: self.params,
-        };
-        let mut workspace = FrameWorkspace::new(&self.undistorter, &self.params).map_err(StageError::domain)?;
-        let mut last_time: Option<(usize, f64)> = None;
-        let mut outcomes = Vec::with_capacity(self.seq.frames.len());
-        for entry in &self.seq.frames {
-            let order_problem = match last_time {
-                Some((layer, t)) if layer == entry.layer && entry.recorded_time_s <= t => Some(format!(
-                    "recorded time {:.4} s is not after the previous frame's {:.4} s (out of order)",
-                    entry.recorded_time_s, t
-                )),
-                _ => None,
-            };
-            let outcome = match order_problem {
-                Some(reason) => skipped(entry, reason),
-                None => {
-                    last_time = Some((entry.layer, entry.recorded_time_s));
-                    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ ((entry.layer as u64) << 32 | entry.frame as u64));
-                    self.localise(&ctx, entry, &mut workspace, &mut rng)
-                }
-            };
-            outcomes.push(outcome);
-        }
-        Ok(outcomes)
-    }
-
-    /// One frame: decode, predict, localise (a failure is a diagnostic, not an error).
-    fn localise(
-        &self,
-        ctx: &FrameContext<'_>,
-        entry: &FrameEntry,
-        workspace: &mut FrameWorkspace,
-        rng: &mut ChaCha8Rng,
-    ) -> FrameOutcome {
-        let path = self.seq.frame_path(entry);
-        let frame = match ThermalFrame::from_png_file(&path) {
-            Ok(frame) => frame,
-            Err(e) => return skipped(entry, format!("{}: {e}", display_rel(&path))),
-        };
-        let t_r = entry.recorded_time_s;
-        let nozzle = ctx.trajectory.position_mm(t_r);
-        let printed: Vec<PathCorner> =
-            self.path_corners.iter().copied().filter(|c| self.passage_s[c.id as usize] <= t_r).collect();
-        let mut predicted: Vec<PredictedCorner> = Vec::new();
-        predict_path_corners_into(&self.h0, nozzle, &printed, &mut predicted);
-        let input = FrameInput { frame: &frame, t_recorded_s: t_r, predicted: &predicted, width_queries: &[] };
-        let result = process_frame(ctx, &input, workspace, rng);
-        let detections = collect_detections(workspace, result.as_ref().ok(), &predicted);
-        match result {
-            Ok(r) => {
-                let plane_to_px = r.homography.homography.inverse();
-                FrameOutcome {
-                    entry: entry.clone(),
-                    skip: None,
-                    corners_found: r.corners_found,
-                    matched: r.matches.len(),
-                    detections,
-                    estimated_time_s: r.capture.t_s,
-                    at_window_edge: r.capture.at_window_edge,
-                    reproj_err_mm: r.homography.rms_error_mm,
-                    plane_to_px,
-                    px_to_plane: Some(r.homography.homography),
-                    undistorted: Some(workspace.undistorted().clone()),
-                }
-            }
-            Err(skip) => {
-                let found = detections.len();
-                FrameOutcome { corners_found: found, detections, ..skipped(entry, skip.to_string()) }
-            }
-        }
-    }
-
     /// For each trajectory sample, the used frame in which its bead is closest to the
     /// measuring age (within half a frame period).
     fn frame_of_samples(&self, frames: &[FrameOutcome], layer: usize) -> Vec<Option<usize>> {
         let half_period = 0.5 * self.seq.camera.frame_period_s;
         let mut best: Vec<Option<(usize, f64)>> = vec![None; self.trajectory.len()];
-        for (i, f) in frames.iter().enumerate().filter(|(_, f)| f.skip.is_none() && f.entry.layer == layer) {
+        for (i, f, loc) in frames.iter().enumerate().filter_map(|(i, f)| f.located().map(|l| (i, f, l))) {
+            if f.entry.layer != layer {
+                continue;
+            }
             for (k, slot) in best.iter_mut().enumerate() {
-                let miss = (f.estimated_time_s - self.trajectory.t_s[k] - self.settings.measure_age_s).abs();
+                let miss = (loc.t_s - self.trajectory.t_s[k] - self.settings.measure_age_s).abs();
                 if miss <= half_period && slot.is_none_or(|(_, m)| miss < m) {
                     *slot = Some((i, miss));
                 }
@@ -359,14 +272,16 @@ impl<'a> Analysis<'a> {
 
     /// Half widths and centre temperature of every sample at `threshold_c`.
     fn read_widths(&self, frames: &[FrameOutcome], owner: &[Option<usize>], threshold_c: f64) -> Vec<Measured> {
-        let params = WidthParams { threshold_c, ..self.params.widths };
+        let params = WidthParams { threshold_c, ..self.localiser.params.widths };
         let mut out = Vec::with_capacity(1);
         owner
             .iter()
             .zip(&self.queries)
             .map(|(frame, query)| {
                 let Some(f) = frame.map(|i| &frames[i]) else { return Measured::default() };
-                let (Some(image), Some(h)) = (&f.undistorted, &f.plane_to_px) else { return Measured::default() };
+                let (Some(image), Some(h)) = (&f.undistorted, f.located().map(|l| &l.plane_to_px)) else {
+                    return Measured::default();
+                };
                 extract_widths_into(image, h, std::slice::from_ref(query), &params, &mut out);
                 let px = h.apply(query.p_mm);
                 let temp_c = bilinear(image, px[0], px[1]).unwrap_or(f64::NAN);
@@ -442,53 +357,13 @@ fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
     lagged.iter().zip(&command).map(|(l, c)| (l - c).abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
 }
 
-fn skipped(entry: &FrameEntry, reason: String) -> FrameOutcome {
-    FrameOutcome {
-        entry: entry.clone(),
-        skip: Some(reason),
-        corners_found: 0,
-        detections: Vec::new(),
-        matched: 0,
-        estimated_time_s: f64::NAN,
-        at_window_edge: false,
-        reproj_err_mm: f64::NAN,
-        plane_to_px: None,
-        px_to_plane: None,
-        undistorted: None,
-    }
-}
-
-/// The detections of the last processed frame with the vertex each was matched to.
-fn collect_detections(
-    workspace: &FrameWorkspace,
-    result: Option<&vision::pipeline::FrameResult>,
-    predicted: &[PredictedCorner],
-) -> Vec<(i64, [f64; 2], f64)> {
-    workspace
-        .detections()
-        .iter()
-        .enumerate()
-        .map(|(i, d)| {
-            let vertex = result
-                .and_then(|r| r.matches.iter().find(|m| m.detection == i))
-                .map_or(-1, |m| i64::from(predicted[m.predicted].id));
-            (vertex, [d.u_px, d.v_px], f64::from(d.temp_c))
-        })
-        .collect()
-}
-
 /// The skip reasons of `frames`, counted: "12 × too few corners: …; 3 × …".
 fn skip_summary(frames: &[FrameOutcome]) -> String {
     let mut counts: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
-    for reason in frames.iter().filter_map(|f| f.skip.as_deref()) {
+    for reason in frames.iter().filter_map(|f| f.skip_reason()) {
         *counts.entry(reason).or_default() += 1;
     }
     counts.iter().map(|(r, n)| format!("{n} × {r}")).collect::<Vec<_>>().join("; ")
-}
-
-fn display_rel(path: &Path) -> String {
-    let parts: Vec<_> = path.iter().rev().take(2).collect();
-    parts.iter().rev().map(|p| p.to_string_lossy()).collect::<Vec<_>>().join("/")
 }
 
 fn median(values: &mut [f64]) -> f64 {
@@ -605,27 +480,41 @@ fn write_frame_tables(
     ctx: &mut StageContext,
     undistorter: &Undistorter,
     frames: &[FrameOutcome],
+    method: Localisation,
 ) -> Result<(), StageError> {
-    let used: Vec<bool> = frames.iter().map(|f| f.skip.is_none()).collect();
+    let located = |f: &FrameOutcome| f.located().copied();
     let homography_cols: Vec<_> = (0..9)
         .map(|i| {
-            let values = frames.iter().map(|f| f.px_to_plane.map_or(f64::NAN, |h| h.m[i / 3][i % 3])).collect();
+            let values =
+                frames.iter().map(|f| located(f).map_or(f64::NAN, |l| l.px_to_plane.m[i / 3][i % 3])).collect();
             f64_col(&format!("h{}{}", i / 3 + 1, i % 3 + 1), values)
         })
         .collect();
+    let of = |g: fn(&super::localise::Located) -> f64| -> Vec<f64> {
+        frames.iter().map(|f| located(f).map_or(f64::NAN, |l| g(&l))).collect()
+    };
+    let time_of = |r: &Result<super::localise::Located, String>| r.as_ref().map_or(f64::NAN, |l| l.t_s);
     let mut columns = vec![
         i64_col("layer", frames.iter().map(|f| f.entry.layer as i64).collect()),
         i64_col("frame", frames.iter().map(|f| f.entry.frame as i64).collect()),
         f64_col("recorded_time_s", frames.iter().map(|f| f.entry.recorded_time_s).collect()),
-        f64_col("estimated_time_s", frames.iter().map(|f| f.estimated_time_s).collect()),
+        f64_col("estimated_time_s", of(|l| l.t_s)),
         i64_col("corners_found", frames.iter().map(|f| f.corners_found as i64).collect()),
         i64_col("corners_matched", frames.iter().map(|f| f.matched as i64).collect()),
-        f64_col("reproj_err_mm", frames.iter().map(|f| f.reproj_err_mm).collect()),
-        bool_col("used", used),
-        bool_col("at_window_edge", frames.iter().map(|f| f.at_window_edge).collect()),
-        str_col("skip_reason", frames.iter().map(|f| f.skip.clone().unwrap_or_default()).collect()),
+        f64_col("reproj_err_mm", of(|l| l.fit_err_mm)),
+        bool_col("used", frames.iter().map(|f| f.located().is_some()).collect()),
+        bool_col("at_window_edge", frames.iter().map(|f| located(f).is_some_and(|l| l.at_window_edge)).collect()),
+        str_col("skip_reason", frames.iter().map(|f| f.skip_reason().unwrap_or_default().to_string()).collect()),
     ];
     columns.extend(homography_cols);
+    columns.extend([
+        str_col("localisation", vec![method.name().to_string(); frames.len()]),
+        i64_col("corners_used", frames.iter().map(|f| located(f).map_or(0, |l| l.pairs as i64)).collect()),
+        f64_col("nozzle_x_mm", of(|l| l.nozzle_mm[0])),
+        f64_col("nozzle_y_mm", of(|l| l.nozzle_mm[1])),
+        f64_col("dlt_time_s", frames.iter().map(|f| time_of(&f.dlt)).collect()),
+        f64_col("rigid_mount_time_s", frames.iter().map(|f| time_of(&f.rigid)).collect()),
+    ]);
     ctx.write_table("frames", &mut frame(columns)?)?;
     let rows: Vec<(&FrameOutcome, &DetectionRow)> =
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
@@ -644,6 +533,48 @@ fn write_frame_tables(
     Ok(())
 }
 
+/// `mount.parquet` (the rigid mounts, one row per pass: 0 the nominal start, 1 and 2 the
+/// fits; H_m row-major, pairs, frames and RMS residual, or the reason a fit failed, and
+/// which one placed the frames) and `vertices.parquet` (every ridge-placed corner pair
+/// of the rigid estimator, and whether it placed the nozzle).
+fn write_mount_tables(
+    ctx: &mut StageContext,
+    undistorter: &Undistorter,
+    frames: &[FrameOutcome],
+    mounts: &[MountRow],
+) -> Result<(), StageError> {
+    let fit_value = |m: &MountRow, g: &dyn Fn(&vision::mount::MountFit) -> f64| m.fit.as_ref().map_or(f64::NAN, g);
+    let mut columns = vec![i64_col("pass", mounts.iter().map(|m| m.pass).collect())];
+    for i in 0..9 {
+        let name = format!("h{}{}", i / 3 + 1, i % 3 + 1);
+        columns.push(f64_col(&name, mounts.iter().map(|m| fit_value(m, &|f| f.mount.m[i / 3][i % 3])).collect()));
+    }
+    columns.extend([
+        i64_col("pairs_used", mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.pairs_used as i64)).collect()),
+        i64_col("frames_used", mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.frames_used as i64)).collect()),
+        f64_col("rms_mm", mounts.iter().map(|m| fit_value(m, &|f| f.rms_mm)).collect()),
+        bool_col("applied", mounts.iter().map(|m| m.applied).collect()),
+        str_col("error", mounts.iter().map(|m| m.fit.as_ref().err().cloned().unwrap_or_default()).collect()),
+    ]);
+    ctx.write_table("mount", &mut frame(columns)?)?;
+    let rows: Vec<(&FrameOutcome, usize)> =
+        frames.iter().flat_map(|f| (0..f.pairs.len()).map(move |k| (f, k))).collect();
+    let px = |(f, k): &(&FrameOutcome, usize)| f.pairs.image_px[*k];
+    let raw: Vec<[f64; 2]> = rows.iter().map(|r| undistorter.distort_px(px(r))).collect();
+    let mut vertices = frame(vec![
+        i64_col("layer", rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
+        i64_col("frame", rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
+        i64_col("vertex", rows.iter().map(|(f, k)| i64::from(f.pairs.ids[*k])).collect()),
+        f64_col("u_px", rows.iter().map(|r| px(r)[0]).collect()),
+        f64_col("v_px", rows.iter().map(|r| px(r)[1]).collect()),
+        f64_col("raw_u_px", raw.iter().map(|p| p[0]).collect()),
+        f64_col("raw_v_px", raw.iter().map(|p| p[1]).collect()),
+        bool_col("used", rows.iter().map(|(f, k)| f.pair_used.get(*k).copied().unwrap_or(false)).collect()),
+    ])?;
+    ctx.write_table("vertices", &mut vertices)?;
+    Ok(())
+}
+
 /// Fig. 4's tables: the frame with the most matched corners (earliest on ties), its
 /// detections and nozzle, and the mosaic of every localised frame on the plane.
 fn write_figure_tables(
@@ -654,7 +585,7 @@ fn write_figure_tables(
 ) -> Result<(), StageError> {
     let best = frames
         .iter()
-        .filter(|f| f.skip.is_none())
+        .filter(|f| f.located().is_some())
         .max_by(|a, b| a.matched.cmp(&b.matched).then(b.entry.recorded_time_s.total_cmp(&a.entry.recorded_time_s)));
     let Some(best) = best else {
         return Err(StageError::BadInput {
@@ -681,7 +612,7 @@ fn write_figure_tables(
         i64_col("matched_vertex", d.iter().map(|x| x.0).collect()),
     ])?;
     ctx.write_table("detections_example", &mut det)?;
-    let nozzle = analysis.undistorter.undistort_px(seq.camera.nozzle_px);
+    let nozzle = analysis.localiser.undistorter.undistort_px(seq.camera.nozzle_px);
     let mut meta = frame(vec![
         i64_col("layer", vec![best.entry.layer as i64]),
         i64_col("frame", vec![best.entry.frame as i64]),
@@ -711,8 +642,8 @@ fn mosaic_frame(
     let nx = ((x1 - x0) / MOSAIC_CELL_MM).ceil() as usize;
     let ny = ((y1 - y0) / MOSAIC_CELL_MM).ceil() as usize;
     let mut temp = vec![f64::NAN; nx * ny];
-    for f in frames.iter().filter(|f| f.skip.is_none() && f.entry.layer == layer) {
-        let (Some(image), Some(h)) = (&f.undistorted, &f.plane_to_px) else { continue };
+    for f in frames.iter().filter(|f| f.entry.layer == layer) {
+        let (Some(image), Some(h)) = (&f.undistorted, f.located().map(|l| &l.plane_to_px)) else { continue };
         for (i, cell) in temp.iter_mut().enumerate() {
             let p = [x0 + ((i % nx) as f64 + 0.5) * MOSAIC_CELL_MM, y0 + ((i / nx) as f64 + 0.5) * MOSAIC_CELL_MM];
             let px = h.apply(p);

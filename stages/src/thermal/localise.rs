@@ -1,0 +1,484 @@
+//! Frame localisation for `thermal.monitor` (paper 003 Sec. 2.3, eqs 27-30): the paper's
+//! per-frame homography and our rigid-mount estimator, run on every frame of a sequence;
+//! the `localisation` parameter chooses which one the widths and the tables use, and
+//! `frames.parquet` carries both capture times.
+//!
+//! - `dlt`, the paper's method: every frame on its own. Undistort, detect the hot
+//!   corners in the band, pair them with the printed CAD corners predicted through the
+//!   nominal mount from the recorded time, place each pair on the ridge intersection
+//!   (`vision::vertex`), fit H(i) by RANSAC + DLT on at least four pairs (eq. 27), the
+//!   nozzle P_N,i = H(i)·P_N⁽⁰⁾ (eq. 29) and the capture time (eq. 30, ±10 ms).
+//! - `rigid_mount`, ours (`vision::mount`): H(i) = T(n_i)·H_m, the camera being rigid on
+//!   a head that only translates. Pass 1 takes the ridge-placed pairs of the detections
+//!   above from every frame and fits the mount H_m once to all of them (P_N⁽⁰⁾ fixes its
+//!   origin, as eq. 29 does). Pass 2 predicts every printed corner whose arms are long
+//!   enough to be read (`VertexParams::arm_reach_mm` plus half a millimetre, so the hot
+//!   end of the bead is not mistaken for an arm) through that mount, from the pass-1
+//!   nozzle (or the commanded position at t_r when pass 1 placed none), and searches its
+//!   ridge vertex from the prediction, in the band or not (`vision::rigid`); the mount
+//!   is fitted again to these pairs, and each frame's nozzle is the robust mean of its
+//!   pairs' offsets — one pair suffices — then eq. 30 with the paper's window.
+//!   Why: the per-frame DLT needs four corners in the band, which two thirds of the
+//!   frames do not have, and its eight free parameters extrapolate the corners' errors
+//!   onto the nozzle; the rigid model has two unknowns per frame.
+
+use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
+use models::thermal::Trajectory;
+use pipeline::StageError;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use vision::camera::Undistorter;
+use vision::frame::ThermalFrame;
+use vision::homography::Homography;
+use vision::localize::TrajectoryView;
+use vision::matching::PredictedCorner;
+use vision::mount::{fit_mount, locate_nozzle, FramePairs, MountFit};
+use vision::pipeline::{
+    check_plausible, localise_dlt, observe_frame, predict_path_corners_into, CornerPairs, FrameContext, FrameInput,
+    FrameWorkspace, PathCorner, PipelineParams,
+};
+use vision::rigid::{initial_mount, localise_rigid, ridge_pairs_into};
+
+use super::common::vertex_passage_times;
+
+/// Beyond `arm_reach_mm`, how far the nozzle must have moved on before a corner's ridges
+/// are read (mm): the newest bead is hottest near the nozzle and would pull the ridge.
+const READY_MARGIN_MM: f64 = 0.5;
+
+/// The estimator whose result the monitor uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Localisation {
+    /// The paper's per-frame homography (eq. 27).
+    Dlt,
+    /// Our rigid-mount estimator.
+    RigidMount,
+}
+
+impl Localisation {
+    /// The parameter values, in this order.
+    pub const NAMES: &'static [&'static str] = &["dlt", "rigid_mount"];
+
+    /// From a checked parameter value.
+    pub fn from_name(name: &str) -> Self {
+        if name == "dlt" {
+            Self::Dlt
+        } else {
+            Self::RigidMount
+        }
+    }
+
+    /// The parameter value.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dlt => "dlt",
+            Self::RigidMount => "rigid_mount",
+        }
+    }
+}
+
+/// One estimator's placement of a frame.
+#[derive(Debug, Clone, Copy)]
+pub struct Located {
+    /// Capture time t̂_c (eq. 30, s).
+    pub t_s: f64,
+    /// t̂_c lies on the edge of the search window.
+    pub at_window_edge: bool,
+    /// Nozzle position P_N,i (eq. 29, world mm).
+    pub nozzle_mm: [f64; 2],
+    /// H(i): undistorted pixel → world plane mm.
+    pub px_to_plane: Homography,
+    /// Its inverse.
+    pub plane_to_px: Homography,
+    /// RMS error of the fit over the pairs it used (mm).
+    pub fit_err_mm: f64,
+    /// Pairs it used.
+    pub pairs: usize,
+}
+
+impl Located {
+    fn new(
+        t: vision::localize::CaptureTimeEstimate,
+        nozzle_mm: [f64; 2],
+        h: Homography,
+        err: f64,
+        pairs: usize,
+    ) -> Result<Self, String> {
+        let plane_to_px = h.inverse().ok_or_else(|| "singular homography".to_string())?;
+        Ok(Self {
+            t_s: t.t_s,
+            at_window_edge: t.at_window_edge,
+            nozzle_mm,
+            px_to_plane: h,
+            plane_to_px,
+            fit_err_mm: err,
+            pairs,
+        })
+    }
+}
+
+/// A detection: (matched vertex or −1, undistorted pixel, temperature °C).
+pub type DetectionRow = (i64, [f64; 2], f64);
+
+/// One frame's outcome under both estimators.
+pub struct FrameOutcome {
+    /// Its row of `frames.csv`.
+    pub entry: FrameEntry,
+    /// Corners detected in the band.
+    pub corners_found: usize,
+    /// Detections paired with printed CAD corners.
+    pub matched: usize,
+    /// Every detection with the vertex it was paired with.
+    pub detections: Vec<DetectionRow>,
+    /// The undistorted frame (None when it could not be read).
+    pub undistorted: Option<ThermalFrame>,
+    /// The rigid estimator's pairs (after pass 2) and which of them placed the nozzle.
+    pub pairs: CornerPairs,
+    /// Per pair of `pairs`: used for the nozzle.
+    pub pair_used: Vec<bool>,
+    /// The paper's estimator, or why it skipped the frame.
+    pub dlt: Result<Located, String>,
+    /// Ours, or why it skipped the frame.
+    pub rigid: Result<Located, String>,
+    /// The one `localisation` chose.
+    pub chosen: Result<Located, String>,
+}
+
+impl FrameOutcome {
+    fn skipped(entry: &FrameEntry, reason: String) -> Self {
+        Self {
+            entry: entry.clone(),
+            corners_found: 0,
+            matched: 0,
+            detections: Vec::new(),
+            undistorted: None,
+            pairs: CornerPairs::default(),
+            pair_used: Vec::new(),
+            dlt: Err(reason.clone()),
+            rigid: Err(reason.clone()),
+            chosen: Err(reason),
+        }
+    }
+
+    /// The chosen placement, if the frame was localised.
+    pub fn located(&self) -> Option<&Located> {
+        self.chosen.as_ref().ok()
+    }
+
+    /// Why the chosen estimator skipped the frame.
+    pub fn skip_reason(&self) -> Option<&str> {
+        self.chosen.as_ref().err().map(String::as_str)
+    }
+}
+
+/// One mount for `mount.parquet`: the start (pass 0, the nominal mount anchored at
+/// P_N⁽⁰⁾) and the fits of passes 1 and 2.
+pub struct MountRow {
+    /// 0, 1 or 2.
+    pub pass: i64,
+    /// The fit or why it failed.
+    pub fit: Result<MountFit, String>,
+    /// This mount placed the frames (the last one that could be fitted).
+    pub applied: bool,
+}
+
+/// What localisation needs, built once per sequence.
+pub struct Localiser<'a> {
+    seq: &'a ThermalSequence,
+    trajectory: &'a Trajectory,
+    /// The camera's undistorter.
+    pub undistorter: Undistorter,
+    h0: Homography,
+    /// Settings of the frame pipeline.
+    pub params: PipelineParams,
+    path_corners: Vec<PathCorner>,
+    passage_s: Vec<f64>,
+    ready_s: Vec<f64>,
+    max_age_s: f64,
+}
+
+impl<'a> Localiser<'a> {
+    /// Precomputes the corners' passage and ready times.
+    pub fn new(
+        seq: &'a ThermalSequence,
+        trajectory: &'a Trajectory,
+        undistorter: Undistorter,
+        h0: Homography,
+        params: PipelineParams,
+        max_age_s: f64,
+    ) -> Self {
+        let path_corners = PathCorner::of_closed_path(&seq.path_mm);
+        let passage_s = vertex_passage_times(seq, trajectory);
+        let vertex = params.vertex.unwrap_or_else(vision::vertex::VertexParams::defaults);
+        let ready_s = path_corners
+            .iter()
+            .map(|c| {
+                let cos = c.arm_dirs[0][0] * c.arm_dirs[1][0] + c.arm_dirs[0][1] * c.arm_dirs[1][1];
+                ready_time_s(
+                    trajectory,
+                    c.vertex_mm,
+                    passage_s[c.id as usize],
+                    vertex.arm_reach_mm(cos) + READY_MARGIN_MM,
+                )
+            })
+            .collect();
+        Self { seq, trajectory, undistorter, h0, params, path_corners, passage_s, ready_s, max_age_s }
+    }
+
+    /// Both estimators on every frame, in file order, and the mount fits; `chosen` set by `method`.
+    pub fn run(&self, seed: u64, method: Localisation) -> Result<(Vec<FrameOutcome>, Vec<MountRow>), StageError> {
+        let view = TrajectoryView::new(&self.trajectory.t_s, &self.trajectory.x_mm, &self.trajectory.y_mm)
+            .map_err(StageError::domain)?;
+        let ctx = FrameContext {
+            undistorter: &self.undistorter,
+            h0: self.h0,
+            nozzle_px: self.seq.camera.nozzle_px,
+            trajectory: view,
+            params: self.params,
+        };
+        let mut frames = self.observe_all(&ctx, seed)?;
+        let mounts = self.localise_rigid_all(&ctx, &mut frames);
+        for f in &mut frames {
+            f.chosen = match method {
+                Localisation::Dlt => f.dlt.clone(),
+                Localisation::RigidMount => f.rigid.clone(),
+            };
+        }
+        Ok((frames, mounts))
+    }
+
+    /// Pass 1 over all frames: decode, observe, the paper's DLT, the ridge pairs.
+    fn observe_all(&self, ctx: &FrameContext<'_>, seed: u64) -> Result<Vec<FrameOutcome>, StageError> {
+        let mut workspace = FrameWorkspace::new(&self.undistorter, &self.params).map_err(StageError::domain)?;
+        let mut last_time: Option<(usize, f64)> = None;
+        let mut outcomes = Vec::with_capacity(self.seq.frames.len());
+        for entry in &self.seq.frames {
+            let outcome = match last_time {
+                Some((layer, t)) if layer == entry.layer && entry.recorded_time_s <= t => FrameOutcome::skipped(
+                    entry,
+                    format!(
+                        "recorded time {:.4} s is not after the previous frame's {:.4} s (out of order)",
+                        entry.recorded_time_s, t
+                    ),
+                ),
+                _ => {
+                    last_time = Some((entry.layer, entry.recorded_time_s));
+                    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ ((entry.layer as u64) << 32 | entry.frame as u64));
+                    self.observe(ctx, entry, &mut workspace, &mut rng)
+                }
+            };
+            outcomes.push(outcome);
+        }
+        Ok(outcomes)
+    }
+
+    /// One frame of pass 1 (a failure is a diagnostic, not an error).
+    fn observe(
+        &self,
+        ctx: &FrameContext<'_>,
+        entry: &FrameEntry,
+        ws: &mut FrameWorkspace,
+        rng: &mut ChaCha8Rng,
+    ) -> FrameOutcome {
+        let path = self.seq.frame_path(entry);
+        let frame = match ThermalFrame::from_png_file(&path) {
+            Ok(frame) => frame,
+            Err(e) => return FrameOutcome::skipped(entry, format!("{}: {e}", display_rel(&path))),
+        };
+        let t_r = entry.recorded_time_s;
+        let printed: Vec<PathCorner> =
+            self.path_corners.iter().copied().filter(|c| self.passage_s[c.id as usize] <= t_r).collect();
+        let mut predicted: Vec<PredictedCorner> = Vec::new();
+        predict_path_corners_into(&self.h0, ctx.trajectory.position_mm(t_r), &printed, &mut predicted);
+        let input = FrameInput { frame: &frame, t_recorded_s: t_r, predicted: &predicted, width_queries: &[] };
+        if let Err(skip) = observe_frame(ctx, &input, ws) {
+            return FrameOutcome::skipped(entry, skip.to_string());
+        }
+        let detections = detection_rows(ws, &predicted);
+        let (corners_found, matched) = (ws.detections().len(), detections.iter().filter(|d| d.0 >= 0).count());
+        let dlt = localise_dlt(ctx, &input, ws, rng).map_err(|s| s.to_string()).and_then(|r| {
+            let h = r.homography.homography;
+            Located::new(r.capture, r.nozzle_mm, h, r.homography.rms_error_mm, r.homography.inlier_count())
+        });
+        FrameOutcome {
+            entry: entry.clone(),
+            corners_found,
+            matched,
+            detections,
+            undistorted: Some(ws.undistorted().clone()),
+            pairs: ws.ridge_pairs(&predicted),
+            pair_used: Vec::new(),
+            dlt,
+            rigid: Err("not localised".into()),
+            chosen: Err("not localised".into()),
+        }
+    }
+
+    /// The rigid-mount estimator over the sequence: fit on pass-1 pairs, re-pair every
+    /// ready corner from the mount's predictions, fit again, place each frame's nozzle.
+    fn localise_rigid_all(&self, ctx: &FrameContext<'_>, frames: &mut [FrameOutcome]) -> Vec<MountRow> {
+        let nozzle_px = self.undistorter.undistort_px(ctx.nozzle_px);
+        let start = match initial_mount(ctx) {
+            Ok(h) => h,
+            Err(e) => {
+                let reason = format!("rigid mount: {e}");
+                frames.iter_mut().for_each(|f| f.rigid = Err(reason.clone()));
+                return vec![MountRow { pass: 0, fit: Err(e.to_string()), applied: false }];
+            }
+        };
+        self.keep_young(frames);
+        let first = self.fit(frames, nozzle_px, &start);
+        let guide = first.as_ref().map_or(start, |f| f.mount);
+        self.repair_all(ctx, frames, &guide);
+        let second = self.fit(frames, nozzle_px, &guide);
+        // Without a second fit (too few frames with two corners) the first one, or else
+        // the nominal mount anchored at P_N⁽⁰⁾, places each frame; mount.parquet says which.
+        let mount = second.as_ref().map_or(guide, |f| f.mount);
+        frames.iter_mut().for_each(|f| self.place(ctx, f, &mount));
+        let nominal = MountFit { mount: start, inliers: Vec::new(), rms_mm: f64::NAN, pairs_used: 0, frames_used: 0 };
+        let applied = if second.is_ok() {
+            2
+        } else if first.is_ok() {
+            1
+        } else {
+            0
+        };
+        [Ok(nominal), first, second]
+            .into_iter()
+            .enumerate()
+            .map(|(pass, fit)| MountRow { pass: pass as i64, fit, applied: pass == applied })
+            .collect()
+    }
+
+    /// The mount fitted to the current pairs of every frame.
+    fn fit(&self, frames: &[FrameOutcome], nozzle_px: [f64; 2], start: &Homography) -> Result<MountFit, String> {
+        let pairs: Vec<FramePairs<'_>> =
+            frames.iter().map(|f| FramePairs { image_px: &f.pairs.image_px, plane_mm: &f.pairs.plane_mm }).collect();
+        fit_mount(&pairs, nozzle_px, start, &self.params.mount).map_err(|e| e.to_string())
+    }
+
+    /// Pass 2: every frame's pairs searched from the predictions of `mount`.
+    fn repair_all(&self, ctx: &FrameContext<'_>, frames: &mut [FrameOutcome], mount: &Homography) {
+        let vertex = self.params.vertex.unwrap_or_else(vision::vertex::VertexParams::defaults);
+        let (mut predicted, mut found) = (Vec::new(), CornerPairs::default());
+        for f in frames.iter_mut() {
+            let Some(image) = &f.undistorted else { continue };
+            let t_r = f.entry.recorded_time_s;
+            let nozzle = locate_nozzle(mount, &f.pairs.image_px, &f.pairs.plane_mm, self.params.mount.inlier_gate_mm)
+                .ok()
+                .map(|fix| fix.nozzle_mm)
+                .filter(|n| check_plausible(ctx, *n, t_r).is_ok())
+                .unwrap_or_else(|| ctx.trajectory.position_mm(t_r));
+            let ready: Vec<PathCorner> =
+                self.path_corners.iter().copied().filter(|c| self.is_young_and_ready(c.id, t_r)).collect();
+            predict_path_corners_into(mount, nozzle, &ready, &mut predicted);
+            ridge_pairs_into(image, &predicted, &vertex, self.params.predicted_shift_px, &mut found);
+            f.pairs = merged(&found, &f.pairs);
+        }
+    }
+
+    /// Both arms of corner `id` are readable at `t_r` and it is at most `max_age_s` old.
+    fn is_young_and_ready(&self, id: u32, t_r: f64) -> bool {
+        let i = id as usize;
+        self.ready_s[i] <= t_r && t_r - self.passage_s[i] <= self.max_age_s
+    }
+
+    /// Drops the pass-1 pairs of corners that are too old or not yet readable.
+    fn keep_young(&self, frames: &mut [FrameOutcome]) {
+        for f in frames.iter_mut() {
+            let t_r = f.entry.recorded_time_s;
+            let mut kept = CornerPairs::default();
+            for k in (0..f.pairs.len()).filter(|&k| self.is_young_and_ready(f.pairs.ids[k], t_r)) {
+                kept.push(f.pairs.ids[k], f.pairs.image_px[k], f.pairs.plane_mm[k]);
+            }
+            f.pairs = kept;
+        }
+    }
+
+    /// The rigid estimator's placement of one frame.
+    fn place(&self, ctx: &FrameContext<'_>, f: &mut FrameOutcome, mount: &Homography) {
+        if f.undistorted.is_none() {
+            f.rigid = f.dlt.clone();
+            return;
+        }
+        match localise_rigid(ctx, mount, &f.pairs, f.entry.recorded_time_s) {
+            Ok(r) => {
+                f.pair_used = r.fix.inliers.clone();
+                f.rigid = Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
+            }
+            Err(skip) => f.rigid = Err(skip.to_string()),
+        }
+    }
+}
+
+/// `primary` plus the pairs of `extra` whose corner it lacks.
+fn merged(primary: &CornerPairs, extra: &CornerPairs) -> CornerPairs {
+    let mut out = primary.clone();
+    for k in (0..extra.len()).filter(|&k| !primary.ids.contains(&extra.ids[k])) {
+        out.push(extra.ids[k], extra.image_px[k], extra.plane_mm[k]);
+    }
+    out
+}
+
+/// First time after `passage_s` at which the trajectory is `reach_mm` from `vertex_mm`
+/// (+∞ if never): from then on both arms of the corner are printed that far.
+fn ready_time_s(trajectory: &Trajectory, vertex_mm: [f64; 2], passage_s: f64, reach_mm: f64) -> f64 {
+    (0..trajectory.len())
+        .filter(|&k| trajectory.t_s[k] >= passage_s)
+        .find(|&k| (trajectory.x_mm[k] - vertex_mm[0]).hypot(trajectory.y_mm[k] - vertex_mm[1]) >= reach_mm)
+        .map_or(f64::INFINITY, |k| trajectory.t_s[k])
+}
+
+/// The detections of the last observed frame with the vertex each was paired with.
+fn detection_rows(ws: &FrameWorkspace, predicted: &[PredictedCorner]) -> Vec<DetectionRow> {
+    ws.detections()
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let vertex =
+                ws.matches().iter().find(|m| m.detection == i).map_or(-1, |m| i64::from(predicted[m.predicted].id));
+            (vertex, [d.u_px, d.v_px], f64::from(d.temp_c))
+        })
+        .collect()
+}
+
+fn display_rel(path: &std::path::Path) -> String {
+    let parts: Vec<_> = path.iter().rev().take(2).collect();
+    parts.iter().rev().map(|p| p.to_string_lossy()).collect::<Vec<_>>().join("/")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_corner_is_ready_once_the_nozzle_is_its_reach_away() {
+        // Along +x at 20 mm/s through a vertex at x = 2 mm (t = 0.1 s): 1.5 mm further on
+        // is reached at t = 0.175 s.
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.001).collect();
+        let x: Vec<f64> = t.iter().map(|t| 20.0 * t).collect();
+        let y = vec![0.0; t.len()];
+        let traj = Trajectory::from_samples(&t, &x, &y).unwrap();
+        let ready = ready_time_s(&traj, [2.0, 0.0], 0.1, 1.5);
+        assert!((ready - 0.175).abs() < 1e-9, "{ready}");
+        assert_eq!(ready_time_s(&traj, [2.0, 0.0], 0.1, 100.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn merging_keeps_the_primary_pair_of_a_corner() {
+        let mut a = CornerPairs::default();
+        a.push(3, [1.0, 1.0], [0.0, 0.0]);
+        let mut b = CornerPairs::default();
+        b.push(3, [9.0, 9.0], [0.0, 0.0]);
+        b.push(5, [2.0, 2.0], [1.0, 1.0]);
+        let m = merged(&a, &b);
+        assert_eq!(m.ids, [3, 5]);
+        assert_eq!(m.image_px[0], [1.0, 1.0]);
+    }
+
+    #[test]
+    fn localisation_names_round_trip() {
+        for name in Localisation::NAMES {
+            assert_eq!(Localisation::from_name(name).name(), *name);
+        }
+    }
+}
