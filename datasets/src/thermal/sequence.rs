@@ -35,8 +35,9 @@ pub const FORMAT_VERSION: u32 = 1;
 /// Name of the ground-truth subfolder.
 pub const TRUTH_DIR: &str = "truth";
 /// Fill fraction stored as 65535 in `truth/deposit_L*.png`: a deposit piles up to this
-/// many layer heights (corner piles reach about 3).
-pub const DEPOSIT_PNG_FULL_FILL: f64 = 4.0;
+/// many layer heights (the fullest cells, where a layer ends with the head at rest, hold
+/// about 5.5).
+pub const DEPOSIT_PNG_FULL_FILL: f64 = 8.0;
 
 /// `camera.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -63,7 +63,7 @@ impl StageKind for ReprintEvaluateStage {
         "thermal.reprint_evaluate"
     }
     fn version(&self) -> u32 {
-        2
+        3
     }
     fn summary(&self) -> &'static str {
         "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
