@@ -622,26 +622,26 @@ narrower than the overlapping beads, so a perfect corner would read as over-depo
 rotated frame), so a bulge at the fanned apex is counted once, not once per direction crossing it; the fit runs 3τ past each window so the lagged tail does \
 not starve the bead after the corner; and K_e = 1, since the paper's K_e was identified for corners read at 140-150 °C and ours are read in a wider band.</p>\n\
 <p><b>What limits width feedback here.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
-so the paper's geometric model is the printer's own. With the printer's true widths in place of the thermal ones \
-(datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 44 % and the RMS contour error by 36 % when the \
-widths come from the first layer, and by 52 % and 43 % from layers 1-4, which is what the spec reads; eqs 31-33 as printed (desired width w0/cos ψ, \
-over-deposition only) lower O_E by 84 % but raise the RMS by 8 %, because they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much \
-and −0.92 mm³ too little, but the footprint of the first layer shows only +0.34 mm³ of that excess: at a sharp apex the deposition quadrilaterals \
-overlap even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it. From the second layer on \
-the nozzle squeezes that pile sideways into the bead, and layers 1-4 show +0.66 mm³. A width read from a thermal \
-footprint is blind to the volume still piled in height, so width feedback under-corrects exactly the corners where the excess is largest, most of all \
-on the paper's one-layer verification print. That is the discrepancy this reproduction names: eqs 31-33 map a width error to a flow error, which holds \
-only where the bead stays one layer high. {extension}\
+so the paper's geometric model is the printer's own. With the printer's true widths in place of the thermal ones (datasets/examples/chen2024_oracle.rs, \
+seed 3, 20 layers), the stage's defaults lower the mean O_E by 53 % and the RMS contour error by 33 % when the widths come from the first layer, and \
+by 64 % and 34 % from layers 1-4, which is what the spec reads; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E as much but \
+leave the RMS where it was, because they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much and −0.92 mm³ too little, but the \
+footprint of the first layer shows only +0.20 mm³ of that excess, and of layers 1-4 +0.32 mm³: at a sharp apex the deposition quadrilaterals overlap \
+even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it; from the second layer on the nozzle \
+squeezes part of that pile sideways into the bead. That is the discrepancy this reproduction names: eqs 31-33 map a width error to a flow error, which \
+holds only where the bead stays one layer high. With the thermal widths instead of the true ones the O_E still falls as far, but the RMS does not: \
+within 0.5 mm of a vertex the thermal width differs from the true one by 0.11-0.13 mm (median absolute, layers 1-4; 90th percentile 0.4-0.9 mm), against \
+0.01 mm on the straight legs, and the compensation turns that noise into thin and thick stretches around the corners. {extension}\
 With the <code>melt_squeeze_out</code> effect of the virtual printer (melt flows into the nearest free space instead of along the deposition direction), \
 true widths gave only a third less O_E in our previous release: the more the melt moves after it leaves the nozzle, the less a width says about the flow.</p>\n\
 <p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
 0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the outer surface \
 of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary on every layer, with no profiler noise. \
-Eq. 41 takes each CAD point's distance to the nearest printed edge, so a bulge that sticks out past a corner costs nothing while a part of the CAD bead left \
-empty, or buried under a pile, does. Our conventional part's worst points are the inner mitre points of the 90-105° valleys, buried about 0.27 mm deep \
-under the corner pile; once the excess is gone the worst points become the sharp outer tips of the 45° corners, which a bead on a blended path never fills. \
-Our conventional part is already at the paper's compensated level (0.27 mm against 0.25 mm at worst); the paper's 1.68 mm comes from corner blobs of its real \
-printer that this printer does not make, so a 50 % fall of the maximum is out of reach for either method here.</p>\n\
+Eq. 41 takes each CAD point's distance to the nearest printed edge, so a bulge that sticks out past a corner costs nothing while a part of the CAD bead \
+left empty does. Our worst point, before and after either compensation, is the outer tip of the mitred CAD bead at the 45° corners, 0.59 mm beyond the \
+vertex, which a round bead on a blended path never fills (0.42 mm short on the conventional part): a floor no flow command removes, so a 50 % fall of the \
+maximum is out of reach for both methods on this part. The paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger \
+than this printer's.</p>\n\
 <p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
 Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
 solve of eq. 39 per corner (models/benches/thermal.rs) and the whole frame pipeline per frame (vision/benches/frames.rs); see the README for the numbers.</p>\n\
