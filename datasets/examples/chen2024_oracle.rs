@@ -32,6 +32,7 @@
 
 use datasets::thermal::deposition::{conventional_command, edge_distance_mm, print_part};
 use datasets::thermal::effects::Effects;
+use models::stats::finite_median;
 use models::thermal::compensation::{
     apply_spans, compensate_spans, velocity_change_from_sweep_mm_s, FbsParams, SpanParams, SweepSample,
 };
@@ -154,7 +155,7 @@ impl TrueWidths {
             let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
             let (sin, cos) = dirs.deposition_heading_rad[k].sin_cos();
             let (left, right) = ([-sin, cos], [sin, -cos]);
-            let side = |dir: [f64; 2]| median(layers.iter().map(|g| edge_distance_mm(g, p, dir)).collect());
+            let side = |dir: [f64; 2]| finite_median(layers.iter().map(|g| edge_distance_mm(g, p, dir)));
             out.measured.push((side(left), side(right)));
             let wd = w0 / dirs.psi_rad[k].cos();
             out.paper_desired.push((wd, wd));
@@ -215,16 +216,6 @@ impl TrueWidths {
             1.0,
         );
         split_volume_mm3(&dv, area * dt_s)
-    }
-}
-
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let mid = values.len() / 2;
-    if values.len() % 2 == 1 {
-        values[mid]
-    } else {
-        0.5 * (values[mid - 1] + values[mid])
     }
 }
 

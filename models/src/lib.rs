@@ -7,8 +7,12 @@
 //!   line-width model, the first-order extrusion-lag baseline, covariance-prior transfer.
 //! - [`inkjet`]: Lu, Zheng, Mishra 2015 (paper 002): layer-to-layer droplet height model
 //!   and the model-predictive controller.
+//! - [`thermal`]: Chen et al. 2024 (paper 003): path geometry, deposition direction
+//!   allocation, filtered-B-spline compensation and the evaluation metrics.
+//! - [`stats`]: the shared median.
 #![deny(missing_docs)]
 
 pub mod fdm;
 pub mod inkjet;
+pub mod stats;
 pub mod thermal;

@@ -56,6 +56,7 @@
 use std::path::Path;
 
 use datasets::thermal::deposition::conventional_command;
+use models::stats::finite_median;
 use models::thermal::compensation::{
     apply_spans, compensate_spans, desired_half_width_mm, paper_gain, velocity_change_from_sweep_mm_s, FbsParams,
     SampleSpan, SpanCompensation, SpanParams, SweepSample,
@@ -309,21 +310,6 @@ impl MeasuredWidths {
         }
         let sides_mm = readings.into_iter().map(|(l, r)| (finite_median(l), finite_median(r))).collect();
         Ok(Self { sides_mm })
-    }
-}
-
-/// Median of the finite values (mean of the middle pair for an even count); NaN if none.
-fn finite_median(mut values: Vec<f64>) -> f64 {
-    values.retain(|v| v.is_finite());
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    let mid = values.len() / 2;
-    if values.len() % 2 == 1 {
-        values[mid]
-    } else {
-        0.5 * (values[mid - 1] + values[mid])
     }
 }
 
