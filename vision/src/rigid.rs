@@ -16,13 +16,26 @@
 //! near the vertex each arm's ridge is pulled towards the other arm: on the virtual
 //! printer the vertex moves inwards by ~0.01 mm in the first half second and ~0.1 mm
 //! after 2 s, so `thermal.monitor` searches only corners younger than `max_corner_age_s`.
+//!
+//! The ridge vertex holds the arm directions it is given ([`crate::vertex`]), so where
+//! they come from matters. Taken from the fitted mount, they would close a loop: a mount
+//! turned by δ turns the predicted arms by δ, which moves each vertex sideways by
+//! s̄·δ/cos(θ/2) ≈ 2.6δ mm for a 45° corner, while the mount moves the predicted
+//! vertices of two neighbouring zigzag corners (5 mm apart across the part) relative to
+//! each other by about 5δ mm, the same way: the two corners of a frame then confirm the
+//! turned mount. Measured (five seeds): re-pairing from the fitted mount's arms and
+//! fitting again drifted instead of settling (seed 3: mount error 0.008 → 0.032 mm in four
+//! rounds, RMS residual rising). [`predict_corners_with_arms_into`] therefore takes the
+//! positions from the fitted mount and the arm directions from a fixed one (the nominal
+//! mount; its error, at most ±0.5° tilt and ±0.3° roll, turns an arm by ~0.005 rad at
+//! most); the fit-and-re-pair rounds then settle in 3-4 rounds.
 
 use crate::frame::ThermalFrame;
 use crate::homography::Homography;
 use crate::localize::{estimate_capture_time, CaptureTimeEstimate};
 use crate::matching::{PredictedCorner, ARM_PROBE_MM};
 use crate::mount::{frame_homography, locate_nozzle, MountError, NozzleFix};
-use crate::pipeline::{check_plausible, CornerPairs, FrameContext, FrameSkip};
+use crate::pipeline::{check_plausible, CornerPairs, FrameContext, FrameSkip, PathCorner};
 use crate::vertex::{vertex_from_ridges, CornerArms, VertexParams};
 
 /// A frame localised under the rigid mount.
@@ -34,6 +47,39 @@ pub struct RigidResult {
     pub homography: Homography,
     /// Capture time (eq. 30).
     pub capture: CaptureTimeEstimate,
+}
+
+/// The predicted pixels of `corners` for a nozzle at `nozzle_mm` (world) through `mount`
+/// (px = H_m⁻¹(corner − nozzle)), with each corner's arm probes
+/// ([`PredictedCorner::arm_px`]) oriented and scaled as `arms_mount` images them (its
+/// probes moved onto `mount`'s vertex pixel). The ridge vertex holds the arm directions
+/// it is given, so taking them from a fixed mount (the nominal one) keeps the vertices
+/// from following the fitted mount's rotation, which the corners of a zigzag hardly
+/// constrain (see the module doc). Corners behind either camera are left out.
+pub fn predict_corners_with_arms_into(
+    mount: &Homography,
+    arms_mount: &Homography,
+    nozzle_mm: [f64; 2],
+    corners: &[PathCorner],
+    out: &mut Vec<PredictedCorner>,
+) {
+    out.clear();
+    let (Some(inv), Some(arms_inv)) = (mount.inverse(), arms_mount.inverse()) else { return };
+    let rel = |p: [f64; 2]| [p[0] - nozzle_mm[0], p[1] - nozzle_mm[1]];
+    let finite = |p: [f64; 2]| p[0].is_finite() && p[1].is_finite();
+    for c in corners {
+        let (px, at) = (inv.apply(rel(c.vertex_mm)), arms_inv.apply(rel(c.vertex_mm)));
+        if !finite(px) || !finite(at) {
+            continue;
+        }
+        let probe = |d: [f64; 2]| {
+            let q = arms_inv.apply(rel([c.vertex_mm[0] + ARM_PROBE_MM * d[0], c.vertex_mm[1] + ARM_PROBE_MM * d[1]]));
+            [q[0] - at[0] + px[0], q[1] - at[1] + px[1]]
+        };
+        let arms = [probe(c.arm_dirs[0]), probe(c.arm_dirs[1])];
+        let arm_px = (finite(arms[0]) && finite(arms[1])).then_some(arms);
+        out.push(PredictedCorner { id: c.id, plane_mm: c.vertex_mm, px, arm_px });
+    }
 }
 
 /// The ridge vertex of every predicted corner that has both arm probes, searched from its
@@ -190,6 +236,39 @@ mod tests {
             let err_mm = (res.fix.nozzle_mm[0] - nozzle_true[0]).hypot(res.fix.nozzle_mm[1] - nozzle_true[1]);
             assert!(err_mm < 0.01, "corner {}: nozzle off by {err_mm} mm", pairs.ids[k]);
         }
+    }
+
+    #[test]
+    fn corners_are_placed_by_the_mount_and_oriented_by_the_arms_mount() {
+        let c = case();
+        let corners = path_corners(&c.scene.vertices_mm);
+        let nozzle = [-1.0, 10.0];
+        let (mount, nominal) = (c.truth.nominal_homography(), c.nominal.nominal_homography());
+        let (mut same, mut plain, mut mixed, mut by_nominal) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        // With one mount for both it is the plain prediction.
+        predict_corners_with_arms_into(&mount, &mount, nozzle, &corners, &mut same);
+        predict_path_corners_into(&mount, nozzle, &corners, &mut plain);
+        assert_eq!(same.len(), corners.len());
+        for (a, b) in same.iter().zip(&plain) {
+            assert_eq!(a.id, b.id);
+            assert!((a.px[0] - b.px[0]).hypot(a.px[1] - b.px[1]) < 1e-9);
+            for k in 0..2 {
+                let (p, q) = (a.arm_px.unwrap()[k], b.arm_px.unwrap()[k]);
+                assert!((p[0] - q[0]).hypot(p[1] - q[1]) < 1e-9);
+            }
+        }
+        // Mixed: the vertex pixel of `mount`, the arm probes of `nominal` moved onto it.
+        predict_corners_with_arms_into(&mount, &nominal, nozzle, &corners, &mut mixed);
+        predict_path_corners_into(&nominal, nozzle, &corners, &mut by_nominal);
+        for ((m, p), n) in mixed.iter().zip(&plain).zip(&by_nominal) {
+            assert!((m.px[0] - p.px[0]).hypot(m.px[1] - p.px[1]) < 1e-9);
+            for k in 0..2 {
+                let (a, b) = (m.arm_px.unwrap()[k], n.arm_px.unwrap()[k]);
+                let (da, db) = ([a[0] - m.px[0], a[1] - m.px[1]], [b[0] - n.px[0], b[1] - n.px[1]]);
+                assert!((da[0] - db[0]).hypot(da[1] - db[1]) < 1e-9, "corner {} arm {k}", m.id);
+            }
+        }
+        assert!(mixed.iter().zip(&by_nominal).any(|(m, n)| (m.px[0] - n.px[0]).abs() > 0.5), "the mounts differ");
     }
 
     #[test]

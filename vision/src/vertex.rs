@@ -11,18 +11,47 @@
 //! vertex up to 2.5 px, systematic in sign per corner).
 //!
 //! What we do instead: locate the vertex geometrically. Each arm of the corner is a
-//! straight bead whose temperature ridge runs along the path; away from the bulge the
+//! straight bead whose temperature ridge runs along the path; away from the corner the
 //! ridge is centred on the path. For each arm we read cross-sections of the undistorted
 //! frame perpendicular to the arm at distances `s` from the corner (far enough that the
-//! other arm is at least `min_arm_gap_mm` away, up to `span_mm` further), take the
+//! two arms are at least `min_arm_gap_mm` apart, up to `span_mm` further), take the
 //! sub-pixel ridge maximum of each (least-squares parabola over ±1.5 px of the hottest
-//! sample), fit a straight line through them (total least squares), and intersect the two
-//! lines. Straight plane lines stay straight in the undistorted image (a homography), so
-//! the intersection is the image of the path vertex (the planner's 0.05 mm blend is
-//! negligible), independent of the bulge. The arm directions come from the CAD path
-//! through the nominal mount (the caller's prediction); the fitted lines correct them.
-//! Two passes: the second starts from the first intersection, which puts the sampled
-//! cross-sections onto the ridges.
+//! sample), draw through their centroid the line with the arm's direction as the caller
+//! predicts it, and intersect the two lines. Straight plane lines stay straight in the
+//! undistorted image (a homography), so the intersection is the image of the path vertex
+//! (the planner's 0.05 mm blend is negligible), independent of the bulge. Two passes: the
+//! second starts from the first intersection, which puts the cross-sections at the
+//! intended distances.
+//!
+//! Why the directions are held, not fitted, and why the arms are read this far out
+//! (measured on the eqs 5-11 printer, seed 3, five layers, every corner 0.15-0.8 s old,
+//! against the true corner pixels, started from them; offsets in plane mm):
+//! - Near a sharp corner the arm's ridge is pulled towards the other arm: the deposition
+//!   directions rotate (DDA, eqs 13-26) up to 1.24 mm from a 45° vertex (0.92 mm at 60°,
+//!   where the arms are ~0.95 mm apart), material piles up on the inner side along the
+//!   bisector (fill up to ~3), and its heat spreads over the arms. On the noise-free
+//!   plane the ridge is 0.15-0.2 mm inwards at s = 0.4-1.0 mm and 0.06-0.1 mm at 1.2 mm
+//!   for the 45°-60° corners; in the frames (PSF 0.7 px) the inward pull, as a function of
+//!   the arm gap g = 2 s sin(θ/2) and the same for every angle, is 0.10 mm at g = 0.8 mm,
+//!   0.014-0.022 mm at 1.2 mm, 0.003-0.007 mm at 1.4 mm and ≤ 0.001 mm from 1.6 mm on.
+//! - The former estimator fitted each arm's direction (total least squares) from 1.2 mm
+//!   of gap on. The pull at the near end tilts the fitted line, and the intersection
+//!   extrapolates the tilt back over `first_offset_mm` + `span_mm`/2 and divides it by
+//!   sin(θ/2): vertices 0.04 mm inwards along the bisector in the median, 0.18 mm at the
+//!   90th percentile and 0.19 mm for the 45° corners (0.84-1.07 px), systematic per
+//!   corner, which the mount fit then absorbed (see `thermal.monitor`).
+//! - Held directions turn a sideways pull into its mean over the read span instead of
+//!   an extrapolated tilt: from 1.2 mm of gap 0.006 mm median, 0.034 mm p90; from 1.6 mm
+//!   (the default) 0.006 mm median, 0.013 mm p90, 45° corners 0.001 mm. Fitted
+//!   directions from 1.6 mm: 0.015 mm and 0.095 mm.
+//!
+//! The held direction must be right: with s̄ the mean distance read (2.8 mm at 45°),
+//! both arms turned by δ the same way (a roll of the mount) move the vertex sideways by
+//! s̄·δ/cos(θ/2), and arms opened or closed by δ each move it along the bisector by
+//! s̄·δ/sin(θ/2) (tested). The callers take it from
+//! the nominal mount (the paper's DLT and the rigid estimator's first pass) or, for the
+//! rigid estimator's later passes, still from the nominal mount while the positions come
+//! from the fitted one ([`crate::rigid::predict_corners_with_arms_into`]).
 
 use crate::frame::ThermalFrame;
 use crate::widths::bilinear;
@@ -51,11 +80,12 @@ pub struct VertexParams {
 
 impl VertexParams {
     /// Sized for the Lepton at ~0.15 mm/px and 0.45 mm beads whose heat has spread to
-    /// σ ≈ 0.3-0.4 mm: 1.2 mm between arms leaves the other arm's tail below 1 % at the
-    /// ridge; 0.7 mm clears the bulge.
+    /// σ ≈ 0.3-0.4 mm: from 1.6 mm between the arms neither the other arm nor the corner's
+    /// pile pulls the ridge by more than 0.001 mm (module doc; 1.2 mm, the former value,
+    /// let them pull it by 0.02 mm); 0.7 mm clears the bulge of obtuse corners.
     pub fn defaults() -> Self {
         Self {
-            min_arm_gap_mm: 1.2,
+            min_arm_gap_mm: 1.6,
             min_offset_mm: 0.7,
             span_mm: 1.5,
             step_mm: 0.1,
@@ -119,9 +149,11 @@ impl CornerArms {
     }
 }
 
-/// The image of the path vertex as the intersection of the two ridge lines, starting
-/// near `start_px` (e.g. the heat peak); None when an arm has too few ridge points, the
-/// lines are nearly parallel or the vertex moves more than `max_shift_px`.
+/// The image of the path vertex, starting near `start_px` (e.g. the heat peak or a
+/// prediction): each arm's line has the direction `arms.dirs` gives it and passes through
+/// the centroid of its ridge points; the vertex is where the two meet. None when an arm
+/// has too few ridge points, the arms are nearly parallel or the vertex moves more than
+/// `max_shift_px`.
 pub fn vertex_from_ridges(
     image: &ThermalFrame,
     start_px: [f64; 2],
@@ -131,70 +163,63 @@ pub fn vertex_from_ridges(
     if arms.sin_between() < 0.2 {
         return None;
     }
-    let first = intersect_ridges(image, start_px, arms, params)?;
-    let second = intersect_ridges(image, first.0, &first.1, params)?;
-    let shift = (second.0[0] - start_px[0]).hypot(second.0[1] - start_px[1]);
-    (shift <= params.max_shift_px).then_some(second.0)
+    let first = intersect_arms(image, start_px, arms, params)?;
+    let second = intersect_arms(image, first, arms, params)?;
+    let shift = (second[0] - start_px[0]).hypot(second[1] - start_px[1]);
+    (shift <= params.max_shift_px).then_some(second)
 }
 
-/// One pass: ridge lines of both arms from `apex_px`, their intersection and the arms
-/// re-aimed along the fitted lines.
-fn intersect_ridges(
+/// One pass of [`vertex_from_ridges`] from `apex_px`.
+fn intersect_arms(
     image: &ThermalFrame,
     apex_px: [f64; 2],
     arms: &CornerArms,
     params: &VertexParams,
-) -> Option<([f64; 2], CornerArms)> {
+) -> Option<[f64; 2]> {
     let s0_mm = params.first_offset_mm(arms.cos_between());
-    let mut lines = [([0.0; 2], [0.0; 2]); 2];
+    let mut through = [[0.0; 2]; 2];
+    let mut points = [[0.0; 2]; MAX_SECTIONS];
     for k in 0..2 {
-        lines[k] = ridge_line(image, apex_px, arms.dirs[k], arms.px_per_mm[k], s0_mm, params)?;
+        let n = ridge_points(image, apex_px, arms.dirs[k], arms.px_per_mm[k], s0_mm, params, &mut points);
+        if n < params.min_points {
+            return None;
+        }
+        through[k] = centroid(&points[..n]);
     }
-    let vertex = intersect(lines[0], lines[1])?;
-    let mut refined = *arms;
-    for (k, (_, dir)) in lines.iter().enumerate() {
-        // Keep the fitted direction pointing away from the vertex.
-        refined.dirs[k] = if dot(*dir, arms.dirs[k]) >= 0.0 { *dir } else { [-dir[0], -dir[1]] };
-    }
-    Some((vertex, refined))
+    intersect((through[0], arms.dirs[0]), (through[1], arms.dirs[1]))
 }
 
-/// Total-least-squares line (point, unit direction) through the ridge maxima of one arm.
-fn ridge_line(
+/// Most cross-sections read per arm.
+const MAX_SECTIONS: usize = 64;
+
+/// The ridge maxima of one arm's cross-sections, `s0_mm` to `s0_mm + span_mm` from
+/// `apex_px` along `dir`, written into `points`; returns how many were found.
+fn ridge_points(
     image: &ThermalFrame,
     apex_px: [f64; 2],
     dir: [f64; 2],
     px_per_mm: f64,
     s0_mm: f64,
     params: &VertexParams,
-) -> Option<([f64; 2], [f64; 2])> {
+    points: &mut [[f64; 2]; MAX_SECTIONS],
+) -> usize {
     let normal = [-dir[1], dir[0]];
     let steps = (params.span_mm / params.step_mm).round() as usize;
-    let (mut n, mut sum, mut sxx, mut syy, mut sxy) = (0usize, [0.0; 2], 0.0, 0.0, 0.0);
-    let mut points = [[0.0; 2]; 64];
-    for i in 0..=steps.min(63) {
+    let mut n = 0;
+    for i in 0..=steps.min(MAX_SECTIONS - 1) {
         let s_px = (s0_mm + i as f64 * params.step_mm) * px_per_mm;
         let centre = [apex_px[0] + s_px * dir[0], apex_px[1] + s_px * dir[1]];
         if let Some(r) = ridge_offset_px(image, centre, normal, params) {
-            let p = [centre[0] + r * normal[0], centre[1] + r * normal[1]];
-            points[n] = p;
-            sum = [sum[0] + p[0], sum[1] + p[1]];
+            points[n] = [centre[0] + r * normal[0], centre[1] + r * normal[1]];
             n += 1;
         }
     }
-    if n < params.min_points {
-        return None;
-    }
-    let mean = [sum[0] / n as f64, sum[1] / n as f64];
-    for p in &points[..n] {
-        let (dx, dy) = (p[0] - mean[0], p[1] - mean[1]);
-        sxx += dx * dx;
-        syy += dy * dy;
-        sxy += dx * dy;
-    }
-    // Principal axis of the scatter: angle ½·atan2(2 sxy, sxx − syy).
-    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    Some((mean, [angle.cos(), angle.sin()]))
+    n
+}
+
+fn centroid(points: &[[f64; 2]]) -> [f64; 2] {
+    let sum = points.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]]);
+    [sum[0] / points.len() as f64, sum[1] / points.len() as f64]
 }
 
 /// Sub-pixel offset of the temperature maximum along `normal` from `centre` (px), by a
@@ -307,6 +332,98 @@ mod tests {
         let found_mm = h0.apply(found);
         let err_mm = (found_mm[0] - vertex[0]).hypot(found_mm[1] - vertex[1]);
         assert!(err_mm < 0.05, "vertex off by {err_mm} mm (hot spot was 0.5 mm off)");
+    }
+
+    /// A noise-free corner drawn directly in the image: vertex at (80, 30) px, arms at
+    /// ±θ/2 from +v, Gaussian ridges of σ = 2 px, 7 px per mm along both arms.
+    fn image_corner(theta: f64) -> (ThermalFrame, CornerArms, [f64; 2]) {
+        let vertex = [80.0, 30.0];
+        let half = 0.5 * theta;
+        let dirs = [[-half.sin(), half.cos()], [half.sin(), half.cos()]];
+        let mut frame = ThermalFrame::filled(160, 120, 60.0);
+        for v in 0..120 {
+            for u in 0..160 {
+                let d = [u as f64 - vertex[0], v as f64 - vertex[1]];
+                let dist2 = dirs
+                    .iter()
+                    .map(|a| {
+                        let along = dot(d, *a).max(0.0);
+                        (d[0] - along * a[0]).powi(2) + (d[1] - along * a[1]).powi(2)
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                frame.temp_c[v * 160 + u] = (60.0 + 70.0 * (-0.5 * dist2 / 4.0).exp()) as f32;
+            }
+        }
+        (frame, CornerArms { dirs, px_per_mm: [7.0, 7.0] }, vertex)
+    }
+
+    fn rotated(d: [f64; 2], delta: f64) -> [f64; 2] {
+        let (s, c) = delta.sin_cos();
+        [c * d[0] - s * d[1], s * d[0] + c * d[1]]
+    }
+
+    #[test]
+    fn exact_arms_give_the_vertex_and_turned_arms_move_it_by_the_closed_form() {
+        let theta = 60f64.to_radians();
+        let (frame, arms, vertex) = image_corner(theta);
+        let params = VertexParams::defaults();
+        let found = vertex_from_ridges(&frame, [81.0, 31.5], &arms, &params).unwrap();
+        assert!((found[0] - vertex[0]).hypot(found[1] - vertex[1]) < 0.01, "{found:?}");
+        // Mean distance read: s0 + span/2 (mm) at 7 px/mm.
+        let s_mean_px = 7.0 * (params.first_offset_mm(theta.cos()) + 0.5 * params.span_mm);
+        let delta = 0.004;
+        // Both arms turned the same way: the vertex moves sideways by s̄·δ/cos(θ/2).
+        let roll = CornerArms { dirs: [rotated(arms.dirs[0], delta), rotated(arms.dirs[1], delta)], ..arms };
+        let moved = vertex_from_ridges(&frame, vertex, &roll, &params).unwrap();
+        let (sideways, along) = (moved[0] - vertex[0], moved[1] - vertex[1]);
+        let expected = s_mean_px * delta / (0.5 * theta).cos();
+        assert!((sideways.abs() - expected).abs() < 0.03 * expected && along.abs() < 0.05 * expected, "{moved:?}");
+        // Both arms opened by δ: it moves along the bisector by s̄·δ/sin(θ/2).
+        let open = CornerArms { dirs: [rotated(arms.dirs[0], -delta), rotated(arms.dirs[1], delta)], ..arms };
+        let moved = vertex_from_ridges(&frame, vertex, &open, &params).unwrap();
+        let expected = s_mean_px * delta / (0.5 * theta).sin();
+        assert!(((moved[1] - vertex[1]).abs() - expected).abs() < 0.03 * expected, "{moved:?}");
+        assert!((moved[0] - vertex[0]).abs() < 0.05 * expected, "{moved:?}");
+    }
+
+    #[test]
+    fn a_pile_along_the_bisector_does_not_pull_the_vertex() {
+        // A 45° corner with an elongated hot pile inside it along the bisector (the eqs
+        // 5-11 printer piles material there): it pulls the arms' ridges towards each
+        // other near the vertex, where the cross-sections do not reach.
+        let cam = CameraModel::lepton35(Distortion::default());
+        let vertex = [0.4, 2.0];
+        let half = 22.5f64.to_radians();
+        let (a, b) = (
+            [vertex[0] - 5.0 * half.sin(), vertex[1] - 5.0 * half.cos()],
+            [vertex[0] + 5.0 * half.sin(), vertex[1] - 5.0 * half.cos()],
+        );
+        let poly = HotPolyline {
+            vertices_mm: vec![a, vertex, b],
+            background_c: 60.0,
+            bead_c: 130.0,
+            bead_sigma_mm: 0.3,
+            corner_excess_c: 0.0,
+            corner_sigma_mm: 0.45,
+        };
+        let pile = |p: [f64; 2]| {
+            let (across, along) = (p[0] - vertex[0], vertex[1] - 0.6 - p[1]);
+            30.0 * (-0.5 * (across / 0.3).powi(2) - 0.5 * (along / 0.6).powi(2)).exp()
+        };
+        let mut frame = render_raw_frame(&cam, [0.0, 0.0], |p| poly.temp_c(p) + pile(p));
+        add_noise(&mut frame, 0.05, 5);
+        let h0 = cam.nominal_homography();
+        let to_px = h0.inverse().unwrap();
+        let arm_pt = |q: [f64; 2]| {
+            let len = (q[0] - vertex[0]).hypot(q[1] - vertex[1]);
+            to_px.apply([vertex[0] + (q[0] - vertex[0]) / len, vertex[1] + (q[1] - vertex[1]) / len])
+        };
+        let arms = CornerArms::from_points(to_px.apply(vertex), [arm_pt(a), arm_pt(b)], 1.0).unwrap();
+        let params = VertexParams::defaults();
+        assert!((params.first_offset_mm(45f64.to_radians().cos()) - 1.6 / (2.0 * half.sin())).abs() < 1e-12);
+        let found = h0.apply(vertex_from_ridges(&frame, to_px.apply(vertex), &arms, &params).unwrap());
+        let err_mm = (found[0] - vertex[0]).hypot(found[1] - vertex[1]);
+        assert!(err_mm < 0.02, "vertex off by {err_mm} mm");
     }
 
     #[test]

@@ -16,7 +16,10 @@
 //!   over the image of the distance between the plane points they give one pixel, beside
 //!   the same for the nominal mount anchored at the nozzle pixel (the fit's start);
 //! - corner vertices: the rigid estimator's ridge vertices that placed a nozzle, to the
-//!   true corner pixels (raw px);
+//!   true corner pixels (raw px); and the nozzle those corners give with their true
+//!   pixels, through the true mount (`nozzle_err_floor_median_mm`: the per-frame camera
+//!   vibration, which one translation per frame cannot tell from a nozzle offset, is all
+//!   that is left) and through the applied mount (`nozzle_err_true_vertices_median_mm`);
 //! - homography (eq. 27): every true corner in a localised frame mapped through the
 //!   frame's estimated H onto the plane, distance to its CAD vertex (mm);
 //! - widths (Sec. 2.4): measured w_l + w_r against the true deposit's width along the
@@ -69,7 +72,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        2
+        3
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -94,8 +97,8 @@ impl StageKind for AccuracyEvaluateStage {
         capture_time_metrics(&frames, &truth, &mut metrics);
         estimator_metrics(&frames, &truth, &mut metrics);
         nozzle_metrics(&frames, &truth, &mut metrics);
-        mount_metrics(&monitor, &seq, &truth, &undistorter, &mut metrics)?;
-        vertex_metrics(&monitor, &truth, &mut metrics)?;
+        let mounts = mount_metrics(&monitor, &seq, &truth, &undistorter, &mut metrics)?;
+        vertex_metrics(&monitor, &seq, &truth, &undistorter, mounts.as_ref(), &mut metrics)?;
         homography_metrics(&frames, &truth, &seq.path_mm, &undistorter, &mut metrics);
         width_metrics(&monitor, &truth, &mut metrics)?;
         let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
@@ -302,17 +305,23 @@ fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metric
     metrics.push("nozzle_err_median_mm", quantile(&mut errors, 0.5), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
 }
 
+/// The applied and the true mount (undistorted pixel → plane mm relative to the nozzle).
+struct Mounts {
+    applied: Homography,
+    truth: Homography,
+}
+
 /// The mount that placed the frames (`applied` row of `mount.parquet`) and the nominal
-/// one against the truth.
+/// one against the truth; returns the applied and the true mount.
 fn mount_metrics(
     monitor: &Path,
     seq: &datasets::thermal::ThermalSequence,
     truth: &ThermalTruth,
     undistorter: &Undistorter,
     metrics: &mut Metrics,
-) -> Result<(), StageError> {
+) -> Result<Option<Mounts>, StageError> {
     if !monitor.join("mount.parquet").is_file() {
-        return Ok(());
+        return Ok(None);
     }
     let file = monitor.join("mount.parquet");
     let df = read_table(monitor, "mount.parquet")?;
@@ -320,7 +329,7 @@ fn mount_metrics(
         (0..9).map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1))).collect::<Result<_, _>>()?;
     let applied = df.column("applied").map_err(|source| StageError::Table { path: file.clone(), source })?;
     let applied = applied.bool().map_err(|source| StageError::Table { path: file.clone(), source })?;
-    let Some(last) = applied.iter().position(|a| a == Some(true)) else { return Ok(()) };
+    let Some(last) = applied.iter().position(|a| a == Some(true)) else { return Ok(None) };
     let fitted = Homography {
         m: [
             [h[0][last], h[1][last], h[2][last]],
@@ -347,7 +356,7 @@ fn mount_metrics(
         let n = gaps.len();
         metrics.push(name, quantile(&mut gaps, 0.5), "mm", n, note);
     }
-    Ok(())
+    Ok(Some(Mounts { applied: fitted, truth: true_mount }))
 }
 
 /// Distances between the plane points two pixel → plane maps give the pixels of an
@@ -366,8 +375,19 @@ fn image_gaps_mm(a: &Homography, b: &Homography, width: usize, height: usize) ->
     out
 }
 
-/// The rigid estimator's vertices that placed a nozzle against the true corner pixels.
-fn vertex_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -> Result<(), StageError> {
+/// The rigid estimator's vertices that placed a nozzle against the true corner pixels,
+/// and the nozzle those corners would give with their true pixels: through the true
+/// mount (the floor the per-frame camera vibration sets, which one translation per frame
+/// cannot tell from a nozzle offset) and through the applied mount (the vertices' share
+/// of the nozzle error removed, the mount's left).
+fn vertex_metrics(
+    monitor: &Path,
+    seq: &datasets::thermal::ThermalSequence,
+    truth: &ThermalTruth,
+    undistorter: &Undistorter,
+    mounts: Option<&Mounts>,
+    metrics: &mut Metrics,
+) -> Result<(), StageError> {
     if !monitor.join("vertices.parquet").is_file() {
         return Ok(());
     }
@@ -383,14 +403,15 @@ fn vertex_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -
         .iter()
         .map(|b| b == Some(true))
         .collect();
+    let true_corner = |i: usize| {
+        truth
+            .corners
+            .iter()
+            .find(|c| c.layer as i64 == layer[i] && c.frame as i64 == frame_no[i] && c.vertex as i64 == vertex[i])
+    };
     let mut errors: Vec<f64> = (0..layer.len())
         .filter(|&i| used[i])
-        .filter_map(|i| {
-            let c = truth.corners.iter().find(|c| {
-                c.layer as i64 == layer[i] && c.frame as i64 == frame_no[i] && c.vertex as i64 == vertex[i]
-            })?;
-            Some((u[i] - c.pixel[0]).hypot(v[i] - c.pixel[1]))
-        })
+        .filter_map(|i| true_corner(i).map(|c| (u[i] - c.pixel[0]).hypot(v[i] - c.pixel[1])))
         .collect();
     let n = errors.len();
     metrics.push(
@@ -401,7 +422,48 @@ fn vertex_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -
         "ridge vertices that placed a nozzle, to the true corner pixels (raw)",
     );
     metrics.push("vertex_err_p90_px", quantile(&mut errors, 0.9), "px", n, "90th percentile");
+    let Some(mounts) = mounts else { return Ok(()) };
+    let (mut floor, mut applied) = (Vec::new(), Vec::new());
+    let mut i = 0;
+    while i < layer.len() {
+        let end = (i..layer.len()).find(|&j| (layer[j], frame_no[j]) != (layer[i], frame_no[i])).unwrap_or(layer.len());
+        let pairs: Vec<([f64; 2], [f64; 2])> = (i..end)
+            .filter(|&k| used[k])
+            .filter_map(|k| true_corner(k).map(|c| (undistorter.undistort_px(c.pixel), seq.path_mm[c.vertex])))
+            .collect();
+        if let (false, Some(t)) = (pairs.is_empty(), truth_frame(truth, layer[i], frame_no[i])) {
+            for (h, out) in [(&mounts.truth, &mut floor), (&mounts.applied, &mut applied)] {
+                let n = mean_offset_mm(h, &pairs);
+                out.push((n[0] - t.nozzle_mm[0]).hypot(n[1] - t.nozzle_mm[1]));
+            }
+        }
+        i = end;
+    }
+    let n = floor.len();
+    metrics.push(
+        "nozzle_err_floor_median_mm",
+        quantile(&mut floor, 0.5),
+        "mm",
+        n,
+        "the used corners' true pixels through the true mount: the camera-vibration floor",
+    );
+    metrics.push(
+        "nozzle_err_true_vertices_median_mm",
+        quantile(&mut applied, 0.5),
+        "mm",
+        n,
+        "the used corners' true pixels through the applied mount: the mount's share",
+    );
     Ok(())
+}
+
+/// The nozzle position n = mean of c − H_m(x) over (undistorted pixel x, vertex c) pairs.
+fn mean_offset_mm(mount: &Homography, pairs: &[([f64; 2], [f64; 2])]) -> [f64; 2] {
+    let sum = pairs.iter().fold([0.0; 2], |s, (x, c)| {
+        let p = mount.apply(*x);
+        [s[0] + c[0] - p[0], s[1] + c[1] - p[1]]
+    });
+    [sum[0] / pairs.len() as f64, sum[1] / pairs.len() as f64]
 }
 
 fn homography_metrics(
@@ -546,6 +608,19 @@ mod tests {
         let gaps = image_gaps_mm(&shifted, &h, 160, 120);
         assert_eq!(gaps.len(), 20 * 15, "an 8-pixel grid over 160 × 120");
         assert!(gaps.iter().all(|d| (d - 0.5).abs() < 1e-9));
+    }
+
+    #[test]
+    fn true_pixels_through_their_mount_give_the_nozzle_back() {
+        let h = Homography { m: [[0.15, 0.01, -12.0], [0.002, 0.21, -13.0], [0.0001, 0.0012, 1.0]] };
+        let inv = h.inverse().unwrap();
+        let nozzle = [12.5, -3.25];
+        let pairs: Vec<([f64; 2], [f64; 2])> = [[14.0, 1.0], [9.0, 4.0], [20.0, -2.0]]
+            .iter()
+            .map(|c| (inv.apply([c[0] - nozzle[0], c[1] - nozzle[1]]), *c))
+            .collect();
+        let n = mean_offset_mm(&h, &pairs);
+        assert!((n[0] - nozzle[0]).abs() < 1e-9 && (n[1] - nozzle[1]).abs() < 1e-9, "{n:?}");
     }
 
     #[test]

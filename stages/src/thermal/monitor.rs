@@ -115,7 +115,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        3
+        4
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -533,8 +533,8 @@ fn write_frame_tables(
     Ok(())
 }
 
-/// `mount.parquet` (the rigid mounts, one row per pass: 0 the nominal start, 1 and 2 the
-/// fits; H_m row-major, pairs, frames and RMS residual, or the reason a fit failed, and
+/// `mount.parquet` (the rigid mounts, one row per pass: 0 the nominal start, 1 the fit
+/// to the detections' pairs, 2 and up the re-pairing rounds; H_m row-major, pairs, frames and RMS residual, or the reason a fit failed, and
 /// which one placed the frames) and `vertices.parquet` (every ridge-placed corner pair
 /// of the rigid estimator, and whether it placed the nozzle).
 fn write_mount_tables(
