@@ -149,6 +149,19 @@ mod tests {
         t_capture_s: f64,
     }
 
+    impl Case {
+        /// The frame context of this case: nominal mount, the true nozzle pixel.
+        fn context<'a>(&self, undistorter: &'a Undistorter, trajectory: TrajectoryView<'a>) -> FrameContext<'a> {
+            FrameContext {
+                undistorter,
+                h0: self.nominal.nominal_homography(),
+                nozzle_px: self.truth.plane_to_raw_px([0.0, 0.0]).unwrap(),
+                trajectory,
+                params: PipelineParams::paper_defaults(80.0),
+            }
+        }
+    }
+
     fn case() -> Case {
         let distortion = Distortion { k1: -0.1, k2: 0.02, p1: 0.0005, p2: -0.0005 };
         let nominal = CameraModel::lepton35(distortion);
@@ -195,13 +208,7 @@ mod tests {
         add_noise(&mut raw, 0.05, 3);
         let undistorter = Undistorter::new(&c.nominal).unwrap();
         let image = undistorter.undistort(&raw).unwrap();
-        let ctx = FrameContext {
-            undistorter: &undistorter,
-            h0: c.nominal.nominal_homography(),
-            nozzle_px: c.truth.plane_to_raw_px([0.0, 0.0]).unwrap(),
-            trajectory: traj,
-            params: PipelineParams::paper_defaults(80.0),
-        };
+        let ctx = c.context(&undistorter, traj);
         let mount = c.truth.nominal_homography();
         // Recorded 4.3 ms early: predictions are 0.09 mm (0.6 px) off, the ridges fix that.
         let t_recorded_s = 1.5;
@@ -276,13 +283,7 @@ mod tests {
         let c = case();
         let traj = TrajectoryView::new(&c.t, &c.x, &c.y).unwrap();
         let undistorter = Undistorter::new(&c.nominal).unwrap();
-        let ctx = FrameContext {
-            undistorter: &undistorter,
-            h0: c.nominal.nominal_homography(),
-            nozzle_px: c.truth.plane_to_raw_px([0.0, 0.0]).unwrap(),
-            trajectory: traj,
-            params: PipelineParams::paper_defaults(80.0),
-        };
+        let ctx = c.context(&undistorter, traj);
         let mount = c.truth.nominal_homography();
         let none = localise_rigid(&ctx, &mount, &CornerPairs::default(), 1.5).unwrap_err();
         assert_eq!(none, FrameSkip::Mount(MountError::NoPairs));
