@@ -63,7 +63,7 @@ impl StageKind for ReprintEvaluateStage {
         "thermal.reprint_evaluate"
     }
     fn version(&self) -> u32 {
-        3
+        4
     }
     fn summary(&self) -> &'static str {
         "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
@@ -82,11 +82,14 @@ impl StageKind for ReprintEvaluateStage {
         let seq = open_sequence(&ctx.inputs[0].dir)?;
         let setup = seq.process.print_setup();
         let trajectory = trajectory_of(&seq)?;
-        let effects = printer_effects(&seq)?;
+        let (effects, dataset_seed) = virtual_printer(&seq)?;
         let commands = read_commands(&ctx.inputs[1].dir, trajectory.len())?;
         let layers = ctx.params.i64("layers") as usize;
         let print = |command: &[f64]| -> Result<Vec<DepositGrid>, StageError> {
-            let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
+            // Seeded from the dataset, not the stage: every re-print of one dataset (the
+            // paper's method, the extension) draws the same flow factors, so their
+            // conventional prints are the same print.
+            let mut rng = ChaCha8Rng::seed_from_u64(dataset_seed ^ REPRINT_SEED_SALT);
             let printed =
                 print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
             Ok(printed.into_iter().map(|l| l.grid).collect())
@@ -117,10 +120,11 @@ impl StageKind for ReprintEvaluateStage {
     }
 }
 
-/// The extra effects of the printer that made the dataset.
-fn printer_effects(seq: &ThermalSequence) -> Result<Effects, StageError> {
+/// The extra effects and the seed of the virtual printer that made the dataset.
+fn virtual_printer(seq: &ThermalSequence) -> Result<(Effects, u64), StageError> {
     match &seq.manifest.provenance {
-        Provenance::Virtual { effects, .. } => Effects::from_pairs(effects.iter().map(|(k, v)| (k.as_str(), *v)))
+        Provenance::Virtual { effects, seed, .. } => Effects::from_pairs(effects.iter().map(|(k, v)| (k.as_str(), *v)))
+            .map(|e| (e, *seed))
             .map_err(|e| super::common::bad_input(seq, "dataset.toml", e)),
         Provenance::Measured { .. } => Err(super::common::bad_input(
             seq,
@@ -129,6 +133,10 @@ fn printer_effects(seq: &ThermalSequence) -> Result<Effects, StageError> {
         )),
     }
 }
+
+/// Mixed into the dataset's seed for the re-print's flow draws, so that they differ from
+/// the draws that printed the dataset itself.
+const REPRINT_SEED_SALT: u64 = 0x5245_5052_494e_5421;
 
 /// The conventional and the compensated command (mm/s of filament) per sample.
 fn read_commands(dir: &std::path::Path, samples: usize) -> Result<(Vec<f64>, Vec<f64>), StageError> {
