@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        5
+        6
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -629,11 +629,12 @@ leave the RMS where it was, because they also thin the flanks. Over one layer th
 footprint of the first layer shows only +0.20 mm³ of that excess, and of layers 1-4 +0.32 mm³: at a sharp apex the deposition quadrilaterals overlap \
 even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it; from the second layer on the nozzle \
 squeezes part of that pile sideways into the bead. That is the discrepancy this reproduction names: eqs 31-33 map a width error to a flow error, which \
-holds only where the bead stays one layer high. With the thermal widths instead of the true ones the O_E still falls as far, but the RMS does not: \
-the heat of a corner's pile spreads along the bead, so the thermal contour smears the corner's excess over some 50 ms either side of the apex. Just \
-after the apex of the 75° corner (vertex 5), where the bead is really thin (0.32 mm, the head accelerating while the flow still lags), the camera reads \
-0.52 mm (median over layers 1-4), so the compensation also takes material from a stretch that already lacks it; within 0.5 mm of a vertex the thermal \
-width differs from the true one by 0.11-0.14 mm (median absolute, 90th percentile 0.4-0.9 mm) against 0.01 mm on the straight legs. {extension}\
+holds only where the bead stays one layer high. With the thermal widths instead of the true ones the O_E still falls about as far, but the RMS \
+much less: the heat of a corner's pile spreads along the bead, so the thermal contour smears the corner's excess over some 50 ms either side of the \
+apex. Just after the apex of the 75° corner (vertex 5), where the bead is really thin (0.32 mm, the head accelerating while the flow still lags), the \
+camera reads 0.45 mm (median over layers 1-4), so the compensation also takes material from a stretch that already lacks it. Within 0.5 mm of a vertex \
+the thermal width differs from the true one by 0.10-0.12 mm (median absolute, 90th percentile 0.4-0.9 mm), against 0.005-0.007 mm away from the \
+corners. Reading the widths young limits the smear (stage monitor's measure_age_s = 0.1 s; at 0.25 s the RMS rose by 22 %). {extension}\
 With the <code>melt_squeeze_out</code> effect of the virtual printer (melt flows into the nearest free space instead of along the deposition direction), \
 true widths gave only a third less O_E in our previous release: the more the melt moves after it leaves the nozzle, the less a width says about the flow.</p>\n\
 <p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
