@@ -294,17 +294,25 @@ mod tests {
 
     /// A 60° corner at `vertex` whose heat peak sits `bulge_mm` inside along the bisector.
     fn scene(vertex: [f64; 2], bulge_mm: f64) -> (HotPolyline, [f64; 2]) {
-        let a = [vertex[0] - 3.0, vertex[1] - 5.196];
-        let b = [vertex[0] + 3.0, vertex[1] - 5.196];
-        let poly = HotPolyline {
+        (corner_polyline(vertex, 30.0, 6.0), [vertex[0], vertex[1] - bulge_mm])
+    }
+
+    /// A corner at `vertex` opening downwards, arms `arm_mm` long at ±`half_angle_deg`
+    /// from the vertical, a 130 °C bead on a 60 °C part.
+    fn corner_polyline(vertex: [f64; 2], half_angle_deg: f64, arm_mm: f64) -> HotPolyline {
+        let (sin, cos) = half_angle_deg.to_radians().sin_cos();
+        let (a, b) = (
+            [vertex[0] - arm_mm * sin, vertex[1] - arm_mm * cos],
+            [vertex[0] + arm_mm * sin, vertex[1] - arm_mm * cos],
+        );
+        HotPolyline {
             vertices_mm: vec![a, vertex, b],
             background_c: 60.0,
             bead_c: 130.0,
             bead_sigma_mm: 0.3,
             corner_excess_c: 0.0,
             corner_sigma_mm: 0.45,
-        };
-        (poly, [vertex[0], vertex[1] - bulge_mm])
+        }
     }
 
     #[test]
@@ -393,19 +401,7 @@ mod tests {
         // other near the vertex, where the cross-sections do not reach.
         let cam = CameraModel::lepton35(Distortion::default());
         let vertex = [0.4, 2.0];
-        let half = 22.5f64.to_radians();
-        let (a, b) = (
-            [vertex[0] - 5.0 * half.sin(), vertex[1] - 5.0 * half.cos()],
-            [vertex[0] + 5.0 * half.sin(), vertex[1] - 5.0 * half.cos()],
-        );
-        let poly = HotPolyline {
-            vertices_mm: vec![a, vertex, b],
-            background_c: 60.0,
-            bead_c: 130.0,
-            bead_sigma_mm: 0.3,
-            corner_excess_c: 0.0,
-            corner_sigma_mm: 0.45,
-        };
+        let poly = corner_polyline(vertex, 22.5, 5.0);
         let pile = |p: [f64; 2]| {
             let (across, along) = (p[0] - vertex[0], vertex[1] - 0.6 - p[1]);
             30.0 * (-0.5 * (across / 0.3).powi(2) - 0.5 * (along / 0.6).powi(2)).exp()
@@ -418,9 +414,16 @@ mod tests {
             let len = (q[0] - vertex[0]).hypot(q[1] - vertex[1]);
             to_px.apply([vertex[0] + (q[0] - vertex[0]) / len, vertex[1] + (q[1] - vertex[1]) / len])
         };
-        let arms = CornerArms::from_points(to_px.apply(vertex), [arm_pt(a), arm_pt(b)], 1.0).unwrap();
+        let arms = CornerArms::from_points(
+            to_px.apply(vertex),
+            [arm_pt(poly.vertices_mm[0]), arm_pt(poly.vertices_mm[2])],
+            1.0,
+        )
+        .unwrap();
         let params = VertexParams::defaults();
-        assert!((params.first_offset_mm(45f64.to_radians().cos()) - 1.6 / (2.0 * half.sin())).abs() < 1e-12);
+        assert!(
+            (params.first_offset_mm(45f64.to_radians().cos()) - 1.6 / (2.0 * 22.5f64.to_radians().sin())).abs() < 1e-12
+        );
         let found = h0.apply(vertex_from_ridges(&frame, to_px.apply(vertex), &arms, &params).unwrap());
         let err_mm = (found[0] - vertex[0]).hypot(found[1] - vertex[1]);
         assert!(err_mm < 0.02, "vertex off by {err_mm} mm");
