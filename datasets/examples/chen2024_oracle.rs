@@ -37,7 +37,7 @@ use models::thermal::compensation::{
     apply_spans, compensate_spans, velocity_change_from_sweep_mm_s, FbsParams, SpanParams, SweepSample,
 };
 use models::thermal::dda::{allocate_directions, DdaParams};
-use models::thermal::dynamics::first_order_lag;
+use models::thermal::dynamics::{first_order_lag, lag_excess};
 use models::thermal::metrics::{contour_errors, corner_deposition, summarize, IdealBead};
 use models::thermal::setup::corner_test_path;
 use models::thermal::{DepositGrid, PrintSetup, Trajectory};
@@ -67,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let v_e = conventional_command(&setup, &trajectory);
     let conventional = print(&setup, &trajectory, &v_e)?;
     let before = score(&setup, &path, &bead, &conventional);
-    let excess = lag_excess_mm_s(&setup, &trajectory, &v_e);
+    let excess = lag_excess(&v_e, trajectory.dt_s, setup.tau_s); // eq. 34's flow excess (mm/s of filament)
     println!("variant       mean_OE%  contour_max_mm (where)        contour_rms_mm  spans | O_E per corner %");
     before.print("before", 0);
     let fbs = FbsParams { tail_s: 3.0 * setup.tau_s, ..FbsParams::paper_defaults() };
@@ -101,12 +101,6 @@ const VARIANTS: [Variant; 5] = [
     Variant { name: "+tail", cad_desired: true, sweep: false, signed: true, tail: true },
     Variant { name: "+sweep", cad_desired: true, sweep: true, signed: true, tail: true },
 ];
-
-/// The flow excess eq. 34 predicts for the command (mm/s of filament).
-fn lag_excess_mm_s(setup: &PrintSetup, trajectory: &Trajectory, v_e: &[f64]) -> Vec<f64> {
-    let lagged = first_order_lag(v_e, trajectory.dt_s, setup.tau_s, 0.0);
-    lagged.iter().zip(v_e).map(|(l, v)| l - v).collect()
-}
 
 /// Positive and negative parts of a velocity series as volumes (mm³).
 fn split_volume_mm3(velocity_mm_s: &[f64], mm3_per_step: f64) -> (f64, f64) {

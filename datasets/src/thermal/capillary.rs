@@ -40,8 +40,9 @@ pub struct LayerFill<'a> {
 }
 
 impl LayerFill<'_> {
-    /// Moves the material of the footprint's thin features (see the module doc) to the
-    /// nearest cell of the opened footprint; returns the number of cells moved.
+    /// Moves the material of the footprint's thin features (see the module doc) back
+    /// along each feature to its root in the opened footprint, spread over the opened
+    /// cells within 2r of that root; returns the number of cells moved.
     /// Cells where `held` is true (under the nozzle's face somewhere along the path) stay:
     /// the face shapes what lies under it, and a thin bead along the path (the start of
     /// a layer, before the flow has built up) is a real bead, not a filament.
@@ -58,15 +59,15 @@ impl LayerFill<'_> {
             (0..self.fill.len()).map(|i| footprint[i] && self.disc_touches(&seeds, i, &chords)).collect();
         let thin: Vec<bool> = (0..self.fill.len()).map(|i| footprint[i] && !opened[i] && !held[i]).collect();
         let roots = self.roots_along_features(&thin, &opened, max_reach_cells);
-        let landing = disc_offsets(2 * radius_cells as i64);
+        let landing = disc_offsets(2.0 * radius_cells as f64);
         let mut moved = 0;
         for (i, root) in roots.into_iter().enumerate() {
             let Some(root) = root else { continue };
-            let lands = |o: &(i64, i64)| self.offset(root, *o).filter(|&j| opened[j]);
-            let count = landing.iter().filter_map(lands).count();
-            let share = self.fill[i] / count as f64;
+            let cells: Vec<usize> =
+                landing.iter().filter_map(|&o| self.offset(root, o)).filter(|&j| opened[j]).collect();
+            let share = self.fill[i] / cells.len() as f64;
             let t_s = self.deposit_time_s[i];
-            for j in landing.iter().filter_map(lands).collect::<Vec<_>>() {
+            for j in cells {
                 self.fill[j] += share;
                 self.deposit_time_s[j] = self.deposit_time_s[j].min(t_s);
             }
@@ -158,11 +159,12 @@ fn disc_chords(radius: i64) -> Vec<(i64, u32)> {
         .collect()
 }
 
-/// Offsets within a disc of `radius` cells.
-fn disc_offsets(radius: i64) -> Vec<(i64, i64)> {
-    (-radius..=radius)
-        .flat_map(|dy| (-radius..=radius).map(move |dx| (dx, dy)))
-        .filter(|(dx, dy)| dx * dx + dy * dy <= radius * radius)
+/// Cell offsets within a disc of `radius_cells` (dx² + dy² ≤ radius²).
+pub(crate) fn disc_offsets(radius_cells: f64) -> Vec<(i64, i64)> {
+    let reach = radius_cells.ceil() as i64;
+    (-reach..=reach)
+        .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
+        .filter(|(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius_cells * radius_cells)
         .collect()
 }
 

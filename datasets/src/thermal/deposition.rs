@@ -56,7 +56,7 @@ use models::thermal::{DepositGrid, PrintSetup, ThermalError, Trajectory};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use super::capillary::{cells_near, LayerFill, MAX_COLLAPSE_MM, THIN_FEATURE_RADIUS_MM};
+use super::capillary::{cells_near, disc_offsets, LayerFill, MAX_COLLAPSE_MM, THIN_FEATURE_RADIUS_MM};
 use super::effects::Effects;
 
 /// Edge of a deposit cell (mm): a tenth of the nominal half-width, 1/20 of the nozzle.
@@ -151,12 +151,7 @@ struct PartStack {
 impl PartStack {
     fn new(grid: DepositGrid, face_radius_mm: f64) -> Self {
         let cells = grid.nx * grid.ny;
-        let reach = (face_radius_mm / grid.cell_mm).ceil() as i64;
-        let r2 = (face_radius_mm / grid.cell_mm).powi(2);
-        let face = (-reach..=reach)
-            .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
-            .filter(|(dx, dy)| ((dx * dx + dy * dy) as f64) <= r2)
-            .collect();
+        let face = disc_offsets(face_radius_mm / grid.cell_mm);
         Self { grid, height_mm: vec![0.0; cells], face }
     }
 

@@ -26,9 +26,27 @@ pub fn first_order_lag_into(input: &[f64], dt_s: f64, tau_s: f64, initial: f64, 
     }
 }
 
+/// What the lag adds to `input` when it starts from rest: G(s)·u − u at every sample.
+/// For a deposition-velocity command this is the flow excess of eq. 34 (positive while
+/// the head slows, negative while it speeds up), which a compensation must cancel.
+pub fn lag_excess(input: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
+    let mut excess = first_order_lag(input, dt_s, tau_s, 0.0);
+    excess.iter_mut().zip(input).for_each(|(lagged, u)| *lagged -= u);
+    excess
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lag_excess_of_a_step_is_the_decaying_shortfall() {
+        // A unit step from rest: G·u − u = −exp(−t/τ) at t = (k+1)·dt.
+        let (dt, tau) = (0.001, 0.0873);
+        for (k, e) in lag_excess(&[1.0; 300], dt, tau).iter().enumerate() {
+            assert!((e + (-((k + 1) as f64) * dt / tau).exp()).abs() < 1e-12, "sample {k}");
+        }
+    }
 
     #[test]
     fn step_response_matches_the_closed_form() {

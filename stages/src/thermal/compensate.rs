@@ -61,7 +61,7 @@ use models::thermal::compensation::{
     apply_spans, compensate_spans, desired_half_width_mm, paper_gain, velocity_change_from_sweep_mm_s, FbsParams,
     SampleSpan, SpanCompensation, SpanParams, SweepSample,
 };
-use models::thermal::dynamics::first_order_lag;
+use models::thermal::dynamics::lag_excess;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
 use pipeline::params::ParamDefault;
@@ -239,7 +239,8 @@ impl StageKind for CompensateStage {
         };
         let nominal = conventional_command(&setup, &trajectory);
         let spans = if ctx.params.str("source") == "lag_model" {
-            let excess = lag_model_excess_mm_s(&nominal, trajectory.dt_s, setup.tau_s);
+            // The flow excess eq. 34 predicts for the nominal command (mm/s of filament).
+            let excess = lag_excess(&nominal, trajectory.dt_s, setup.tau_s);
             let whole_layer = vec![f64::INFINITY; trajectory.len()];
             let params = SpanParams { epsilon_mm: 0.0, ..params };
             compensate_spans(&whole_layer, &excess, trajectory.dt_s, &params, |_| 1.0)
@@ -267,14 +268,6 @@ impl StageKind for CompensateStage {
         ctx.write_table("command", &mut table)?;
         Ok(())
     }
-}
-
-/// The flow excess the deposition dynamics predict for the command `v_e_mm_s`: the
-/// lagged deposition velocity G(s)·v_e (eq. 34, from rest) minus the command itself
-/// (mm/s of filament), which the filtered B-spline then cancels (eqs 36-39).
-fn lag_model_excess_mm_s(v_e_mm_s: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
-    let lagged = first_order_lag(v_e_mm_s, dt_s, tau_s, 0.0);
-    lagged.iter().zip(v_e_mm_s).map(|(l, v)| l - v).collect()
 }
 
 /// The monitored half widths (left, right) of a run of consecutive layers, indexed by

@@ -45,7 +45,7 @@ use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::ThermalSequence;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
-use models::thermal::dynamics::first_order_lag;
+use models::thermal::dynamics::lag_excess;
 use models::thermal::geometry::half_widths_mm;
 use models::thermal::{PrintSetup, Trajectory};
 use pipeline::params::ParamDefault;
@@ -361,9 +361,9 @@ const SETTLED_FLOW_TOLERANCE: f64 = 0.02;
 /// settled samples may calibrate T_t to the nominal width.
 fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
     let command = conventional_command(setup, trajectory);
-    let lagged = first_order_lag(&command, trajectory.dt_s, setup.tau_s, 0.0);
     let steady = setup.nominal_deposition_velocity_mm_s(setup.feed_mm_s);
-    lagged.iter().zip(&command).map(|(l, c)| (l - c).abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
+    let excess = lag_excess(&command, trajectory.dt_s, setup.tau_s);
+    excess.iter().map(|e| e.abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
 }
 
 /// The skip reasons of `frames`, counted: "12 × too few corners: …; 3 × …".
