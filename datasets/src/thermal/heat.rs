@@ -114,10 +114,8 @@ pub struct LayerHeat {
 /// heat capacity (in layer heights) of the deposit at a point.
 #[derive(Debug, Clone)]
 struct Piles {
-    origin_mm: [f64; 2],
-    cell_mm: f64,
-    nx: usize,
-    ny: usize,
+    /// The deposit's grid geometry (its fill is not kept: `cells` holds what is needed).
+    geometry: DepositGrid,
     /// Cell index → (fill averaged over σ0, deposit time in s), for cells fuller than 1.
     cells: HashMap<usize, (f32, f32)>,
 }
@@ -133,18 +131,17 @@ impl Piles {
             .filter(|&i| grid.fill[i] > 1.0)
             .map(|i| (i, (smoothed_fill(grid, i, &kernel) as f32, deposit.deposit_time_s[i])))
             .collect();
-        Self { origin_mm: grid.origin_mm, cell_mm: grid.cell_mm, nx: grid.nx, ny: grid.ny, cells }
+        let geometry = DepositGrid { fill: Vec::new(), ..*grid };
+        Self { geometry, cells }
     }
 
     /// Heat capacity at `p_mm` and `t_s` in layer heights: the fill of a pile laid by
     /// then, 1 elsewhere.
     fn capacity(&self, p_mm: [f64; 2], t_s: f64) -> f64 {
-        let fx = (p_mm[0] - self.origin_mm[0]) / self.cell_mm;
-        let fy = (p_mm[1] - self.origin_mm[1]) / self.cell_mm;
-        if fx < 0.0 || fy < 0.0 || fx >= self.nx as f64 || fy >= self.ny as f64 {
+        let Some((x, y)) = self.geometry.cell_of(p_mm) else {
             return 1.0;
-        }
-        match self.cells.get(&(fy as usize * self.nx + fx as usize)) {
+        };
+        match self.cells.get(&self.geometry.index(x, y)) {
             Some(&(fill, t_dep_s)) if f64::from(t_dep_s) <= t_s => f64::from(fill).max(1.0),
             _ => 1.0,
         }
