@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        6
+        7
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -109,18 +109,18 @@ pub struct CornerOe {
 /// Everything of ours the section reports.
 #[derive(Debug, Clone)]
 pub struct Ours {
-    /// Per-corner O_E.
-    pub corners: Vec<CornerOe>,
-    /// (max, RMS) contour error, conventional then compensated (mm).
-    pub contour_mm: [(f64, f64); 2],
+    /// The re-print of the paper's method.
+    pub reprint: Reprint,
+    /// Compensated spans (rows of `spans.parquet`).
+    pub spans: usize,
     /// `accuracy.parquet`: metric → (value, unit, n, note).
     pub accuracy: BTreeMap<String, AccuracyRow>,
     /// Frames used, and skip reason → count.
     pub frames_used: usize,
     /// Skipped frames by reason.
     pub skipped: BTreeMap<String, usize>,
-    /// Sources: spans, corners, contour, accuracy, frames.
-    pub sources: [String; 5],
+    /// Sources: spans, accuracy, frames.
+    pub sources: [String; 3],
     /// Our lag-model extension's re-print, when the fifth input is given.
     pub extension: Option<Reprint>,
 }
@@ -147,17 +147,12 @@ impl Reprint {
 
     /// Mean O_E before and after over the corners with finite values (%).
     pub fn mean_oe_pct(&self) -> (f64, f64) {
-        mean_oe_pct(&self.corners)
+        let mean = |pick: fn(&CornerOe) -> f64| {
+            let v: Vec<f64> = self.corners.iter().map(pick).filter(|x| x.is_finite()).collect();
+            v.iter().sum::<f64>() / v.len().max(1) as f64
+        };
+        (mean(|c| c.oe_pct.0), mean(|c| c.oe_pct.1))
     }
-}
-
-/// Mean O_E before and after over the corners with finite values (%).
-fn mean_oe_pct(corners: &[CornerOe]) -> (f64, f64) {
-    let mean = |pick: fn(&CornerOe) -> f64| {
-        let v: Vec<f64> = corners.iter().map(pick).filter(|x| x.is_finite()).collect();
-        v.iter().sum::<f64>() / v.len().max(1) as f64
-    };
-    (mean(|c| c.oe_pct.0), mean(|c| c.oe_pct.1))
 }
 
 impl Ours {
@@ -167,15 +162,13 @@ impl Ours {
         let (compensate, reprint, accuracy, monitor) = (&inputs[0], &inputs[1], &inputs[2], &inputs[3]);
         let (frames_used, skipped) = read_frames(&monitor.dir.join("frames.parquet"))?;
         Ok(Self {
-            corners: read_corners(&reprint.dir.join("corners.parquet"))?,
-            contour_mm: read_contour(&reprint.dir.join("contour.parquet"))?,
+            reprint: Reprint::read(reprint)?,
+            spans: read_parquet(&compensate.dir.join("spans.parquet"))?.height(),
             accuracy: read_accuracy(&accuracy.dir.join("accuracy.parquet"))?,
             frames_used,
             skipped,
             sources: [
                 source(compensate, "spans.parquet"),
-                source(reprint, "corners.parquet"),
-                source(reprint, "contour.parquet"),
                 source(accuracy, "accuracy.parquet"),
                 source(monitor, "frames.parquet"),
             ],
@@ -185,7 +178,7 @@ impl Ours {
 
     /// Mean O_E before and after over the corners with finite values (%).
     pub fn mean_oe_pct(&self) -> (f64, f64) {
-        mean_oe_pct(&self.corners)
+        self.reprint.mean_oe_pct()
     }
 
     /// A metric of `accuracy.parquet`, if present and finite.
@@ -281,7 +274,7 @@ pub fn reduction_checks(mean_oe_pct: (f64, f64), contour_mm: [(f64, f64); 2]) ->
 pub fn checks(ours: &Ours) -> Vec<Check> {
     let loc = ours.metric("capture_time_err_median_ms");
     let baseline = ours.metric("capture_time_err_baseline_median_ms");
-    let mut checks = reduction_checks(ours.mean_oe_pct(), ours.contour_mm);
+    let mut checks = reduction_checks(ours.mean_oe_pct(), ours.reprint.contour_mm);
     checks.extend([
         Check {
             what: "median capture-time localisation error (ms)",
@@ -351,8 +344,9 @@ fn push_line(html: &mut String, rows: &mut Vec<Row>, l: Line) {
 fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
     let mut html = String::from("<table><tr><th class=\"t\">quantity</th><th>paper</th><th>ours</th><th class=\"t\">unit</th><th class=\"t\">our source</th></tr>\n");
     let (oe0, oe1) = ours.mean_oe_pct();
-    let [(max0, rms0), (max1, rms1)] = ours.contour_mm;
-    let [_spans, corners, contour, accuracy, frames] = &ours.sources;
+    let [(max0, rms0), (max1, rms1)] = ours.reprint.contour_mm;
+    let [spans, accuracy, frames] = &ours.sources;
+    let [corners, contour] = &ours.reprint.sources;
     let paper_oe_red = reduction_pct(PAPER_OE_PCT.0, PAPER_OE_PCT.1);
     let m = |name: &str| ours.metric(name);
     let map_text = format!("mAP {PAPER_MAP_PCT} %");
@@ -444,6 +438,7 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
             3,
             accuracy,
         ),
+        ("sec_2_4", "compensated spans (eqs 32-39)", None, "—", Some(ours.spans as f64), "spans", 0, spans),
         ("sec_3_2", "frames used", None, "—", Some(ours.frames_used as f64), "frames", 0, frames),
         (
             "sec_3_2",
@@ -513,7 +508,7 @@ fn extension_lines(ext: &Reprint, html: &mut String, rows: &mut Vec<Row>) {
 
 fn corner_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
     let mut html = String::from("<h4>O_E per corner (eq. 40; the paper prints only the mean)</h4>\n<table><tr><th>vertex</th><th>angle (°)</th><th>O_E before (%)</th><th>O_E after (%)</th><th>reduction (%)</th></tr>\n");
-    for c in &ours.corners {
+    for c in &ours.reprint.corners {
         let red = reduction_pct(c.oe_pct.0, c.oe_pct.1);
         let _ = writeln!(
             html,
@@ -532,7 +527,7 @@ fn corner_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
                     paper: None,
                     ours: v,
                     unit: "%",
-                    source: ours.sources[1].clone(),
+                    source: ours.reprint.sources[0].clone(),
                 });
             }
         }
@@ -597,7 +592,7 @@ fn localisation_verdict(ours: &Ours) -> &'static str {
 
 fn discussion(ours: &Ours) -> String {
     let (oe0, oe1) = ours.mean_oe_pct();
-    let [(max0, rms0), (max1, rms1)] = ours.contour_mm;
+    let [(max0, rms0), (max1, rms1)] = ours.reprint.contour_mm;
     let loc = fmt(ours.metric("capture_time_err_median_ms"), 2);
     let base = fmt(ours.metric("capture_time_err_baseline_median_ms"), 2);
     let (p, r) = (
@@ -663,7 +658,7 @@ frame needs only its translation, which a single corner gives (vision::mount, vi
 with the arm lines through the ridges' centres so that the heat of the inner pile does not tilt them. The nozzle then lands within {nozzle} mm of its true \
 position, the floor set by the camera's vibration being {floor} mm. {loc_verdict} Eq. 30 pays off most with a larger or unknown capture delay (the \
 camera_latency effect of the virtual camera), which the recorded time cannot see.</p>\n",
-        n = ours.corners.len(),
+        n = ours.reprint.corners.len(),
         extension = extension_sentence(ours),
         loc_verdict = localisation_verdict(ours),
         dlt = fmt(ours.metric("dlt_capture_time_err_median_ms"), 2),
@@ -714,6 +709,8 @@ mod tests {
         assert_eq!(row("max contour error, conventional (eq. 41)").paper, Some(1.6805));
         assert!(row("corner detector recall").paper.is_none());
         assert!(row("mean O_E before compensation (eq. 40)").source.contains("corners.parquet of stage reprint"));
+        let spans = row("compensated spans (eqs 32-39)");
+        assert!(spans.ours >= 1.0 && spans.source.contains("spans.parquet of stage compensate"), "{}", spans.source);
         let verdicts: Vec<Option<bool>> = checks(&ours).iter().map(|c| c.pass).collect();
         assert_eq!(verdicts, vec![Some(true), Some(true), Some(true), Some(true), Some(true)]);
         assert!(html.contains("<b>pass</b>") && !html.contains("<b>fail</b>"));
@@ -740,7 +737,7 @@ mod tests {
     fn failed_and_missing_checks_are_stated() {
         let root = tempfile::tempdir().expect("tempdir");
         let mut ours = Ours::read(&inputs(root.path())).expect("reads");
-        ours.contour_mm = [(1.0, 0.4), (0.6, 0.3)];
+        ours.reprint.contour_mm = [(1.0, 0.4), (0.6, 0.3)];
         ours.accuracy.remove("capture_time_err_median_ms");
         let c = checks(&ours);
         assert_eq!(c[1].pass, Some(false), "max falls 40 % < 50 %");
