@@ -43,6 +43,7 @@
 
 use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::ThermalSequence;
+use models::stats::finite_median;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
 use models::thermal::dynamics::lag_excess;
@@ -306,13 +307,7 @@ impl<'a> Analysis<'a> {
         let straight_owner: Vec<Option<usize>> =
             owner.iter().zip(&self.straight).map(|(o, s)| if *s { *o } else { None }).collect();
         let median_width = |t: f64| -> f64 {
-            let mut w: Vec<f64> = self
-                .read_widths(frames, &straight_owner, t)
-                .iter()
-                .map(|m| m.left_mm + m.right_mm)
-                .filter(|w| w.is_finite())
-                .collect();
-            median(&mut w)
+            finite_median(self.read_widths(frames, &straight_owner, t).iter().map(|m| m.left_mm + m.right_mm))
         };
         let (mut lo, mut hi) = (self.seq.process.bed_temp_c + 1.0, self.seq.process.nozzle_temp_c);
         for _ in 0..30 {
@@ -373,19 +368,6 @@ fn skip_summary(frames: &[FrameOutcome]) -> String {
         *counts.entry(reason).or_default() += 1;
     }
     counts.iter().map(|(r, n)| format!("{n} × {r}")).collect::<Vec<_>>().join("; ")
-}
-
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 /// `directions.parquet`: the deposition frame with and without DDA (Fig. 3).
