@@ -12,7 +12,8 @@
 //! footprint (the footprint minus its morphological opening), and moves each
 //! such cell's material back along the feature to the cell it hangs from (a
 //! breadth-first walk through the thin cells from the cells that stay), spread evenly
-//! over the remaining cells within 2r of that root, where it piles up. Mass is conserved exactly;
+//! over the remaining cells within 2r of that root, where it piles up (the nozzle face's
+//! squeeze then pours what stands above the nozzle plane sideways, see `deposition`). Mass is conserved exactly;
 //! features at least 2r wide, beads and corner bulges, keep their shape (a square end
 //! loses the cells of its corners that no disc of radius r reaches inside it).
 //!

@@ -34,9 +34,9 @@ pub const KIND: &str = "thermal-sequence";
 pub const FORMAT_VERSION: u32 = 1;
 /// Name of the ground-truth subfolder.
 pub const TRUTH_DIR: &str = "truth";
-/// Fill fraction stored as 65535 in `truth/deposit_L*.png`: a deposit piles up to this
-/// many layer heights (the fullest cells, where a layer ends with the head at rest, hold
-/// about 5.5).
+/// Fill fraction stored as 65535 in `truth/deposit_L*.png`: a layer is at most three
+/// layer heights thick (the nozzle face's headroom, reached where melt is squeezed over
+/// the edge of the layer below; see `deposition`).
 pub const DEPOSIT_PNG_FULL_FILL: f64 = 8.0;
 
 /// `camera.toml`.
