@@ -113,7 +113,7 @@ pub struct ThermalGenerateArgs {
     #[arg(long, default_value_t = 1)]
     pub layers: usize,
     /// An extra effect (camera_latency, tau_mismatch, heat_diffusion_widening,
-    /// layer_heat_accumulation); repeat, each followed by --strength.
+    /// layer_heat_accumulation, melt_squeeze_out); repeat, each followed by --strength.
     #[arg(long = "effect", value_name = "NAME")]
     pub effects: Vec<String>,
     /// Strength of the preceding --effect (same order).

@@ -42,11 +42,33 @@ fn chen2024_writes_its_tables_figures_and_section() {
     assert!(used > 2 * dlt_used, "rigid mount {used} frames, DLT {dlt_used}");
     let corners = read(&out.join("corners.parquet"));
     assert_eq!(corners.height(), 18, "one row per corner of the test path");
+    for column in ["corner", "angle_deg", "oe_before_pct", "oe_after_pct"] {
+        assert!(corners.column(column).is_ok(), "corners.parquet lacks {column} (the issue's columns)");
+    }
+    let contour = read(&out.join("contour.parquet"));
+    for column in ["variant", "max_mm", "rms_mm"] {
+        assert!(contour.column(column).is_ok(), "contour.parquet lacks {column} (the issue's columns)");
+    }
     let before = f64s(&corners, "oe_before_pct");
     assert!(before.iter().all(|v| v.is_finite() && *v >= 0.0));
-    let contour = read(&out.join("contour.parquet"));
     assert_eq!(strs(&contour, "variant"), ["conventional", "compensated"]);
     assert!(f64s(&contour, "max_mm").iter().all(|v| v.is_finite() && *v > 0.0));
+    // The bars that the paper's method meets on the shipped spec: the mean O_E
+    // falls by at least 50 %, the RMS contour error by at least 30 %. The max does not
+    // reach its 50 % (the report says why); this only guards what it reaches (45 %).
+    let mean = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let (oe_before, oe_after) = (mean(before), mean(f64s(&corners, "oe_after_pct")));
+    assert!(oe_after <= 0.5 * oe_before, "mean O_E {oe_before} % → {oe_after} %");
+    let (max, rms) = (f64s(&contour, "max_mm"), f64s(&contour, "rms_mm"));
+    assert!(rms[1] <= 0.7 * rms[0], "RMS contour error {} → {} mm", rms[0], rms[1]);
+    assert!(max[1] <= 0.7 * max[0], "max contour error {} → {} mm", max[0], max[1]);
+    // Frames with no corner in view are placed by their recorded time, for widths only:
+    // no capture-time estimate of their own, and not in the capture-time statistics.
+    let placed_by = strs(&frames, "placed_by");
+    let estimated = f64s(&frames, "estimated_time_s");
+    let dead_reckoned: Vec<usize> = (0..placed_by.len()).filter(|&i| placed_by[i] == "recorded_time").collect();
+    assert!(!dead_reckoned.is_empty(), "the first frames of each layer show no corner");
+    assert!(dead_reckoned.iter().all(|&i| estimated[i].is_nan()));
     let accuracy = read(&out.join("accuracy.parquet"));
     let metrics = strs(&accuracy, "metric");
     for metric in ["capture_time_err_median_ms", "capture_time_err_baseline_median_ms", "width_err_median_mm"] {
@@ -55,12 +77,14 @@ fn chen2024_writes_its_tables_figures_and_section() {
     // The capture-time estimate must beat taking the recorded time as is (the bar).
     let values = f64s(&accuracy, "value");
     let metric = |name: &str| values[metrics.iter().position(|m| m == name).unwrap()];
+    assert_eq!(metric("frames_placed_by_recorded_time"), dead_reckoned.len() as f64);
+    assert_eq!(metric("frames_used") as usize, estimated.iter().filter(|t| t.is_finite()).count());
     let (ours, baseline) = (metric("capture_time_err_median_ms"), metric("capture_time_err_baseline_median_ms"));
     assert!(ours < 0.75 * baseline, "capture time error {ours} ms vs recorded time {baseline} ms");
     for table in ["widths", "compensation", "spans", "paper_comparison", "lag_model_corners", "lag_model_contour"] {
         assert!(out.join(format!("{table}.parquet")).is_file(), "{table}.parquet");
     }
-    // Five layers are filmed; the compensation reads layers 1-4.
+    // Five layers are filmed; the compensation reads the first.
     let layers = frames.column("layer").unwrap().i64().unwrap().into_no_null_iter().max();
     assert_eq!(layers, Some(4));
     // The extension is scored beside the paper's method, with its own rows.

@@ -11,9 +11,8 @@
 //! corner on the first layer (eq. 40, A_c = W²/sin θ, window radius 1 mm) and the contour
 //! error (eq. 41) over all layers, with where its maximum lies.
 //!
-//! Two monitorings: layer 0 alone (the paper's one-layer verification), and layers 1-4
-//! (what `specs/chen2024.toml` reads: from the second layer on, the nozzle squeezes the
-//! corner pile of the layer below into the bead, where a width can see it).
+//! Two monitorings: layer 0 alone (the paper's one-layer verification, what
+//! `specs/chen2024.toml` reads), and the median of layers 1-4 per sample.
 //!
 //! Variants:
 //! - `lag model`: no widths: the desired output is the flow excess eq. 34 predicts,
@@ -233,7 +232,7 @@ fn score(setup: &PrintSetup, path: &[[f64; 2]], bead: &IdealBead, layers: &[Depo
         let c = corner_deposition(&layers[0], bead, path[i], CORNER_RADIUS_MM);
         oe_pct.push(100.0 * c.over_area_mm2 / polytope);
     }
-    let cad = bead.contour_points(0.05);
+    let cad = bead.contour_points(0.05, false); // the external surface, as the stage
     let errors: Vec<_> = layers.iter().map(|g| contour_errors(g, &cad)).collect();
     let summary = summarize(&errors);
     let max_at = errors

@@ -35,7 +35,7 @@
 //!   straight bead; at a sharp apex the allocated directions fan round a nearly fixed
 //!   point and neighbouring directions cross the same bulge. The swept area counts every
 //!   point once, but on the eqs 5-11 printer it under-counts the apex excess (the oracle
-//!   study: −37 % O_E against −64 % for the literal reading), so `thermal.compensate`
+//!   study: −58 % O_E against −71 % for the literal reading), so `thermal.compensate`
 //!   defaults to the literal reading.
 //! - Tail ([`solve_fbs_with_tail`], `FbsParams::tail_s`). Paper: the fit (eq. 39) runs
 //!   over [Δt̂0, Δt̂1] only. The lag's response to an input that ends at Δt̂1 goes on

@@ -120,10 +120,14 @@ impl IdealBead {
             .fold(f64::INFINITY, f64::min)
     }
 
-    /// CAD contour points P_t: both offset polygons sampled every `spacing_mm`.
-    pub fn contour_points(&self, spacing_mm: f64) -> Vec<[f64; 2]> {
+    /// CAD contour points P_t of eq. 41, every `spacing_mm`: the outer offset polygon,
+    /// the part's external surface the paper's profiler measures (Sec. 3.3), and with
+    /// `with_inner_face` the inner one too (the wall's inside face).
+    pub fn contour_points(&self, spacing_mm: f64, with_inner_face: bool) -> Vec<[f64; 2]> {
         let mut points = sample_polygon(&self.outer_mm, spacing_mm);
-        points.extend(sample_polygon(&self.inner_mm, spacing_mm));
+        if with_inner_face {
+            points.extend(sample_polygon(&self.inner_mm, spacing_mm));
+        }
         points
     }
 }
@@ -457,7 +461,7 @@ mod tests {
             assert!(c.index < 0.05, "corner at {:?}: O_E {}", c.centre_mm, c.index);
             assert!(c.ideal_area_mm2 > 0.5);
         }
-        let errors = contour_errors(&grid, &bead.contour_points(CONTOUR_SPACING_MM));
+        let errors = contour_errors(&grid, &bead.contour_points(CONTOUR_SPACING_MM, true));
         let summary = summarize(&[errors]);
         eprintln!("ideal deposit: max {} mm rms {} mm over {} points", summary.max_mm, summary.rms_mm, summary.points);
         assert!(summary.rms_mm < 0.1 * cell, "rms {}", summary.rms_mm);

@@ -193,17 +193,17 @@ pub fn figure_size_px(n: usize, per_row: usize) -> (u32, u32) {
 /// Reads `corners.parquet`, keeping the vertices in `wanted` (all when empty).
 pub fn load_corners(path: &Path, wanted: &[i64]) -> Result<Vec<Corner>, StageError> {
     let df = read_parquet(path)?;
-    let (vertex, angle) = (ints(&df, "vertex", path)?, f64s(&df, "angle_deg", path)?);
+    let (vertex, angle) = (ints(&df, "corner", path)?, f64s(&df, "angle_deg", path)?);
     let (before, after) = (f64s(&df, "oe_before_pct", path)?, f64s(&df, "oe_after_pct", path)?);
     let corners: Vec<Corner> = (0..df.height())
         .map(|i| Corner { vertex: vertex[i], angle_deg: angle[i], oe_pct: (before[i], after[i]) })
         .filter(|c| wanted.is_empty() || wanted.contains(&c.vertex))
         .collect();
     if let Some(missing) = wanted.iter().find(|w| !corners.iter().any(|c| c.vertex == **w)) {
-        return Err(no_rows(path, "vertex", &format!("vertex {missing}")));
+        return Err(no_rows(path, "corner", &format!("corner {missing}")));
     }
     if corners.is_empty() {
-        return Err(no_rows(path, "vertex", "one row per evaluated corner"));
+        return Err(no_rows(path, "corner", "one row per evaluated corner"));
     }
     Ok(corners)
 }

@@ -163,9 +163,22 @@ pub fn frames() -> DataFrame {
     let n = 40;
     let used: Vec<bool> = (0..n).map(|i| i % 5 != 4).collect();
     let reason: Vec<&str> = used.iter().map(|u| if *u { "" } else { "fewer than 4 corners" }).collect();
+    // The first two frames show no corner: placed by their recorded time, no estimate.
+    let placed_by: Vec<&str> = (0..n)
+        .map(|i| {
+            if !used[i] {
+                ""
+            } else if i < 2 {
+                "recorded_time"
+            } else {
+                "corners"
+            }
+        })
+        .collect();
     let recorded: Vec<f64> = (0..n).map(|i| 0.125 * i as f64).collect();
-    let estimated: Vec<f64> =
-        (0..n).map(|i| if used[i] { recorded[i] + 0.004 * noise(i) - 0.003 } else { f64::NAN }).collect();
+    let estimated: Vec<f64> = (0..n)
+        .map(|i| if placed_by[i] == "corners" { recorded[i] + 0.004 * noise(i) - 0.003 } else { f64::NAN })
+        .collect();
     df!(
         "layer" => (0..n).map(|i| (i / 20) as i32).collect::<Vec<i32>>(),
         "frame" => (0..n as i32).collect::<Vec<i32>>(),
@@ -173,7 +186,7 @@ pub fn frames() -> DataFrame {
         "corners_found" => (0..n).map(|i| if used[i] { 5 } else { 2 }).collect::<Vec<i32>>(),
         "corners_matched" => (0..n).map(|i| if used[i] { 4 } else { 1 }).collect::<Vec<i32>>(),
         "reproj_err_mm" => (0..n).map(|i| if used[i] { 0.03 + 0.01 * noise(i) } else { f64::NAN }).collect::<Vec<f64>>(),
-        "used" => used, "skip_reason" => reason
+        "used" => used, "placed_by" => placed_by, "skip_reason" => reason
     )
     .expect("frame")
 }
@@ -346,7 +359,7 @@ pub fn corners(poly: &[(f64, f64)]) -> DataFrame {
     let before: Vec<f64> = (0..n).map(|k| 100.0 + 10.0 * noise(k)).collect();
     let after: Vec<f64> = (0..n).map(|k| 30.0 + 10.0 * noise(k + 50)).collect();
     df!(
-        "vertex" => (0..n as i32).collect::<Vec<i32>>(), "angle_deg" => angle,
+        "corner" => (0..n as i32).collect::<Vec<i32>>(), "angle_deg" => angle,
         "oe_before_pct" => before.clone(), "oe_after_pct" => after.clone(),
         "a_c_mm2" => a_c.clone(),
         "a_o_before_mm2" => a_c.iter().zip(&before).map(|(a, o)| a * o / 100.0).collect::<Vec<f64>>(),

@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        7
+        8
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -115,8 +115,10 @@ pub struct Ours {
     pub spans: usize,
     /// `accuracy.parquet`: metric → (value, unit, n, note).
     pub accuracy: BTreeMap<String, AccuracyRow>,
-    /// Frames used, and skip reason → count.
+    /// Frames placed from their corners (eqs 27-30).
     pub frames_used: usize,
+    /// Frames with no corner in view, placed by their recorded time (widths only).
+    pub frames_by_recorded_time: usize,
     /// Skipped frames by reason.
     pub skipped: BTreeMap<String, usize>,
     /// Sources: spans, accuracy, frames.
@@ -160,12 +162,13 @@ impl Ours {
     /// fifth (the extension's reprint).
     pub fn read(inputs: &[InputArtifact]) -> Result<Self, StageError> {
         let (compensate, reprint, accuracy, monitor) = (&inputs[0], &inputs[1], &inputs[2], &inputs[3]);
-        let (frames_used, skipped) = read_frames(&monitor.dir.join("frames.parquet"))?;
+        let (frames_used, frames_by_recorded_time, skipped) = read_frames(&monitor.dir.join("frames.parquet"))?;
         Ok(Self {
             reprint: Reprint::read(reprint)?,
             spans: read_parquet(&compensate.dir.join("spans.parquet"))?.height(),
             accuracy: read_accuracy(&accuracy.dir.join("accuracy.parquet"))?,
             frames_used,
+            frames_by_recorded_time,
             skipped,
             sources: [
                 source(compensate, "spans.parquet"),
@@ -189,13 +192,13 @@ impl Ours {
 
 fn read_corners(path: &Path) -> Result<Vec<CornerOe>, StageError> {
     let df = read_parquet(path)?;
-    let (vertex, angle) = (ints(&df, "vertex", path)?, f64s(&df, "angle_deg", path)?);
+    let (vertex, angle) = (ints(&df, "corner", path)?, f64s(&df, "angle_deg", path)?);
     let (before, after) = (f64s(&df, "oe_before_pct", path)?, f64s(&df, "oe_after_pct", path)?);
     let corners: Vec<CornerOe> = (0..df.height())
         .map(|i| CornerOe { vertex: vertex[i], angle_deg: angle[i], oe_pct: (before[i], after[i]) })
         .collect();
     if corners.is_empty() {
-        return Err(no_rows(path, "vertex", "one row per evaluated corner"));
+        return Err(no_rows(path, "corner", "one row per evaluated corner"));
     }
     Ok(corners)
 }
@@ -217,16 +220,23 @@ fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageErro
     Ok((0..df.height()).map(|i| (metric[i].clone(), (value[i], unit[i].clone(), n[i], note[i].clone()))).collect())
 }
 
-fn read_frames(path: &Path) -> Result<(usize, BTreeMap<String, usize>), StageError> {
+/// Frames placed from their corners, placed by their recorded time (`placed_by`, absent
+/// in tables of older monitors: all placed frames count as placed from corners) and
+/// skipped by reason.
+fn read_frames(path: &Path) -> Result<(usize, usize, BTreeMap<String, usize>), StageError> {
     let df = read_parquet(path)?;
     let (used, reason) = (bools(&df, "used", path)?, strs(&df, "skip_reason", path)?);
+    let by_recorded_time = match df.column("placed_by") {
+        Ok(_) => strs(&df, "placed_by", path)?.iter().filter(|p| *p == "recorded_time").count(),
+        Err(_) => 0,
+    };
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
     for (u, r) in used.iter().zip(reason) {
         if !u {
             *skipped.entry(if r.is_empty() { "unstated".into() } else { r }).or_default() += 1;
         }
     }
-    Ok((used.iter().filter(|u| **u).count(), skipped))
+    Ok((used.iter().filter(|u| **u).count() - by_recorded_time, by_recorded_time, skipped))
 }
 
 /// The relative reduction from `before` to `after` (%).
@@ -439,7 +449,26 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
             accuracy,
         ),
         ("sec_2_4", "compensated spans (eqs 32-39)", None, "—", Some(ours.spans as f64), "spans", 0, spans),
-        ("sec_3_2", "frames used", None, "—", Some(ours.frames_used as f64), "frames", 0, frames),
+        (
+            "sec_3_2",
+            "frames placed from their corners (eqs 27-30)",
+            None,
+            "—",
+            Some(ours.frames_used as f64),
+            "frames",
+            0,
+            frames,
+        ),
+        (
+            "sec_3_2",
+            "frames placed by their recorded time (no corner in view; widths only)",
+            None,
+            "—",
+            Some(ours.frames_by_recorded_time as f64),
+            "frames",
+            0,
+            frames,
+        ),
         (
             "sec_3_2",
             "frames skipped",
@@ -574,7 +603,9 @@ fn extension_sentence(ours: &Ours) -> String {
     let [(max0, rms0), (max1, rms1)] = ext.contour_mm;
     format!(
         "Fed instead with the flow excess eq. 34 predicts for the nominal command (our extension, no widths: stage compensate_lag), the same \
-filtered-B-spline solve lowers the mean O_E by {:.1} % and the RMS contour error by {:.1} %, and changes the max by {:+.1} %. ",
+filtered-B-spline solve lowers the mean O_E by {:.1} % and the RMS contour error by {:.1} %, and changes the max by {:+.1} %. It knows nothing of \
+the CAD bead: it removes the whole predicted excess, also where that excess was filling the CAD bead's sharp tips, which the width feedback keeps because \
+the desired width there is the CAD bead's long extent along the bisector. ",
         reduction_pct(oe0, oe1),
         reduction_pct(rms0, rms1),
         -reduction_pct(max0, max1)
@@ -605,41 +636,44 @@ fn discussion(ours: &Ours) -> String {
 The paper measures O_E on photographs of real prints (Figs 9-10); ours is computed on the first layer the virtual printer deposits again (a 0.02 mm fill grid, \
 stage reprint), with A_c the corner polytope, the rhombus where the two edges' ideal beads overlap (W²/sin θ), and A_o the deposited area outside the ideal \
 (mitred) bead within a disc around the vertex. Our test path has eighteen corners (45° to 120° apexes on two zig-zags, their valleys and four side corners) where \
-the paper's has four types. Two things make corners over-deposit on the virtual printer: the flow lag (τ = 0.0873 s, eq. 34) while the head slows, and, at \
-the sharp apexes, the deposition segments of the incoming and outgoing beads overlapping, so that material piles up. Only corners covered by a localised \
-frame get a width reading and a compensation; the others keep O_E before = after in the table above.</p>\n\
+the paper's has four types. Corners over-deposit on the virtual printer because the flow lags (τ = 0.0873 s, eq. 34) while the head slows: the beads \
+of eqs 5-11 widen and, at the sharp apexes, the deposition segments of the incoming and outgoing beads overlap; what would stand higher than the nozzle \
+plane the nozzle face squeezes out sideways, into a bulge. Only corners covered by a localised frame get a width reading and a compensation; the others \
+keep O_E before = after in the table above.</p>\n\
 <p><b>Deposition velocity.</b> We read the paper's deposition velocity v_e as the extruder's filament velocity (E = A_fil·v_e, 1.75 mm filament), the reading \
 under which its w0 = K·α + b (K = 3.44 mm, b = 0.67 mm) gives a sub-millimetre bead and its bounds ΔV ∈ [−2, 4] mm/s allow the short retraction a corner needs; \
 the virtual printer lets a negative command pull the melt pressure down and extrudes only while it is positive. \
 Where the stage's defaults depart from eqs 31-33 (stage compensate's parameters, in the source column), they do so for reasons measured on the virtual printer \
 with its true widths: the desired width is the CAD bead's extent along each allocated direction (at a sharp corner's inner side eq. 31's w0/cos ψ is far \
 narrower than the overlapping beads, so a perfect corner would read as over-deposited); the width error is signed, as eq. 33 is, so thin stretches get \
-material too; the widths are the median over the monitored layers 1-4; the fit runs 3τ past each window so the lagged tail does not starve the bead \
-after the corner; and K_e = 1, since the paper's K_e was identified for corners read at 140-150 °C and ours are read in a wider band.</p>\n\
-<p><b>What limits width feedback here.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
-so the paper's geometric model is the printer's own. With the printer's true widths in place of the thermal ones (datasets/examples/chen2024_oracle.rs, \
-seed 3, 20 layers), the stage's defaults lower the mean O_E by 53 % and the RMS contour error by 33 % when the widths come from the first layer, and \
-by 64 % and 34 % from layers 1-4, which is what the spec reads; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E as much but \
-leave the RMS where it was, because they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much and −0.92 mm³ too little, but the \
-footprint of the first layer shows only +0.20 mm³ of that excess, and of layers 1-4 +0.32 mm³: at a sharp apex the deposition quadrilaterals overlap \
-even after the allocation and the material piles up in height (up to 2.8 layer heights), where no width can see it; from the second layer on the nozzle \
-squeezes part of that pile sideways into the bead. That is the discrepancy this reproduction names: eqs 31-33 map a width error to a flow error, which \
-holds only where the bead stays one layer high. With the thermal widths instead of the true ones the O_E still falls about as far, but the RMS \
-much less: the heat of a corner's pile spreads along the bead, so the thermal contour smears the corner's excess over some 50 ms either side of the \
-apex. Just after the apex of the 75° corner (vertex 5), where the bead is really thin (0.32 mm, the head accelerating while the flow still lags), the \
-camera reads 0.45 mm (median over layers 1-4), so the compensation also takes material from a stretch that already lacks it. Within 0.5 mm of a vertex \
-the thermal width differs from the true one by 0.10-0.12 mm (median absolute, 90th percentile 0.4-0.9 mm), against 0.005-0.007 mm away from the \
-corners. Reading the widths young limits the smear (stage monitor's measure_age_s = 0.1 s; at 0.25 s the RMS rose by 22 %). {extension}\
-With the <code>melt_squeeze_out</code> effect of the virtual printer (melt flows into the nearest free space instead of along the deposition direction), \
-true widths gave only a third less O_E in our previous release: the more the melt moves after it leaves the nozzle, the less a width says about the flow.</p>\n\
+material too; the fit runs 3τ past each window so the lagged tail does not starve the bead after the corner; and K_e = 1, since the paper's K_e was \
+identified for corners read at 140-150 °C and ours are read in a wider band. The widths are those of the first layer, as in the paper's one-layer \
+verification (the median of layers 1-4 per sample gives the same gains on seed 3: O_E −71 %, RMS −34 %).</p>\n\
+<p><b>Width feedback against the truth.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
+so the paper's geometric model is the printer's own, except where the nozzle face squeezes the excess sideways. With the printer's true widths of the \
+first layer in place of the thermal ones (datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 71 % and \
+the RMS contour error by 35 %; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E by 80 % but the RMS by only 15 %, because \
+they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much and −0.92 mm³ too little; the true widths of the first layer see +0.54 and \
+−0.80 mm³ of it. The rest is what this reproduction names as the model's blind spot: eqs 31-33 read the flow error along the deposition directions, and \
+the squeezed-out part of a corner's excess lies around the apex, between them. The thermal widths do as well as the true ones here: within 0.5 mm of a \
+vertex they differ from the true widths by 0.054 mm (median absolute, 90th percentile 0.10 mm), against 0.005 mm away from the corners, because a \
+corner's bulge holds more heat and its warm contour spreads as it ages. Reading them young limits that (stage monitor's measure_age_s = 0.1 s; on seed 3 \
+the RMS falls by 30 % at 0.15 s and 18 % at 0.25 s; at 0.06 s some corners are not yet fully in view). The first frames of every layer show no corner; \
+placing them by their recorded time through the fitted mount (stage monitor's place_cornerless) lets the compensation also fill the thin start of the \
+layer, where the flow builds up from rest: without it O_E falls by 65 % instead of 71 %. {extension}The <code>melt_squeeze_out</code> effect of the virtual printer sends part of every millisecond's melt into \
+the nearest free cells instead of along the deposition direction: the more the melt moves after it leaves the nozzle, the less a width says about the \
+flow (an earlier version of this printer that sent all of it there let true widths lower O_E by only a third).</p>\n\
 <p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
-0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the outer surface \
-of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary on every layer, with no profiler noise. \
-Eq. 41 takes each CAD point's distance to the nearest printed edge, so a bulge that sticks out past a corner costs nothing while a part of the CAD bead \
-left empty does. Our worst point, before and after either compensation, is the outer tip of the mitred CAD bead at the 45° corners, 0.59 mm beyond the \
-vertex, which a round bead on a blended path never fills (0.42 mm short on the conventional part): a floor no flow command removes, so a 50 % fall of the \
-maximum is out of reach for both methods on this part. The paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger \
-than this printer's.</p>\n\
+0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the external \
+surface of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary on every layer, at the CAD \
+points of the external surface (stage reprint's inner_face = false; with the wall's inside face too the max falls by 30 % and the RMS by 33 % on seed 3), \
+with no profiler noise. Eq. 41 takes each CAD point's distance to the nearest printed edge, so both a bulge that pushes the edge out and a part of the \
+CAD bead left empty cost. The conventional part's worst point on seed 3 is the notch of the 75° valley, which its bulge fills 0.34 mm deep; after \
+compensation it is the notch of the 52.5° valley (0.18 mm). How far the maximum falls depends on how much of each sharp corner's excess the compensation \
+leaves: the mitred tip of the CAD bead at a 45° apex lies 0.59 mm beyond the vertex, where a round bead on a blended path does not reach, and only the \
+excess fills it. With the true widths (or thermal widths read at 0.06 s) the 45° corners lose more of their excess and that tip is 0.33 mm short, so \
+the maximum hardly falls; the lag model, which removes all of it, leaves it 0.40 mm short. A 50 % fall of the maximum, the issue's bar, is not reached \
+by either method. The paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger than this printer's.</p>\n\
 <p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
 Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
 solve of eq. 39 per corner (models/benches/thermal.rs) and the whole frame pipeline per frame (vision/benches/frames.rs); see the README for the numbers.</p>\n\
@@ -648,20 +682,21 @@ annotated real frames, so we detect corners classically (local temperature maxim
 are known, and report precision {p} % and recall {r} % against that ground truth instead; mAP is not computed. The paper keeps frames whose corners are at \
 140-150 °C; on the virtual printer a corner crosses that band about 1 s after it is printed and stays in it for about 0.2 s, so never more than two corners \
 are in it at once and eq. 27 needs four: the shipped spec widens the band (stage monitor's band_low_c/band_high_c, in the source column). A corner's heat peak \
-sits inside the corner, where the material piles up; we place each matched corner at the intersection of its two bead ridges instead (vision::vertex).</p>\n\
+sits inside the corner, where the material bulges; we place each matched corner at the intersection of its two bead ridges instead (vision::vertex).</p>\n\
 <p><b>Capture-time localisation.</b> The paper gives no error figure, only that the search neighbourhood δt of eq. 30 should be within 10 ms. Ours: median \
 error {loc} ms against the virtual camera's true capture times, against {base} ms when the recorded time is used as is (the camera's timestamps jitter \
-with σ = 3 ms); the paper's per-frame DLT homography (eq. 27, stage monitor with localisation = \"dlt\") gives {dlt} ms. Two thirds of the frames hold \
-fewer than the four in-band corners eq. 27 needs, and four to six corners on one side of the image let an 8-parameter homography extrapolate their errors \
-onto the nozzle. Our extension uses that the camera is rigid on a head that only translates: one mount homography is fitted to the whole sequence and each \
+with σ = 3 ms); the paper's per-frame DLT homography (eq. 27, stage monitor with localisation = \"dlt\") gives {dlt} ms on the {dlt_frames} frames that \
+hold the four in-band corners it needs, and four to six corners on one side of the image let an 8-parameter homography extrapolate their errors onto \
+the nozzle. Our extension uses that the camera is rigid on a head that only translates: one mount homography is fitted to the whole sequence and each \
 frame needs only its translation, which a single corner gives (vision::mount, vision::rigid); corner vertices are placed where the two bead ridges meet, \
-with the arm lines through the ridges' centres so that the heat of the inner pile does not tilt them. The nozzle then lands within {nozzle} mm of its true \
+with the arm lines through the ridges' centres so that the heat of the corner's bulge does not tilt them. The nozzle then lands within {nozzle} mm of its true \
 position, the floor set by the camera's vibration being {floor} mm. {loc_verdict} Eq. 30 pays off most with a larger or unknown capture delay (the \
 camera_latency effect of the virtual camera), which the recorded time cannot see.</p>\n",
         n = ours.reprint.corners.len(),
         extension = extension_sentence(ours),
         loc_verdict = localisation_verdict(ours),
         dlt = fmt(ours.metric("dlt_capture_time_err_median_ms"), 2),
+        dlt_frames = fmt(ours.metric("dlt_frames_used"), 0),
         nozzle = fmt(ours.metric("nozzle_err_median_mm"), 3),
         floor = fmt(ours.metric("nozzle_err_floor_median_mm"), 3),
     )
@@ -698,7 +733,7 @@ mod tests {
     fn section_reports_every_number_and_the_checks() {
         let root = tempfile::tempdir().expect("tempdir");
         let ours = Ours::read(&inputs(root.path())).expect("reads");
-        assert_eq!((ours.frames_used, ours.skipped.values().sum::<usize>()), (32, 8));
+        assert_eq!((ours.frames_used, ours.frames_by_recorded_time, ours.skipped.values().sum::<usize>()), (30, 2, 8));
         let (rows, html) = section(&ours);
         let df = comparison_frame(&rows).expect("frame");
         let names: Vec<&str> = df.get_column_names().iter().map(|s| s.as_str()).collect();

@@ -26,7 +26,8 @@
 //!   same deposition direction (fill level 0.5), median absolute error and bias (mm);
 //! - corner detection: detections against the true corners whose temperature is in
 //!   the detector's band (the "newly printed corners" of Sec. 3.2), within 3 px;
-//! - frames used and skipped.
+//! - frames placed from their corners, placed by their recorded time (no corner in view,
+//!   `thermal.monitor`'s `place_cornerless`; their nozzle is also scored) and skipped.
 
 use std::path::Path;
 
@@ -72,7 +73,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        3
+        4
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -104,14 +105,16 @@ impl StageKind for AccuracyEvaluateStage {
         let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
         detection_metrics(&monitor, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
         let used = frames.used.iter().filter(|u| **u).count();
+        metrics.push("frames_used", used as f64, "frames", used, "frames placed from their corners (eqs 27-30)");
+        let dead_reckoned = frames.by_recorded_time.iter().filter(|r| **r).count();
         metrics.push(
-            "frames_used",
-            used as f64,
+            "frames_placed_by_recorded_time",
+            dead_reckoned as f64,
             "frames",
-            used,
-            "frames localised (≥ 4 matched corners, homography found)",
+            dead_reckoned,
+            "no corner in view: placed at the commanded position at t_r through the fitted mount, widths only",
         );
-        let skipped = frames.used.len() - used;
+        let skipped = frames.used.len() - used - dead_reckoned;
         metrics.push(
             "frames_skipped",
             skipped as f64,
@@ -161,6 +164,8 @@ struct FrameRows {
     recorded_s: Vec<f64>,
     estimated_s: Vec<f64>,
     used: Vec<bool>,
+    /// Placed by the recorded time (`placed_by` = recorded_time): no estimate of its own.
+    by_recorded_time: Vec<bool>,
     at_window_edge: Vec<bool>,
     homography: Vec<Option<Homography>>,
     /// Per estimator in `frames.parquet` (column prefix, capture times; NaN = skipped).
@@ -194,6 +199,15 @@ impl FrameRows {
             (Some(x), Some(y)) => Some(x.iter().zip(&y).map(|(x, y)| [*x, *y]).collect()),
             _ => None,
         };
+        let by_recorded_time = match df.column("placed_by") {
+            Ok(c) => c
+                .str()
+                .map_err(|source| StageError::Table { path: file.clone(), source })?
+                .iter()
+                .map(|v| v == Some("recorded_time"))
+                .collect(),
+            Err(_) => vec![false; estimated_s.len()],
+        };
         let at_window_edge = match df.column("at_window_edge") {
             Ok(c) => c
                 .bool()
@@ -208,6 +222,7 @@ impl FrameRows {
             frame: i64_column(&df, &file, "frame")?,
             recorded_s: f64_column(&df, &file, "recorded_time_s")?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
+            by_recorded_time,
             at_window_edge,
             estimated_s,
             homography,
@@ -292,17 +307,27 @@ fn estimator_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Met
 }
 
 /// Distance of P_N,i (eq. 29) from the true nozzle at the capture time.
+/// Also for the frames placed by their recorded time.
 fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
     let Some(nozzle) = &frames.nozzle_mm else { return };
-    let mut errors: Vec<f64> = (0..nozzle.len())
-        .filter(|&i| frames.used[i] && nozzle[i][0].is_finite())
-        .filter_map(|i| {
-            let t = truth_frame(truth, frames.layer[i], frames.frame[i])?;
-            Some((nozzle[i][0] - t.nozzle_mm[0]).hypot(nozzle[i][1] - t.nozzle_mm[1]))
-        })
-        .collect();
-    let n = errors.len();
-    metrics.push("nozzle_err_median_mm", quantile(&mut errors, 0.5), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
+    let errors = |rows: &[bool]| -> Vec<f64> {
+        (0..nozzle.len())
+            .filter(|&i| rows[i] && nozzle[i][0].is_finite())
+            .filter_map(|i| {
+                let t = truth_frame(truth, frames.layer[i], frames.frame[i])?;
+                Some((nozzle[i][0] - t.nozzle_mm[0]).hypot(nozzle[i][1] - t.nozzle_mm[1]))
+            })
+            .collect()
+    };
+    let mut placed = errors(&frames.used);
+    let n = placed.len();
+    metrics.push("nozzle_err_median_mm", quantile(&mut placed, 0.5), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
+    let mut dead_reckoned = errors(&frames.by_recorded_time);
+    if !dead_reckoned.is_empty() {
+        let n = dead_reckoned.len();
+        let note = "frames placed by their recorded time: commanded position at t_r to the true nozzle at t_c";
+        metrics.push("recorded_time_nozzle_err_median_mm", quantile(&mut dead_reckoned, 0.5), "mm", n, note);
+    }
 }
 
 /// The applied and the true mount (undistorted pixel → plane mm relative to the nozzle).

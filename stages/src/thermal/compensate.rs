@@ -21,9 +21,10 @@
 //!   direction (`IdealBead::edge_distance_mm`), which equals w0/cos ψ on straight edges.
 //! - Flow excess (`volume = "linear"`): eq. 33 as printed, h·|v|·cos ψ·Δw. The option
 //!   `sweep` takes the area swept by the turning deposition segments instead (see
-//!   models::thermal::compensation); with the printer's true widths it lowers the mean O_E
-//!   by only 37 % where `linear` lowers it by 64 % (the oracle study), because it counts
-//!   less of the excess at the apex, where most of it is.
+//!   models::thermal::compensation); with the printer's true widths of layer 0 it lowers
+//!   the mean O_E by only 58 % where `linear` lowers it by 71 % (the oracle study, seed
+//!   3), because it counts less of the excess at the apex, where most of it is; on the
+//!   thermal widths 48 % against 71 %.
 //! - Both signs (`add_material = true`). Paper eq. 33 is signed, and the spans are
 //!   |Δw| ≥ ε. The earlier default dropped Δw < 0 because eq. 31's w0/cos ψ made them
 //!   spurious; with the CAD desired width they are the real thinning after a corner
@@ -41,10 +42,12 @@
 //! Extension (`source = "lag_model"`, not the paper's method): the same filtered
 //! B-spline solve, but the desired output is the flow excess eq. 34 predicts for the
 //! nominal command, lag(v_e) − v_e, over the whole layer, with no widths. The paper
-//! identifies τ (Sec. 3.2) and then corrects only what the camera sees; on the virtual
-//! printer the footprint the camera sees misses the material that piles up in height
-//! at a sharp apex (see the report), so the model-based feed-forward is run beside the
-//! paper's width feedback and both are scored by their own re-print.
+//! identifies τ (Sec. 3.2) and then corrects only what the camera sees; the widths read
+//! along the deposition directions see about 70 % of the flow excess at the corners (the
+//! rest is squeezed around the apex, between them; see the report), so the model-based
+//! feed-forward is run beside the paper's width feedback and both are scored by their own
+//! re-print. On seed 3 it lowers the mean O_E as far (−70 %) but not the contour error:
+//! it knows nothing of the CAD bead and also removes the excess that filled its tips.
 //!
 //! Units: the deposition velocity v_e is the extruder's (E-axis) velocity in mm/s of
 //! filament, E = A_fil·v_e. This is the reading under which the paper's numbers fit

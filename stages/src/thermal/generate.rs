@@ -23,7 +23,7 @@ const PARAMS: &[ParamSpec] = &[
         name: "effects",
         ty: ParamType::Text,
         default: ParamDefault::Str(""),
-        doc: "Extra physical effects as `name=strength` pairs separated by commas (camera_latency, tau_mismatch, heat_diffusion_widening, layer_heat_accumulation); empty: none.",
+        doc: "Extra physical effects as `name=strength` pairs separated by commas (camera_latency, tau_mismatch, heat_diffusion_widening, layer_heat_accumulation, melt_squeeze_out); empty: none.",
     },
     ParamSpec {
         name: "lepton_habits",
@@ -38,7 +38,7 @@ impl StageKind for GenerateSequenceStage {
         "thermal.generate_sequence"
     }
     fn version(&self) -> u32 {
-        3
+        4
     }
     fn summary(&self) -> &'static str {
         "Virtual extrusion printer + nozzle-mounted thermal camera → a thermal-sequence dataset (the output folder)"

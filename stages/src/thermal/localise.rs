@@ -24,11 +24,21 @@
 //!   Why: the per-frame DLT needs four corners in the band, which two thirds of the
 //!   frames do not have, and its eight free parameters extrapolate the corners' errors
 //!   onto the nozzle; the rigid model has two unknowns per frame.
+//!   A frame with no readable corner at all (the first few of every layer: the layer
+//!   starts mid-side, and the previous layer's corners are too old) is placed, when
+//!   `place_cornerless` is set, by dead reckoning: the commanded position at its recorded
+//!   time through the fitted mount ([`Placement::RecordedTime`]). It has no capture-time
+//!   estimate of its own (its `estimated_time_s` is NaN, so `thermal.accuracy_evaluate`
+//!   leaves it out of the capture-time and homography statistics), but its widths can be
+//!   read: the recorded time is good to a few milliseconds, a few hundredths of a
+//!   millimetre along a straight bead, across which a width does not change.
 //!
-//! Measured on the eqs 5-11 printer (five layers, seeds 1-5, `thermal.accuracy_evaluate`):
-//! median capture-time error 0.78-0.87 ms against 1.91-2.24 ms for the recorded time,
-//! nozzle 0.024-0.030 mm against the 0.024-0.028 mm the camera vibration leaves with
-//! perfect vertices and mount, mount 0.007-0.029 mm. Before (ridge lines fitted from
+//! Measured on the eqs 5-11 printer with the nozzle face's squeeze (five layers, seeds 1-5,
+//! `thermal.accuracy_evaluate`): median capture-time error 0.76-0.91 ms against
+//! 1.91-2.24 ms for the recorded time (the paper's DLT: 1.50-2.65 ms on its 82-93 frames),
+//! nozzle 0.025-0.029 mm against the 0.024-0.028 mm the camera vibration leaves with
+//! perfect vertices and mount, mount 0.005-0.018 mm; the 30 frames placed by their
+//! recorded time 0.025-0.044 mm. Before (ridge lines fitted from
 //! 1.2 mm of arm gap, one re-pairing from the first fit's arms) the vertices of the sharp
 //! corners sat up to 1 px inside them (0.23 px median, 0.88 px p90), the mount fit
 //! absorbed that bias and came out 0.18 mm off on every seed (the nominal mount is
@@ -45,10 +55,10 @@ use vision::frame::ThermalFrame;
 use vision::homography::Homography;
 use vision::localize::TrajectoryView;
 use vision::matching::PredictedCorner;
-use vision::mount::{fit_mount, locate_nozzle, FramePairs, MountFit};
+use vision::mount::{fit_mount, frame_homography, locate_nozzle, FramePairs, MountError, MountFit};
 use vision::pipeline::{
     check_plausible, localise_dlt, observe_frame, predict_path_corners_into, CornerPairs, FrameContext, FrameInput,
-    FrameWorkspace, PathCorner, PipelineParams,
+    FrameSkip, FrameWorkspace, PathCorner, PipelineParams,
 };
 use vision::rigid::{initial_mount, localise_rigid, predict_corners_with_arms_into, ridge_pairs_into};
 
@@ -95,11 +105,32 @@ impl Localisation {
     }
 }
 
+/// How a frame was placed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Placement {
+    /// From its corners (eqs 27-30).
+    Corners,
+    /// No corner: the commanded position at the recorded time, through the fitted mount.
+    RecordedTime,
+}
+
+impl Placement {
+    /// The `placed_by` value of `frames.parquet`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Corners => "corners",
+            Self::RecordedTime => "recorded_time",
+        }
+    }
+}
+
 /// One estimator's placement of a frame.
 #[derive(Debug, Clone, Copy)]
 pub struct Located {
-    /// Capture time t̂_c (eq. 30, s).
+    /// Capture time t̂_c (eq. 30, s); the recorded time for [`Placement::RecordedTime`].
     pub t_s: f64,
+    /// How the frame was placed.
+    pub placed_by: Placement,
     /// t̂_c lies on the edge of the search window.
     pub at_window_edge: bool,
     /// Nozzle position P_N,i (eq. 29, world mm).
@@ -125,6 +156,7 @@ impl Located {
         let plane_to_px = h.inverse().ok_or_else(|| "singular homography".to_string())?;
         Ok(Self {
             t_s: t.t_s,
+            placed_by: Placement::Corners,
             at_window_edge: t.at_window_edge,
             nozzle_mm,
             px_to_plane: h,
@@ -132,6 +164,29 @@ impl Located {
             fit_err_mm: err,
             pairs,
         })
+    }
+
+    /// A frame without corners, placed by dead reckoning (module doc).
+    fn by_recorded_time(t_recorded_s: f64, nozzle_mm: [f64; 2], h: Homography) -> Result<Self, String> {
+        let plane_to_px = h.inverse().ok_or_else(|| "singular homography".to_string())?;
+        Ok(Self {
+            t_s: t_recorded_s,
+            placed_by: Placement::RecordedTime,
+            at_window_edge: false,
+            nozzle_mm,
+            px_to_plane: h,
+            plane_to_px,
+            fit_err_mm: f64::NAN,
+            pairs: 0,
+        })
+    }
+
+    /// Eq. 30's capture-time estimate; NaN for a frame placed by its recorded time.
+    pub fn estimated_time_s(&self) -> f64 {
+        match self.placed_by {
+            Placement::Corners => self.t_s,
+            Placement::RecordedTime => f64::NAN,
+        }
     }
 }
 
@@ -214,6 +269,7 @@ pub struct Localiser<'a> {
     passage_s: Vec<f64>,
     ready_s: Vec<f64>,
     max_age_s: f64,
+    place_cornerless: bool,
 }
 
 impl<'a> Localiser<'a> {
@@ -225,6 +281,7 @@ impl<'a> Localiser<'a> {
         h0: Homography,
         params: PipelineParams,
         max_age_s: f64,
+        place_cornerless: bool,
     ) -> Self {
         let path_corners = PathCorner::of_closed_path(&seq.path_mm);
         let passage_s = vertex_passage_times(seq, trajectory);
@@ -241,7 +298,7 @@ impl<'a> Localiser<'a> {
                 )
             })
             .collect();
-        Self { seq, trajectory, undistorter, h0, params, path_corners, passage_s, ready_s, max_age_s }
+        Self { seq, trajectory, undistorter, h0, params, path_corners, passage_s, ready_s, max_age_s, place_cornerless }
     }
 
     /// Both estimators on every frame, in file order, and the mount fits; `chosen` set by `method`.
@@ -437,6 +494,11 @@ impl<'a> Localiser<'a> {
             Ok(r) => {
                 f.pair_used = r.fix.inliers.clone();
                 f.rigid = Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
+            }
+            Err(FrameSkip::Mount(MountError::NoPairs)) if self.place_cornerless => {
+                let t_r = f.entry.recorded_time_s;
+                let nozzle_mm = ctx.trajectory.position_mm(t_r);
+                f.rigid = Located::by_recorded_time(t_r, nozzle_mm, frame_homography(mount, nozzle_mm));
             }
             Err(skip) => f.rigid = Err(skip.to_string()),
         }

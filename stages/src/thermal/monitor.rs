@@ -22,13 +22,15 @@
 //!    width of eq. 31 and the error of eq. 32.
 //!
 //! Age: the paper reads frames whose corners are at 140-150 °C, an age it does not
-//! state. A corner's pile stays hot while its heat spreads along the bead
-//! (σ² = σ0² + 2·D·age), so the older the bead, the more the thermal contour smears the
-//! apex excess onto the thin stretch just after the apex, where the head accelerates
-//! while the flow still lags. We read each sample at 0.1 s, when it is 2 mm behind the
-//! nozzle at 20 mm/s. Measured on seed 3: at 0.25 s the median width error is 0.018 mm
-//! and the compensated part's RMS contour error rises by 22 %; at 0.1 s it is 0.009 mm
-//! and the RMS falls by 9 %; at 0.06 s too few corners are fully in view.
+//! state. A corner's bulge stays hot while its heat spreads (σ² = σ0² + 2·D·age), so the
+//! older the bead, the more the thermal contour smears the apex excess onto the thin
+//! stretch just after the apex, where the head accelerates while the flow still lags.
+//! We read each sample at 0.1 s, when it is 2 mm behind the nozzle at 20 mm/s. Measured
+//! on seed 3 (`specs/chen2024.toml`): at 0.1 s the median width error is 0.009 mm and the
+//! compensated part's RMS contour error falls by 35 %; at 0.15 s by 30 %; at 0.25 s the
+//! width error is 0.017 mm and the RMS falls by only 18 %; at 0.06 s some corners are
+//! not yet fully in view and the sharp corners lose more of their excess (the max
+//! contour error then falls by 1 % instead of 45 %).
 //!
 //! T_t: the paper does not give it. Heat spreads sideways as the bead cools, so the
 //! contour at any fixed temperature drifts with age; we calibrate T_t per layer the way
@@ -113,6 +115,12 @@ const PARAMS: &[ParamSpec] = &[
         doc: "rigid_mount only: corners printed longer ago than this (s, from the commanded trajectory) are not used; as a bead cools its heat spreads and the ridges of a corner's two arms pull each other inwards (≈ 0.1 mm after 2 s).",
     },
     ParamSpec {
+        name: "place_cornerless",
+        ty: ParamType::Bool,
+        default: ParamDefault::Bool(true),
+        doc: "rigid_mount only: place a frame with no readable corner (the first few of each layer) by the commanded position at its recorded time through the fitted mount, so the widths of the layer's start are read; it gets no capture-time estimate (NaN in frames.parquet, `placed_by` = recorded_time). false: skip it, as the paper's method must.",
+    },
+    ParamSpec {
         name: "window_s",
         ty: ParamType::Float { min: 0.001, max: 0.5 },
         default: ParamDefault::Float(0.010),
@@ -125,7 +133,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        5
+        6
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -170,6 +178,7 @@ struct Settings {
     window_s: f64,
     localisation: Localisation,
     max_corner_age_s: f64,
+    place_cornerless: bool,
 }
 
 impl Settings {
@@ -184,6 +193,7 @@ impl Settings {
             window_s: p.f64("window_s"),
             localisation: Localisation::from_name(p.str("localisation")),
             max_corner_age_s: p.f64("max_corner_age_s"),
+            place_cornerless: p.bool("place_cornerless"),
         }
     }
 }
@@ -236,6 +246,7 @@ impl<'a> Analysis<'a> {
                 camera.nominal_homography(),
                 params,
                 settings.max_corner_age_s,
+                settings.place_cornerless,
             ),
             queries,
             straight,
@@ -484,16 +495,20 @@ fn write_frame_tables(
     let of = |g: fn(&super::localise::Located) -> f64| -> Vec<f64> {
         frames.iter().map(|f| located(f).map_or(f64::NAN, |l| g(&l))).collect()
     };
-    let time_of = |r: &Result<super::localise::Located, String>| r.as_ref().map_or(f64::NAN, |l| l.t_s);
+    let time_of = |r: &Result<super::localise::Located, String>| r.as_ref().map_or(f64::NAN, |l| l.estimated_time_s());
     let mut columns = vec![
         i64_col("layer", frames.iter().map(|f| f.entry.layer as i64).collect()),
         i64_col("frame", frames.iter().map(|f| f.entry.frame as i64).collect()),
         f64_col("recorded_time_s", frames.iter().map(|f| f.entry.recorded_time_s).collect()),
-        f64_col("estimated_time_s", of(|l| l.t_s)),
+        f64_col("estimated_time_s", of(|l| l.estimated_time_s())),
         i64_col("corners_found", frames.iter().map(|f| f.corners_found as i64).collect()),
         i64_col("corners_matched", frames.iter().map(|f| f.matched as i64).collect()),
         f64_col("reproj_err_mm", of(|l| l.fit_err_mm)),
         bool_col("used", frames.iter().map(|f| f.located().is_some()).collect()),
+        str_col(
+            "placed_by",
+            frames.iter().map(|f| located(f).map_or("", |l| l.placed_by.name()).to_string()).collect(),
+        ),
         bool_col("at_window_edge", frames.iter().map(|f| located(f).is_some_and(|l| l.at_window_edge)).collect()),
         str_col("skip_reason", frames.iter().map(|f| f.skip_reason().unwrap_or_default().to_string()).collect()),
     ];

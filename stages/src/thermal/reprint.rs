@@ -11,9 +11,11 @@
 //!   corners) within the corner window, a disc of radius `corner_radius_mm` around the
 //!   vertex. The window must hold the whole corner bulge; A_c does not depend on it, so
 //!   O_E is the bulge measured in corner polytopes.
-//! - Contour error (eq. 41, Table 3): every CAD contour point (both offset polygons at
-//!   ±W/2, every 0.05 mm) to the nearest point of the printed footprint's boundary
-//!   (fill level 0.5, marching squares), on every layer; max and RMS over all.
+//! - Contour error (eq. 41, Table 3): every CAD contour point to the nearest point of the
+//!   printed footprint's boundary (fill level 0.5, marching squares), on every layer; max
+//!   and RMS over all. The CAD points P_t are "the desirable external surface profile"
+//!   the paper's laser profiler measures from outside the part: the outer offset polygon
+//!   at W/2, every 0.05 mm (`inner_face = true` adds the wall's inside face at −W/2).
 //!
 //! Also writes the first layer's deposit classes near the corners (Fig. 10) and the
 //! CAD polygon.
@@ -56,6 +58,12 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(0.05),
         doc: "Spacing of the CAD contour points of eq. 41 (mm); the paper's profiler samples every 0.5 mm in z, we sample the contour finely.",
     },
+    ParamSpec {
+        name: "inner_face",
+        ty: ParamType::Bool,
+        default: ParamDefault::Bool(false),
+        doc: "Also score the wall's inside face in eq. 41; the paper's P_t is the external surface its profiler sees (Sec. 3.3).",
+    },
 ];
 
 impl StageKind for ReprintEvaluateStage {
@@ -63,7 +71,7 @@ impl StageKind for ReprintEvaluateStage {
         "thermal.reprint_evaluate"
     }
     fn version(&self) -> u32 {
-        4
+        6
     }
     fn summary(&self) -> &'static str {
         "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
@@ -100,7 +108,7 @@ impl StageKind for ReprintEvaluateStage {
         let radius_mm = ctx.params.f64("corner_radius_mm");
         let mut corners = corners_frame(&seq, &setup, &bead, radius_mm, &before[0], &after[0])?;
         ctx.write_table("corners", &mut corners)?;
-        let cad = bead.contour_points(ctx.params.f64("contour_spacing_mm"));
+        let cad = bead.contour_points(ctx.params.f64("contour_spacing_mm"), ctx.params.bool("inner_face"));
         let errors_before: Vec<Vec<ContourPoint>> = before.iter().map(|g| contour_errors(g, &cad)).collect();
         let errors_after: Vec<Vec<ContourPoint>> = after.iter().map(|g| contour_errors(g, &cad)).collect();
         let mut contour = contour_frame(&errors_before, &errors_after)?;
@@ -168,7 +176,7 @@ fn corners_frame(
     let b: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(before, bead, *v, radius_mm)).collect();
     let a: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(after, bead, *v, radius_mm)).collect();
     frame(vec![
-        i64_col("vertex", (0..angles.len() as i64).collect()),
+        i64_col("corner", (0..angles.len() as i64).collect()),
         f64_col("angle_deg", angles),
         f64_col("oe_before_pct", b.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
         f64_col("oe_after_pct", a.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
