@@ -9,7 +9,9 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use polars::prelude::{DataFrame, KeyValueMetadata, ParquetCompression, ParquetReader, ParquetWriter, SerReader};
+use polars::prelude::{
+    Column, DataFrame, KeyValueMetadata, ParquetCompression, ParquetReader, ParquetWriter, SerReader,
+};
 
 use crate::error::StageError;
 use crate::TOOL_VERSION;
@@ -51,6 +53,19 @@ pub fn write_parquet(path: &Path, df: &mut DataFrame, meta: &TableMeta) -> Resul
 pub fn read_parquet(path: &Path) -> Result<DataFrame, StageError> {
     let file = fs::File::open(path).map_err(|e| StageError::io(path, e))?;
     ParquetReader::new(file).finish().map_err(|source| StageError::Table { path: path.to_path_buf(), source })
+}
+
+/// Column `name` of `df`, read from `path`; a missing column is a `BadInput` naming the
+/// file, the column and the columns the table has.
+pub fn column<'a>(df: &'a DataFrame, name: &str, path: &Path) -> Result<&'a Column, StageError> {
+    df.column(name).map_err(|_| {
+        let present: Vec<&str> = df.get_column_names().iter().map(|c| c.as_str()).collect();
+        StageError::BadInput {
+            file: path.to_path_buf(),
+            location: Some(name.to_string()),
+            expected: format!("expected a column `{name}`; the table has {}", present.join(", ")),
+        }
+    })
 }
 
 /// Writes `bytes` to `path` atomically.
@@ -126,6 +141,17 @@ fn temp_sibling(path: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_missing_column_is_named_with_the_columns_there_are() {
+        let df = polars::df!("x_mm" => [1.0], "y_mm" => [2.0]).unwrap();
+        let path = Path::new("out/thermal/path.parquet");
+        assert_eq!(column(&df, "y_mm", path).unwrap().len(), 1);
+        let err = column(&df, "z_mm", path).unwrap_err().to_string();
+        assert!(err.contains("out/thermal/path.parquet") && err.contains("`z_mm`"), "{err}");
+        assert!(err.contains("the table has x_mm, y_mm"), "{err}");
+        assert_eq!(err.matches("not found").count(), 0, "{err}");
+    }
 
     #[test]
     fn failed_write_leaves_previous_file_untouched() {

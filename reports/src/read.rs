@@ -2,14 +2,14 @@
 
 use std::path::Path;
 
-pub use pipeline::artifact::read_parquet;
+pub use pipeline::artifact::{column, read_parquet};
 use pipeline::StageError;
 use polars::prelude::DataFrame;
 
 /// Column `name` as floats (nulls become NaN).
 pub fn f64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
-    let col = df.column(name).map_err(bad)?;
+    let col = column(df, name, path)?;
     let ca = col.f64().map_err(bad)?;
     Ok(ca.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
 }
@@ -17,7 +17,7 @@ pub fn f64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageEr
 /// Column `name` as strings.
 pub fn strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
-    let col = df.column(name).map_err(bad)?;
+    let col = column(df, name, path)?;
     let ca = col.str().map_err(bad)?;
     Ok(ca.iter().map(|v| v.unwrap_or_default().to_string()).collect())
 }
@@ -25,7 +25,7 @@ pub fn strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, Stag
 /// Column `name` as 64-bit integers (nulls are an error).
 pub fn i64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<i64>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
-    let col = df.column(name).map_err(bad)?;
+    let col = column(df, name, path)?;
     let ca = col.i64().map_err(bad)?;
     ca.iter()
         .enumerate()
@@ -52,7 +52,7 @@ pub fn no_rows(path: &Path, column: &str, wanted: &str) -> StageError {
 /// counts as i64). A non-integer column or a null is an error naming the column.
 pub fn ints(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<i64>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
-    let col = df.column(name).map_err(bad)?;
+    let col = column(df, name, path)?;
     if !col.dtype().is_integer() {
         return Err(StageError::BadInput {
             file: path.to_path_buf(),
@@ -68,7 +68,7 @@ pub fn ints(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<i64>, StageEr
 /// Column `name` as booleans (nulls are an error).
 pub fn bools(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<bool>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };
-    let ca = df.column(name).map_err(bad)?.bool().map_err(bad)?;
+    let ca = column(df, name, path)?.bool().map_err(bad)?;
     ca.iter().enumerate().map(|(row, v)| v.ok_or_else(|| null_at(path, name, row))).collect()
 }
 

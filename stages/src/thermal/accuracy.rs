@@ -31,6 +31,8 @@
 
 use std::path::Path;
 
+use models::stats::finite_median;
+
 use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::thermal::DepositGrid;
@@ -73,7 +75,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        4
+        5
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -250,13 +252,13 @@ fn time_errors(frames: &FrameRows, truth: &ThermalTruth, times: &[f64]) -> (Vec<
 }
 
 fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
-    let (mut ours, mut baseline) = time_errors(frames, truth, &frames.estimated_s);
+    let (mut ours, baseline) = time_errors(frames, truth, &frames.estimated_s);
     let n = ours.len();
-    metrics.push("capture_time_err_median_ms", quantile(&mut ours, 0.5), "ms", n, "|t̂_c − t_c|, eq. 30");
+    metrics.push("capture_time_err_median_ms", median(&ours), "ms", n, "|t̂_c − t_c|, eq. 30");
     metrics.push("capture_time_err_p90_ms", quantile(&mut ours, 0.9), "ms", n, "90th percentile of |t̂_c − t_c|");
     metrics.push(
         "capture_time_err_baseline_median_ms",
-        quantile(&mut baseline, 0.5),
+        median(&baseline),
         "ms",
         n,
         "|t_r − t_c|: the recorded time taken as the capture time",
@@ -269,10 +271,10 @@ fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut 
         }
     }
     let n = offset.len();
-    metrics.push("capture_offset_median_ms", quantile(&mut offset, 0.5), "ms", n, "median of t̂_c − t_r (signed)");
+    metrics.push("capture_offset_median_ms", median(&offset), "ms", n, "median of t̂_c − t_r (signed)");
     metrics.push(
         "capture_offset_true_median_ms",
-        quantile(&mut true_offset, 0.5),
+        median(&true_offset),
         "ms",
         n,
         "median of t_c − t_r (signed): a constant capture delay shows here",
@@ -284,20 +286,14 @@ fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut 
 /// The capture-time error of each estimator `frames.parquet` carries, on its own frames.
 fn estimator_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
     for (prefix, times) in &frames.estimators {
-        let (mut ours, mut baseline) = time_errors(frames, truth, times);
+        let (mut ours, baseline) = time_errors(frames, truth, times);
         let n = ours.len();
         let name = |what: &str| format!("{prefix}_{what}");
-        metrics.push(
-            &name("capture_time_err_median_ms"),
-            quantile(&mut ours, 0.5),
-            "ms",
-            n,
-            "|t̂_c − t_c| of this estimator",
-        );
+        metrics.push(&name("capture_time_err_median_ms"), median(&ours), "ms", n, "|t̂_c − t_c| of this estimator");
         metrics.push(&name("capture_time_err_p90_ms"), quantile(&mut ours, 0.9), "ms", n, "90th percentile");
         metrics.push(
             &name("capture_time_err_baseline_median_ms"),
-            quantile(&mut baseline, 0.5),
+            median(&baseline),
             "ms",
             n,
             "|t_r − t_c| on the frames this estimator localised",
@@ -319,14 +315,14 @@ fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metric
             })
             .collect()
     };
-    let mut placed = errors(&frames.used);
+    let placed = errors(&frames.used);
     let n = placed.len();
-    metrics.push("nozzle_err_median_mm", quantile(&mut placed, 0.5), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
-    let mut dead_reckoned = errors(&frames.by_recorded_time);
+    metrics.push("nozzle_err_median_mm", median(&placed), "mm", n, "|P_N,i − true nozzle at t_c|, eq. 29");
+    let dead_reckoned = errors(&frames.by_recorded_time);
     if !dead_reckoned.is_empty() {
         let n = dead_reckoned.len();
         let note = "frames placed by their recorded time: commanded position at t_r to the true nozzle at t_c";
-        metrics.push("recorded_time_nozzle_err_median_mm", quantile(&mut dead_reckoned, 0.5), "mm", n, note);
+        metrics.push("recorded_time_nozzle_err_median_mm", median(&dead_reckoned), "mm", n, note);
     }
 }
 
@@ -352,7 +348,7 @@ fn mount_metrics(
     let df = read_table(monitor, "mount.parquet")?;
     let h: Vec<Vec<f64>> =
         (0..9).map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1))).collect::<Result<_, _>>()?;
-    let applied = df.column("applied").map_err(|source| StageError::Table { path: file.clone(), source })?;
+    let applied = pipeline::artifact::column(&df, "applied", &file)?;
     let applied = applied.bool().map_err(|source| StageError::Table { path: file.clone(), source })?;
     let Some(last) = applied.iter().position(|a| a == Some(true)) else { return Ok(None) };
     let fitted = Homography {
@@ -377,9 +373,9 @@ fn mount_metrics(
             "nominal mount anchored at P_N⁽⁰⁾ vs the true mount, median over the image",
         ),
     ] {
-        let mut gaps = image_gaps_mm(&h, &true_mount, cam.width_px, cam.height_px);
+        let gaps = image_gaps_mm(&h, &true_mount, cam.width_px, cam.height_px);
         let n = gaps.len();
-        metrics.push(name, quantile(&mut gaps, 0.5), "mm", n, note);
+        metrics.push(name, median(&gaps), "mm", n, note);
     }
     Ok(Some(Mounts { applied: fitted, truth: true_mount }))
 }
@@ -421,7 +417,7 @@ fn vertex_metrics(
     let (layer, frame_no, vertex) =
         (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?, i64_column(&df, &file, "vertex")?);
     let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
-    let used = df.column("used").map_err(|source| StageError::Table { path: file.clone(), source })?;
+    let used = pipeline::artifact::column(&df, "used", &file)?;
     let used: Vec<bool> = used
         .bool()
         .map_err(|source| StageError::Table { path: file.clone(), source })?
@@ -441,7 +437,7 @@ fn vertex_metrics(
     let n = errors.len();
     metrics.push(
         "vertex_err_median_px",
-        quantile(&mut errors, 0.5),
+        median(&errors),
         "px",
         n,
         "ridge vertices that placed a nozzle, to the true corner pixels (raw)",
@@ -467,14 +463,14 @@ fn vertex_metrics(
     let n = floor.len();
     metrics.push(
         "nozzle_err_floor_median_mm",
-        quantile(&mut floor, 0.5),
+        median(&floor),
         "mm",
         n,
         "the used corners' true pixels through the true mount: the camera-vibration floor",
     );
     metrics.push(
         "nozzle_err_true_vertices_median_mm",
-        quantile(&mut applied, 0.5),
+        median(&applied),
         "mm",
         n,
         "the used corners' true pixels through the applied mount: the mount's share",
@@ -513,7 +509,7 @@ fn homography_metrics(
     let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n.max(1) as f64).sqrt();
     metrics.push(
         "homography_err_median_mm",
-        quantile(&mut errors, 0.5),
+        median(&errors),
         "mm",
         n,
         "true corner pixels through the estimated H, to their CAD vertex",
@@ -552,12 +548,12 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
     let n = abs_err.len();
     metrics.push(
         "width_err_median_mm",
-        quantile(&mut abs_err, 0.5),
+        median(&abs_err),
         "mm",
         n,
         "|(w_l + w_r) − true width| along the deposition direction",
     );
-    metrics.push("width_bias_median_mm", quantile(&mut signed, 0.5), "mm", n, "median of the signed width error");
+    metrics.push("width_bias_median_mm", median(&signed), "mm", n, "median of the signed width error");
     Ok(())
 }
 
@@ -610,7 +606,12 @@ fn detection_metrics(
     Ok(())
 }
 
-/// The `q` quantile (nearest rank) of `values`; NaN when empty.
+/// The median of the finite values: [`finite_median`], as every published median.
+fn median(values: &[f64]) -> f64 {
+    finite_median(values.iter().copied())
+}
+
+/// The `q` quantile of `values` by nearest rank (the 90th percentiles); NaN when empty.
 fn quantile(values: &mut [f64], q: f64) -> f64 {
     if values.is_empty() {
         return f64::NAN;
@@ -649,10 +650,13 @@ mod tests {
     }
 
     #[test]
-    fn quantile_is_the_nearest_rank() {
+    fn quantile_is_the_nearest_rank_and_the_median_the_middle_mean() {
         let mut v = [4.0, 1.0, 3.0, 2.0];
         assert_eq!(quantile(&mut v, 0.5), 2.0);
         assert_eq!(quantile(&mut v, 0.9), 4.0);
         assert!(quantile(&mut [], 0.5).is_nan());
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median(&[4.0, f64::NAN, 3.0]), 3.5);
+        assert!(median(&[]).is_nan());
     }
 }

@@ -79,7 +79,7 @@ pub fn read_table(dir: &Path, file: &str) -> Result<DataFrame, StageError> {
 
 /// A column of floats of `df` (read from `file`), nulls as NaN.
 pub fn f64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<f64>, StageError> {
-    let series = df.column(name).map_err(|source| StageError::Table { path: file.into(), source })?;
+    let series = pipeline::artifact::column(df, name, file)?;
     let cast = series
         .cast(&polars::prelude::DataType::Float64)
         .map_err(|source| StageError::Table { path: file.into(), source })?;
@@ -89,7 +89,7 @@ pub fn f64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<f64>, S
 
 /// A column of integers of `df` (read from `file`).
 pub fn i64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<i64>, StageError> {
-    let series = df.column(name).map_err(|source| StageError::Table { path: file.into(), source })?;
+    let series = pipeline::artifact::column(df, name, file)?;
     let cast = series
         .cast(&polars::prelude::DataType::Int64)
         .map_err(|source| StageError::Table { path: file.into(), source })?;
