@@ -44,7 +44,7 @@
 //!
 //! The `melt_squeeze_out` effect (strength s ∈ [0, 1]) sends a fraction s of each
 //! sample's volume elsewhere: it fills the nearest cells around the nozzle tip that are
-//! not yet full, in order of distance, up to the layer height ("melt flows where there
+//! not yet full, in order of distance, up to their headroom ("melt flows where there
 //! is room"). This breaks the slender-deposition assumption of eqs 5-7 (material stays
 //! where and when it was extruded) and is what the discrepancy study of the report
 //! switches on. On a straight line at steady state the empty cells ahead of the nozzle
