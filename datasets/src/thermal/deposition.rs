@@ -46,8 +46,8 @@
 //! sample's volume elsewhere: it fills the nearest cells around the nozzle tip that are
 //! not yet full, in order of distance, up to their headroom ("melt flows where there
 //! is room"). This breaks the slender-deposition assumption of eqs 5-7 (material stays
-//! where and when it was extruded) and is what the discrepancy study of the report
-//! switches on. On a straight line at steady state the empty cells ahead of the nozzle
+//! where and when it was extruded), for discrepancy studies (DESIGN §7; no shipped spec
+//! switches it on). On a straight line at steady state the empty cells ahead of the nozzle
 //! form a crescent of area 2r·|v|·dt, so the same bead width emerges there.
 //!
 //! Simplifications, stated: each quadrilateral is split into sub-quads of at most

@@ -75,7 +75,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        5
+        6
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -114,7 +114,7 @@ impl StageKind for AccuracyEvaluateStage {
             dead_reckoned as f64,
             "frames",
             dead_reckoned,
-            "no corner in view: placed at the commanded position at t_r through the fitted mount, widths only",
+            "no corner in view: placed at the commanded position at t_r + median offset through the fitted mount, widths only",
         );
         let skipped = frames.used.len() - used - dead_reckoned;
         metrics.push(
@@ -321,7 +321,7 @@ fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metric
     let dead_reckoned = errors(&frames.by_recorded_time);
     if !dead_reckoned.is_empty() {
         let n = dead_reckoned.len();
-        let note = "frames placed by their recorded time: commanded position at t_r to the true nozzle at t_c";
+        let note = "frames placed by their recorded time (plus the median capture offset) to the true nozzle at t_c";
         metrics.push("recorded_time_nozzle_err_median_mm", median(&dead_reckoned), "mm", n, note);
     }
 }

@@ -27,7 +27,9 @@
 //!   A frame with no readable corner at all (the first few of every layer: the layer
 //!   starts mid-side, and the previous layer's corners are too old) is placed, when
 //!   `place_cornerless` is set, by dead reckoning: the commanded position at its recorded
-//!   time through the fitted mount ([`Placement::RecordedTime`]). It has no capture-time
+//!   time, shifted by the median capture offset t̂_c − t_r of the frames placed from their
+//!   corners (a constant capture delay shows there), through the fitted mount
+//!   ([`Placement::RecordedTime`]). It has no capture-time
 //!   estimate of its own (its `estimated_time_s` is NaN, so `thermal.accuracy_evaluate`
 //!   leaves it out of the capture-time and homography statistics), but its widths can be
 //!   read: the recorded time is good to a few milliseconds, a few hundredths of a
@@ -46,6 +48,7 @@
 //! time.
 
 use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
+use models::stats::finite_median;
 use models::thermal::Trajectory;
 use pipeline::StageError;
 use rand::SeedableRng;
@@ -127,7 +130,8 @@ impl Placement {
 /// One estimator's placement of a frame.
 #[derive(Debug, Clone, Copy)]
 pub struct Located {
-    /// Capture time t̂_c (eq. 30, s); the recorded time for [`Placement::RecordedTime`].
+    /// Capture time t̂_c (eq. 30, s); for [`Placement::RecordedTime`] the recorded time
+    /// plus the sequence's median capture offset.
     pub t_s: f64,
     /// How the frame was placed.
     pub placed_by: Placement,
@@ -166,11 +170,11 @@ impl Located {
         })
     }
 
-    /// A frame without corners, placed by dead reckoning (module doc).
-    fn by_recorded_time(t_recorded_s: f64, nozzle_mm: [f64; 2], h: Homography) -> Result<Self, String> {
+    /// A frame without corners, placed by dead reckoning at `t_s` (module doc).
+    fn by_recorded_time(t_s: f64, nozzle_mm: [f64; 2], h: Homography) -> Result<Self, String> {
         let plane_to_px = h.inverse().ok_or_else(|| "singular homography".to_string())?;
         Ok(Self {
-            t_s: t_recorded_s,
+            t_s,
             placed_by: Placement::RecordedTime,
             at_window_edge: false,
             nozzle_mm,
@@ -424,7 +428,10 @@ impl<'a> Localiser<'a> {
         }
         // The last mount that could be fitted places each frame (the nominal mount
         // anchored at P_N⁽⁰⁾ when none could); mount.parquet says which.
-        frames.iter_mut().for_each(|f| self.place(ctx, f, &mount));
+        let cornerless: Vec<usize> = (0..frames.len()).filter(|&i| self.place(ctx, &mut frames[i], &mount)).collect();
+        if self.place_cornerless {
+            self.place_by_recorded_time(ctx, frames, &cornerless, &mount);
+        }
         let applied = fits.iter().rposition(|f| f.is_ok()).unwrap_or(0);
         fits.into_iter()
             .enumerate()
@@ -484,23 +491,44 @@ impl<'a> Localiser<'a> {
         }
     }
 
-    /// The rigid estimator's placement of one frame.
-    fn place(&self, ctx: &FrameContext<'_>, f: &mut FrameOutcome, mount: &Homography) {
+    /// The rigid estimator's placement of one frame from its corners; true when it has
+    /// none (it is then skipped, unless [`Self::place_by_recorded_time`] places it).
+    fn place(&self, ctx: &FrameContext<'_>, f: &mut FrameOutcome, mount: &Homography) -> bool {
         if f.undistorted.is_none() {
             f.rigid = f.dlt.clone();
-            return;
+            return false;
         }
         match localise_rigid(ctx, mount, &f.pairs, f.entry.recorded_time_s) {
             Ok(r) => {
                 f.pair_used = r.fix.inliers.clone();
                 f.rigid = Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
+                false
             }
-            Err(FrameSkip::Mount(MountError::NoPairs)) if self.place_cornerless => {
-                let t_r = f.entry.recorded_time_s;
-                let nozzle_mm = ctx.trajectory.position_mm(t_r);
-                f.rigid = Located::by_recorded_time(t_r, nozzle_mm, frame_homography(mount, nozzle_mm));
+            Err(skip) => {
+                f.rigid = Err(skip.to_string());
+                skip == FrameSkip::Mount(MountError::NoPairs)
             }
-            Err(skip) => f.rigid = Err(skip.to_string()),
+        }
+    }
+
+    /// Places the frames `cornerless` (no corner pair) by dead reckoning (module doc): the
+    /// commanded position at the recorded time plus the median capture offset t̂_c − t_r
+    /// of the frames placed from their corners, through the fitted mount, so that a
+    /// constant capture delay the corners reveal is not left in.
+    fn place_by_recorded_time(
+        &self,
+        ctx: &FrameContext<'_>,
+        frames: &mut [FrameOutcome],
+        cornerless: &[usize],
+        mount: &Homography,
+    ) {
+        let offset_s =
+            finite_median(frames.iter().filter_map(|f| f.rigid.as_ref().ok().map(|l| l.t_s - f.entry.recorded_time_s)));
+        let offset_s = if offset_s.is_finite() { offset_s } else { 0.0 };
+        for &i in cornerless {
+            let t_s = frames[i].entry.recorded_time_s + offset_s;
+            let nozzle_mm = ctx.trajectory.position_mm(t_s);
+            frames[i].rigid = Located::by_recorded_time(t_s, nozzle_mm, frame_homography(mount, nozzle_mm));
         }
     }
 }

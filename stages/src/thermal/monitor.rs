@@ -118,7 +118,7 @@ const PARAMS: &[ParamSpec] = &[
         name: "place_cornerless",
         ty: ParamType::Bool,
         default: ParamDefault::Bool(true),
-        doc: "rigid_mount only: place a frame with no readable corner (the first few of each layer) by the commanded position at its recorded time through the fitted mount, so the widths of the layer's start are read; it gets no capture-time estimate (NaN in frames.parquet, `placed_by` = recorded_time). false: skip it, as the paper's method must.",
+        doc: "rigid_mount only: place a frame with no readable corner (the first few of each layer) by the commanded position at its recorded time (plus the median capture offset of the frames placed from corners) through the fitted mount, so the widths of the layer's start are read; it gets no capture-time estimate (NaN in frames.parquet, `placed_by` = recorded_time). false: skip it, as the paper's method must.",
     },
     ParamSpec {
         name: "window_s",
@@ -133,7 +133,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        6
+        7
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
