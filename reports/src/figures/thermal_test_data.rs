@@ -162,7 +162,13 @@ pub fn write_monitor(dir: &Path) {
 pub fn frames() -> DataFrame {
     let n = 40;
     let used: Vec<bool> = (0..n).map(|i| i % 5 != 4).collect();
-    let reason: Vec<&str> = used.iter().map(|u| if *u { "" } else { "fewer than 4 corners" }).collect();
+    let reason: Vec<String> = (0..n)
+        .map(|i| match (used[i], i % 10) {
+            (true, _) => String::new(),
+            (false, 4) => format!("same image as frame {}: a repeated or frozen camera frame", i - 1),
+            (false, _) => "fewer than 4 corners".into(),
+        })
+        .collect();
     // The first two frames show no corner: placed by their recorded time, no estimate.
     let placed_by: Vec<&str> = (0..n)
         .map(|i| {

@@ -25,7 +25,8 @@
 //! - widths (Sec. 2.4): measured w_l + w_r against the true deposit's width along the
 //!   same deposition direction (fill level 0.5), median absolute error and bias (mm);
 //! - corner detection: detections against the true corners whose temperature is in
-//!   the detector's band (the "newly printed corners" of Sec. 3.2), within 3 px;
+//!   the detector's band (the "newly printed corners" of Sec. 3.2), within 3 px, on every
+//!   frame but those the monitor skipped as repeats of the frame before;
 //! - frames placed from their corners, placed by their recorded time (no corner in view,
 //!   `thermal.monitor`'s `place_cornerless`; their nozzle is also scored) and skipped.
 
@@ -75,7 +76,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        6
+        7
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -557,6 +558,20 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
     Ok(())
 }
 
+/// (layer, frame) of the frames the monitor skipped as repeats of the frame before
+/// (`repeat_of_frame` ≥ 0 in `frames.parquet`; absent in older tables: none). The
+/// detector does not run on them, so they are left out of its precision and recall.
+fn repeated_frames(monitor: &Path) -> Result<Vec<(i64, i64)>, StageError> {
+    let file = monitor.join("frames.parquet");
+    let df = read_table(monitor, "frames.parquet")?;
+    if df.column("repeat_of_frame").is_err() {
+        return Ok(Vec::new());
+    }
+    let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
+    let repeat_of = i64_column(&df, &file, "repeat_of_frame")?;
+    Ok((0..layer.len()).filter(|&i| repeat_of[i] >= 0).map(|i| (layer[i], frame_no[i])).collect())
+}
+
 fn detection_metrics(
     monitor: &Path,
     truth: &ThermalTruth,
@@ -568,7 +583,9 @@ fn detection_metrics(
     let df = read_table(monitor, "detections.parquet")?;
     let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
     let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
-    let mut keys: Vec<(i64, i64)> = truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).collect();
+    let repeats = repeated_frames(monitor)?;
+    let mut keys: Vec<(i64, i64)> =
+        truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).filter(|key| !repeats.contains(key)).collect();
     keys.sort_unstable();
     keys.dedup();
     let (mut tp, mut detections, mut positives) = (0usize, 0usize, 0usize);

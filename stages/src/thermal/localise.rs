@@ -21,7 +21,12 @@
 //!   (`vision::vertex`), and the mount is fitted again. Each frame's nozzle is then the
 //!   robust mean of its pairs' offsets under the last mount — one pair suffices — and
 //!   eq. 30 with the paper's window gives the capture time.
-//!   Why: the per-frame DLT needs four corners in the band, which two thirds of the
+//! - Both skip a frame whose image is bit for bit the one before it: a FLIR Lepton
+//!   delivers its last image again (now and then, and through its ~0.9 s shutter freeze)
+//!   under a new timestamp, and that image shows the part as it was before, so its
+//!   corners would place the nozzle wrongly and, with no corner, dead reckoning would.
+//!
+//!   Why the rigid mount: the per-frame DLT needs four corners in the band, which two thirds of the
 //!   frames do not have, and its eight free parameters extrapolate the corners' errors
 //!   onto the nozzle; the rigid model has two unknowns per frame.
 //!   A frame with no readable corner at all (the first few of every layer: the layer
@@ -35,12 +40,13 @@
 //!   read: the recorded time is good to a few milliseconds, a few hundredths of a
 //!   millimetre along a straight bead, across which a width does not change.
 //!
-//! Measured on the eqs 5-11 printer with the nozzle face's squeeze (five layers, seeds 1-5,
-//! `thermal.accuracy_evaluate`): median capture-time error 0.76-0.91 ms against
-//! 1.91-2.24 ms for the recorded time (the paper's DLT: 1.50-2.65 ms on its 82-93 frames),
-//! nozzle 0.025-0.029 mm against the 0.024-0.028 mm the camera vibration leaves with
-//! perfect vertices and mount, mount 0.005-0.018 mm; the 30 frames placed by their
-//! recorded time 0.025-0.044 mm. Before (ridge lines fitted from
+//! Measured on the eqs 5-11 printer with the nozzle face's squeeze, filmed by a camera
+//! with the Lepton habits (five layers, seeds 1-5, `thermal.accuracy_evaluate`): median
+//! capture-time error 0.79-0.91 ms against 1.87-2.21 ms for the recorded time (the
+//! paper's DLT: 1.66-2.81 ms on its 66-77 frames), nozzle 0.024-0.029 mm against the
+//! 0.024-0.027 mm the camera vibration leaves with perfect vertices and mount, mount
+//! 0.005-0.018 mm; 45-50 repeated frames skipped; the 28-30 frames placed by their
+//! recorded time 0.028-0.051 mm. Before (ridge lines fitted from
 //! 1.2 mm of arm gap, one re-pairing from the first fit's arms) the vertices of the sharp
 //! corners sat up to 1 px inside them (0.23 px median, 0.88 px p90), the mount fit
 //! absorbed that bias and came out 0.18 mm off on every seed (the nominal mount is
@@ -219,6 +225,8 @@ pub struct FrameOutcome {
     pub rigid: Result<Located, String>,
     /// The one `localisation` chose.
     pub chosen: Result<Located, String>,
+    /// The frame number whose image this one repeats (skipped, see `observe_all`).
+    pub repeat_of: Option<usize>,
 }
 
 impl FrameOutcome {
@@ -234,6 +242,7 @@ impl FrameOutcome {
             dlt: Err(reason.clone()),
             rigid: Err(reason.clone()),
             chosen: Err(reason),
+            repeat_of: None,
         }
     }
 
@@ -327,11 +336,12 @@ impl<'a> Localiser<'a> {
         Ok((frames, mounts))
     }
 
-    /// Pass 1 over all frames: decode, observe, the paper's DLT, the ridge pairs.
+    /// Pass 1 over all frames: decode, observe, the paper's DLT, the ridge pairs; a frame
+    /// whose image is the one before it again is skipped (module doc).
     fn observe_all(&self, ctx: &FrameContext<'_>, seed: u64) -> Result<Vec<FrameOutcome>, StageError> {
         let mut workspace = FrameWorkspace::new(&self.undistorter, &self.params).map_err(StageError::domain)?;
         let mut last_time: Option<(usize, f64)> = None;
-        let mut outcomes = Vec::with_capacity(self.seq.frames.len());
+        let mut outcomes: Vec<FrameOutcome> = Vec::with_capacity(self.seq.frames.len());
         for entry in &self.seq.frames {
             let outcome = match last_time {
                 Some((layer, t)) if layer == entry.layer && entry.recorded_time_s <= t => FrameOutcome::skipped(
@@ -344,7 +354,17 @@ impl<'a> Localiser<'a> {
                 _ => {
                     last_time = Some((entry.layer, entry.recorded_time_s));
                     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ ((entry.layer as u64) << 32 | entry.frame as u64));
-                    self.observe(ctx, entry, &mut workspace, &mut rng)
+                    let outcome = self.observe(ctx, entry, &mut workspace, &mut rng);
+                    match repeated_image(&outcomes, &outcome) {
+                        Some(previous) => FrameOutcome {
+                            repeat_of: Some(previous),
+                            ..FrameOutcome::skipped(
+                                entry,
+                                format!("same image as frame {previous}: a repeated or frozen camera frame, not its own time and place"),
+                            )
+                        },
+                        None => outcome,
+                    }
                 }
             };
             outcomes.push(outcome);
@@ -391,6 +411,7 @@ impl<'a> Localiser<'a> {
             dlt,
             rigid: Err("not localised".into()),
             chosen: Err("not localised".into()),
+            repeat_of: None,
         }
     }
 
@@ -531,6 +552,20 @@ impl<'a> Localiser<'a> {
             frames[i].rigid = Located::by_recorded_time(t_s, nozzle_mm, frame_homography(mount, nozzle_mm));
         }
     }
+}
+
+/// The frame number of the last decoded frame before `current`, if it is of the same
+/// layer and its image is bit for bit `current`'s.
+fn repeated_image(earlier: &[FrameOutcome], current: &FrameOutcome) -> Option<usize> {
+    let image = current.undistorted.as_ref()?;
+    let previous = earlier.iter().rev().find(|f| f.undistorted.is_some())?;
+    let same = previous.entry.layer == current.entry.layer
+        && previous.undistorted.as_ref().is_some_and(|p| {
+            p.width == image.width
+                && p.temp_c.len() == image.temp_c.len()
+                && p.temp_c.iter().zip(&image.temp_c).all(|(a, b)| a.to_bits() == b.to_bits())
+        });
+    same.then_some(previous.entry.frame)
 }
 
 /// Largest distance between the plane points two pixel → plane maps give the pixels of

@@ -27,10 +27,9 @@
 //! stretch just after the apex, where the head accelerates while the flow still lags.
 //! We read each sample at 0.1 s, when it is 2 mm behind the nozzle at 20 mm/s. Measured
 //! on seed 3 (`specs/chen2024.toml`): at 0.1 s the median width error is 0.009 mm and the
-//! compensated part's RMS contour error falls by 35 %; at 0.15 s by 30 %; at 0.25 s the
+//! compensated part's RMS contour error falls by 34 %; at 0.15 s by 30 %; at 0.25 s the
 //! width error is 0.017 mm and the RMS falls by only 18 %; at 0.06 s some corners are
-//! not yet fully in view and the sharp corners lose more of their excess (the max
-//! contour error then falls by 1 % instead of 45 %).
+//! not yet fully in view and the max contour error falls by 31 % instead of 43 %.
 //!
 //! T_t: the paper does not give it. Heat spreads sideways as the bead cools, so the
 //! contour at any fixed temperature drifts with age; we calibrate T_t per layer the way
@@ -133,7 +132,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        7
+        8
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -511,6 +510,7 @@ fn write_frame_tables(
         ),
         bool_col("at_window_edge", frames.iter().map(|f| located(f).is_some_and(|l| l.at_window_edge)).collect()),
         str_col("skip_reason", frames.iter().map(|f| f.skip_reason().unwrap_or_default().to_string()).collect()),
+        i64_col("repeat_of_frame", frames.iter().map(|f| f.repeat_of.map_or(-1, |r| r as i64)).collect()),
     ];
     columns.extend(homography_cols);
     columns.extend([
