@@ -621,6 +621,23 @@ fn display_rel(path: &std::path::Path) -> String {
 mod tests {
     use super::*;
 
+    /// A decoded frame of `layer`, `frame` whose every pixel reads `temp_c`.
+    fn decoded(layer: usize, frame: usize, temp_c: f32) -> FrameOutcome {
+        let entry = FrameEntry { layer, frame, recorded_time_s: 0.125 * frame as f64, file: "f.png".into() };
+        let image = ThermalFrame { width: 4, height: 3, temp_c: vec![temp_c; 12] };
+        FrameOutcome { undistorted: Some(image), ..FrameOutcome::skipped(&entry, String::new()) }
+    }
+
+    #[test]
+    fn a_frame_repeats_the_last_decoded_one_of_its_layer_only_bit_for_bit() {
+        let unreadable = FrameOutcome::skipped(&decoded(0, 1, 0.0).entry, "wrong size".into());
+        let earlier = vec![decoded(0, 0, 80.0), unreadable];
+        assert_eq!(repeated_image(&earlier, &decoded(0, 2, 80.0)), Some(0), "the unreadable frame is passed over");
+        assert_eq!(repeated_image(&earlier, &decoded(0, 2, 80.001)), None);
+        assert_eq!(repeated_image(&earlier, &decoded(1, 0, 80.0)), None, "a new layer starts afresh");
+        assert_eq!(repeated_image(&[], &decoded(0, 0, 80.0)), None);
+    }
+
     #[test]
     fn a_corner_is_ready_once_the_nozzle_is_its_reach_away() {
         // Along +x at 20 mm/s through a vertex at x = 2 mm (t = 0.1 s): 1.5 mm further on
