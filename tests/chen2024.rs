@@ -69,10 +69,12 @@ fn chen2024_writes_its_tables_figures_and_section() {
     let dead_reckoned: Vec<usize> = (0..placed_by.len()).filter(|&i| placed_by[i] == "recorded_time").collect();
     assert!(!dead_reckoned.is_empty(), "the first frames of each layer show no corner");
     assert!(dead_reckoned.iter().all(|&i| estimated[i].is_nan()));
+    let used_flags = frames.column("used").unwrap().bool().unwrap().clone();
+    assert!(dead_reckoned.iter().all(|&i| used_flags.get(i) == Some(false)), "used = localised by eqs 27-30");
     // The shipped camera has the Lepton habits: a frame that repeats the image before it
     // is skipped with a reason naming that frame.
     let repeat_of = frames.column("repeat_of_frame").unwrap().i64().unwrap().into_no_null_iter().collect::<Vec<_>>();
-    let (reasons, used_flags) = (strs(&frames, "skip_reason"), frames.column("used").unwrap().bool().unwrap().clone());
+    let reasons = strs(&frames, "skip_reason");
     let repeats: Vec<usize> = (0..repeat_of.len()).filter(|&i| repeat_of[i] >= 0).collect();
     assert!(!repeats.is_empty(), "the Lepton repeats and freezes");
     for i in repeats {

@@ -161,24 +161,21 @@ pub fn write_monitor(dir: &Path) {
 /// `frames.parquet`: 40 frames of two layers, every fifth skipped.
 pub fn frames() -> DataFrame {
     let n = 40;
-    let used: Vec<bool> = (0..n).map(|i| i % 5 != 4).collect();
-    let reason: Vec<String> = (0..n)
-        .map(|i| match (used[i], i % 10) {
-            (true, _) => String::new(),
-            (false, 4) => format!("same image as frame {}: a repeated or frozen camera frame", i - 1),
-            (false, _) => "fewer than 4 corners".into(),
+    // Frames 0 and 1 show no corner: placed by their recorded time for widths, not used.
+    let used: Vec<bool> = (0..n).map(|i| i % 5 != 4 && i >= 2).collect();
+    let placed_by: Vec<&str> = (0..n)
+        .map(|i| match (i < 2, used[i]) {
+            (true, _) => "recorded_time",
+            (false, true) => "corners",
+            (false, false) => "",
         })
         .collect();
-    // The first two frames show no corner: placed by their recorded time, no estimate.
-    let placed_by: Vec<&str> = (0..n)
-        .map(|i| {
-            if !used[i] {
-                ""
-            } else if i < 2 {
-                "recorded_time"
-            } else {
-                "corners"
-            }
+    let reason: Vec<String> = (0..n)
+        .map(|i| match (used[i], i < 2, i % 10) {
+            (true, _, _) => String::new(),
+            (false, true, _) => "rigid mount: no corner pairs; placed by its recorded time, for its widths only".into(),
+            (false, false, 4) => format!("same image as frame {}: a repeated or frozen camera frame", i - 1),
+            (false, false, _) => "fewer than 4 corners".into(),
         })
         .collect();
     let recorded: Vec<f64> = (0..n).map(|i| 0.125 * i as f64).collect();

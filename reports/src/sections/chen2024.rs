@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        10
+        11
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -220,23 +220,23 @@ fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageErro
     Ok((0..df.height()).map(|i| (metric[i].clone(), (value[i], unit[i].clone(), n[i], note[i].clone()))).collect())
 }
 
-/// Frames placed from their corners, placed by their recorded time (`placed_by`, absent
-/// in tables of older monitors: all placed frames count as placed from corners) and
-/// skipped by reason.
+/// Frames placed from their corners (`used`), placed by their recorded time (`placed_by`,
+/// absent in tables of older monitors) and skipped by reason.
 fn read_frames(path: &Path) -> Result<(usize, usize, BTreeMap<String, usize>), StageError> {
     let df = read_parquet(path)?;
     let (used, reason) = (bools(&df, "used", path)?, strs(&df, "skip_reason", path)?);
-    let by_recorded_time = match df.column("placed_by") {
-        Ok(_) => strs(&df, "placed_by", path)?.iter().filter(|p| *p == "recorded_time").count(),
-        Err(_) => 0,
+    let dead_reckoned: Vec<bool> = match df.column("placed_by") {
+        Ok(_) => strs(&df, "placed_by", path)?.iter().map(|p| p == "recorded_time").collect(),
+        Err(_) => vec![false; used.len()],
     };
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
-    for (u, r) in used.iter().zip(reason) {
-        if !u {
+    for ((u, d), r) in used.iter().zip(&dead_reckoned).zip(reason) {
+        if !u && !d {
             *skipped.entry(reason_class(r)).or_default() += 1;
         }
     }
-    Ok((used.iter().filter(|u| **u).count() - by_recorded_time, by_recorded_time, skipped))
+    let count = |v: &[bool]| v.iter().filter(|b| **b).count();
+    Ok((count(&used), count(&dead_reckoned), skipped))
 }
 
 /// A skip reason without the frame it names, so that reasons of one kind count together.

@@ -114,6 +114,9 @@ impl Localisation {
     }
 }
 
+/// The skip reason of a frame placed by its recorded time.
+const PLACED_BY_RECORDED_TIME: &str = "rigid mount: no corner pairs; placed by its recorded time, for its widths only";
+
 /// How a frame was placed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Placement {
@@ -251,9 +254,20 @@ impl FrameOutcome {
         self.chosen.as_ref().ok()
     }
 
-    /// Why the chosen estimator skipped the frame.
+    /// Placed from its corners (eqs 27-30), with a capture-time estimate: `used` in
+    /// `frames.parquet`.
+    pub fn localised(&self) -> bool {
+        self.located().is_some_and(|l| l.placed_by == Placement::Corners)
+    }
+
+    /// Why the frame is not localised: the chosen estimator's skip reason, or that it was
+    /// placed by its recorded time for its widths only.
     pub fn skip_reason(&self) -> Option<&str> {
-        self.chosen.as_ref().err().map(String::as_str)
+        match &self.chosen {
+            Err(reason) => Some(reason),
+            Ok(l) if l.placed_by == Placement::RecordedTime => Some(PLACED_BY_RECORDED_TIME),
+            Ok(_) => None,
+        }
     }
 }
 

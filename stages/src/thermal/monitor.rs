@@ -132,7 +132,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        8
+        9
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -503,7 +503,7 @@ fn write_frame_tables(
         i64_col("corners_found", frames.iter().map(|f| f.corners_found as i64).collect()),
         i64_col("corners_matched", frames.iter().map(|f| f.matched as i64).collect()),
         f64_col("reproj_err_mm", of(|l| l.fit_err_mm)),
-        bool_col("used", frames.iter().map(|f| f.located().is_some()).collect()),
+        bool_col("used", frames.iter().map(FrameOutcome::localised).collect()),
         str_col(
             "placed_by",
             frames.iter().map(|f| located(f).map_or("", |l| l.placed_by.name()).to_string()).collect(),
@@ -591,7 +591,7 @@ fn write_figure_tables(
 ) -> Result<(), StageError> {
     let best = frames
         .iter()
-        .filter(|f| f.located().is_some())
+        .filter(|f| f.localised())
         .max_by(|a, b| a.matched.cmp(&b.matched).then(b.entry.recorded_time_s.total_cmp(&a.entry.recorded_time_s)));
     let Some(best) = best else {
         return Err(StageError::BadInput {
