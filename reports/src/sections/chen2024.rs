@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        11
+        12
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -685,10 +685,12 @@ surface of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours appli
 points of the external surface (stage reprint's inner_face = false; with the wall's inside face too the max falls by 30 % and the RMS by 33 % on seed 3), \
 with no profiler noise. Eq. 41 takes each CAD point's distance to the nearest printed edge, so both a bulge that pushes the edge out and a part of the \
 CAD bead left empty cost. The conventional part's worst point on seed 3 is the notch of the 75° valley, which its bulge fills 0.34 mm deep; after \
-compensation it is the mitred tip of the CAD bead at a 60° apex, 0.45 mm beyond the vertex, left 0.19 mm short. How far the maximum falls depends on how \
-much of each sharp corner's excess the compensation leaves: a round bead on a blended path does not reach the mitred tips of the sharp apexes (at 45° \
-the tip lies 0.59 mm beyond the vertex), and only the excess fills them. With the true widths the 45° corners lose more of their excess and that tip is \
-0.33 mm short, so the maximum hardly falls; the lag model, which removes all of it, leaves it 0.40 mm short. A 50 % fall of the maximum, the issue's bar, is not reached \
+compensation it is the mitred tip of the CAD bead at a 60° apex, 0.45 mm beyond the vertex, left 0.19 mm short. At a sharp apex the two sides want \
+opposite things: a round bead on a blended path does not reach the mitred tip on the outside (at 45° it lies 0.59 mm beyond the vertex), where only the \
+excess fills it, while the same excess bulges on the inside of the turn (Fig. 10). The compensation sets one flow for both sides (eq. 32 sums \
+w_l + w_r), so it trades the inner bulge against the outer tip, and the maximum is whichever of the two it leaves larger. With the true widths the 45° \
+corners lose more of their excess and that tip is 0.33 mm short, so the maximum hardly falls; the lag model, which removes all of it, leaves it 0.40 mm \
+short. A 50 % fall of the maximum, the issue's bar, is not reached \
 by either method. The paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger than this printer's.</p>\n\
 <p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
 Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
