@@ -21,24 +21,23 @@
 //!   (`vision::vertex`), and the mount is fitted again. Each frame's nozzle is then the
 //!   robust mean of its pairs' offsets under the last mount — one pair suffices — and
 //!   eq. 30 with the paper's window gives the capture time.
-//! - Both skip a frame whose image is bit for bit the one before it: a FLIR Lepton
-//!   delivers its last image again (now and then, and through its ~0.9 s shutter freeze)
-//!   under a new timestamp, and that image shows the part as it was before, so its
-//!   corners would place the nozzle wrongly and, with no corner, dead reckoning would.
-//!
-//!   Why the rigid mount: the per-frame DLT needs four corners in the band, which two thirds of the
-//!   frames do not have, and its eight free parameters extrapolate the corners' errors
+//!   Why: the per-frame DLT needs four corners in the band, which about three frames in
+//!   four do not have, and its eight free parameters extrapolate the corners' errors
 //!   onto the nozzle; the rigid model has two unknowns per frame.
 //!   A frame with no readable corner at all (the first few of every layer: the layer
 //!   starts mid-side, and the previous layer's corners are too old) is placed, when
 //!   `place_cornerless` is set, by dead reckoning: the commanded position at its recorded
 //!   time, shifted by the median capture offset t̂_c − t_r of the frames placed from their
 //!   corners (a constant capture delay shows there), through the fitted mount
-//!   ([`Placement::RecordedTime`]). It has no capture-time
-//!   estimate of its own (its `estimated_time_s` is NaN, so `thermal.accuracy_evaluate`
-//!   leaves it out of the capture-time and homography statistics), but its widths can be
-//!   read: the recorded time is good to a few milliseconds, a few hundredths of a
-//!   millimetre along a straight bead, across which a width does not change.
+//!   ([`Placement::RecordedTime`]). It is not localised (`used` is false, its
+//!   `estimated_time_s` NaN, so `thermal.accuracy_evaluate` leaves it out of the
+//!   capture-time and homography statistics), but its widths are read: the recorded time
+//!   is good to a few milliseconds, a few hundredths of a millimetre along a straight
+//!   bead, across which a width does not change.
+//! - Both skip a frame whose image is bit for bit the one before it: a FLIR Lepton
+//!   delivers its last image again (now and then, and through its ~0.9 s shutter freeze)
+//!   under a new timestamp, and that image shows the part as it was before, so its
+//!   corners would place the nozzle wrongly and, with no corner, dead reckoning would.
 //!
 //! Measured on the eqs 5-11 printer with the nozzle face's squeeze, filmed by a camera
 //! with the Lepton habits (five layers, seeds 1-5, `thermal.accuracy_evaluate`): median
