@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        12
+        13
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -658,7 +658,8 @@ Where the stage's defaults depart from eqs 31-33 (stage compensate's parameters,
 with its true widths: the desired width is the CAD bead's extent along each allocated direction (at a sharp corner's inner side eq. 31's w0/cos ψ is far \
 narrower than the overlapping beads, so a perfect corner would read as over-deposited); the width error is signed, as eq. 33 is, so thin stretches get \
 material too; the fit runs 3τ past each window so the lagged tail does not starve the bead after the corner; and K_e = 1, since the paper's K_e was \
-identified for corners read at 140-150 °C and ours are read in a wider band.</p>\n\
+identified for corners read at 140-150 °C and ours are read in a wider band (its formula with T_p clamped to that band, stage compensate's gain = \
+\"paper\", gives on seed 3 O_E −77 %, max −43 %, RMS −27 %: it over-corrects the cooler corners).</p>\n\
 <p><b>Monitored layers.</b> The paper verifies on one layer; our camera has the habits of its \
 Lepton 3.5 (it repeats its last image now and then and holds one through a ~0.9 s shutter freeze once a layer; the monitor skips such repeats), so a \
 corner the freeze hides in the first layer is read in another: the widths are the median over the five filmed layers per sample (stage compensate's \
