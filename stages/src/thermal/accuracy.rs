@@ -106,7 +106,7 @@ impl StageKind for AccuracyEvaluateStage {
         homography_metrics(&frames, &truth, &seq.path_mm, &undistorter, &mut metrics);
         width_metrics(&monitor, &truth, &mut metrics)?;
         let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
-        detection_metrics(&monitor, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
+        detection_metrics(&monitor, &frames, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
         let used = frames.used.iter().filter(|u| **u).count();
         metrics.push("frames_used", used as f64, "frames", used, "frames placed from their corners (eqs 27-30)");
         let dead_reckoned = frames.by_recorded_time.iter().filter(|r| **r).count();
@@ -169,6 +169,9 @@ struct FrameRows {
     used: Vec<bool>,
     /// Placed by the recorded time (`placed_by` = recorded_time): no estimate of its own.
     by_recorded_time: Vec<bool>,
+    /// Skipped as a repeat of the frame before (`repeat_of_frame` ≥ 0; absent in older
+    /// tables: none).
+    repeated: Vec<bool>,
     at_window_edge: Vec<bool>,
     homography: Vec<Option<Homography>>,
     /// Per estimator in `frames.parquet` (column prefix, capture times; NaN = skipped).
@@ -178,6 +181,12 @@ struct FrameRows {
 }
 
 impl FrameRows {
+    /// (layer, frame) of the frames the monitor skipped as repeats of the frame before:
+    /// the detector does not run on them, so they are left out of its precision and recall.
+    fn repeats(&self) -> Vec<(i64, i64)> {
+        (0..self.repeated.len()).filter(|&i| self.repeated[i]).map(|i| (self.layer[i], self.frame[i])).collect()
+    }
+
     fn read(dir: &Path) -> Result<Self, StageError> {
         let file = dir.join("frames.parquet");
         let df = read_table(dir, "frames.parquet")?;
@@ -211,6 +220,10 @@ impl FrameRows {
                 .collect(),
             Err(_) => vec![false; estimated_s.len()],
         };
+        let repeated = match df.column("repeat_of_frame") {
+            Ok(_) => i64_column(&df, &file, "repeat_of_frame")?.iter().map(|r| *r >= 0).collect(),
+            Err(_) => vec![false; estimated_s.len()],
+        };
         let at_window_edge = match df.column("at_window_edge") {
             Ok(c) => c
                 .bool()
@@ -226,6 +239,7 @@ impl FrameRows {
             recorded_s: f64_column(&df, &file, "recorded_time_s")?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
             by_recorded_time,
+            repeated,
             at_window_edge,
             estimated_s,
             homography,
@@ -558,22 +572,9 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
     Ok(())
 }
 
-/// (layer, frame) of the frames the monitor skipped as repeats of the frame before
-/// (`repeat_of_frame` ≥ 0 in `frames.parquet`; absent in older tables: none). The
-/// detector does not run on them, so they are left out of its precision and recall.
-fn repeated_frames(monitor: &Path) -> Result<Vec<(i64, i64)>, StageError> {
-    let file = monitor.join("frames.parquet");
-    let df = read_table(monitor, "frames.parquet")?;
-    if df.column("repeat_of_frame").is_err() {
-        return Ok(Vec::new());
-    }
-    let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
-    let repeat_of = i64_column(&df, &file, "repeat_of_frame")?;
-    Ok((0..layer.len()).filter(|&i| repeat_of[i] >= 0).map(|i| (layer[i], frame_no[i])).collect())
-}
-
 fn detection_metrics(
     monitor: &Path,
+    frames: &FrameRows,
     truth: &ThermalTruth,
     band_c: (f64, f64),
     radius_px: f64,
@@ -583,7 +584,7 @@ fn detection_metrics(
     let df = read_table(monitor, "detections.parquet")?;
     let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
     let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
-    let repeats = repeated_frames(monitor)?;
+    let repeats = frames.repeats();
     let mut keys: Vec<(i64, i64)> =
         truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).filter(|key| !repeats.contains(key)).collect();
     keys.sort_unstable();
