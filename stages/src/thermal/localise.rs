@@ -180,17 +180,8 @@ impl Located {
 
     /// A frame without corners, placed by dead reckoning at `t_s` (module doc).
     fn by_recorded_time(t_s: f64, nozzle_mm: [f64; 2], h: Homography) -> Result<Self, String> {
-        let plane_to_px = h.inverse().ok_or_else(|| "singular homography".to_string())?;
-        Ok(Self {
-            t_s,
-            placed_by: Placement::RecordedTime,
-            at_window_edge: false,
-            nozzle_mm,
-            px_to_plane: h,
-            plane_to_px,
-            fit_err_mm: f64::NAN,
-            pairs: 0,
-        })
+        let time = vision::localize::CaptureTimeEstimate { t_s, distance_mm: 0.0, at_window_edge: false };
+        Ok(Self { placed_by: Placement::RecordedTime, ..Self::new(time, nozzle_mm, h, f64::NAN, 0)? })
     }
 
     /// Eq. 30's capture-time estimate; NaN for a frame placed by its recorded time.
