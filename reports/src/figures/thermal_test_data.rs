@@ -189,7 +189,8 @@ pub fn frames() -> DataFrame {
         "corners_found" => (0..n).map(|i| if used[i] { 5 } else { 2 }).collect::<Vec<i32>>(),
         "corners_matched" => (0..n).map(|i| if used[i] { 4 } else { 1 }).collect::<Vec<i32>>(),
         "reproj_err_mm" => (0..n).map(|i| if used[i] { 0.03 + 0.01 * noise(i) } else { f64::NAN }).collect::<Vec<f64>>(),
-        "used" => used, "placed_by" => placed_by, "skip_reason" => reason
+        "used" => used, "placed_by" => placed_by, "skip_reason" => reason,
+        "repeat_of_frame" => (0..n).map(|i| if i % 10 == 4 { i as i64 - 1 } else { -1 }).collect::<Vec<i64>>()
     )
     .expect("frame")
 }

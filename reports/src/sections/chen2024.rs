@@ -229,26 +229,26 @@ fn read_frames(path: &Path) -> Result<(usize, usize, BTreeMap<String, usize>), S
         Ok(_) => strs(&df, "placed_by", path)?.iter().map(|p| p == "recorded_time").collect(),
         Err(_) => vec![false; used.len()],
     };
+    let repeated: Vec<bool> = match df.column("repeat_of_frame") {
+        Ok(_) => ints(&df, "repeat_of_frame", path)?.iter().map(|r| *r >= 0).collect(),
+        Err(_) => vec![false; used.len()],
+    };
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
-    for ((u, d), r) in used.iter().zip(&dead_reckoned).zip(reason) {
-        if !u && !d {
-            *skipped.entry(reason_class(r)).or_default() += 1;
-        }
+    for (i, r) in reason.into_iter().enumerate().filter(|(i, _)| !used[*i] && !dead_reckoned[*i]) {
+        let class = match (repeated[i], r.is_empty()) {
+            (true, _) => REPEATED_FRAMES.to_string(),
+            (false, true) => "unstated".to_string(),
+            (false, false) => r,
+        };
+        *skipped.entry(class).or_default() += 1;
     }
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
     Ok((count(&used), count(&dead_reckoned), skipped))
 }
 
-/// A skip reason without the frame it names, so that reasons of one kind count together.
-fn reason_class(reason: String) -> String {
-    if reason.is_empty() {
-        "unstated".into()
-    } else if reason.starts_with("same image as frame") {
-        "same image as the frame before (a repeated or frozen camera frame)".into()
-    } else {
-        reason
-    }
-}
+/// The skip class of the frames that repeat the image before them (`repeat_of_frame`):
+/// one count, whichever frame each repeats.
+const REPEATED_FRAMES: &str = "same image as the frame before (a repeated or frozen camera frame)";
 
 /// The relative reduction from `before` to `after` (%).
 pub fn reduction_pct(before: f64, after: f64) -> f64 {
@@ -754,7 +754,7 @@ mod tests {
         let ours = Ours::read(&inputs(root.path())).expect("reads");
         assert_eq!((ours.frames_used, ours.frames_by_recorded_time, ours.skipped.values().sum::<usize>()), (30, 2, 8));
         // Repeats of different frames count as one reason.
-        let repeats = ours.skipped.get("same image as the frame before (a repeated or frozen camera frame)");
+        let repeats = ours.skipped.get(REPEATED_FRAMES);
         assert_eq!((ours.skipped.len(), repeats), (2, Some(&4)), "{:?}", ours.skipped);
         let (rows, html) = section(&ours);
         let df = comparison_frame(&rows).expect("frame");
