@@ -11,8 +11,9 @@
 //! path and that a disc of radius [`THIN_FEATURE_RADIUS_MM`] cannot reach inside the
 //! footprint (the footprint minus its morphological opening), and moves each
 //! such cell's material back along the feature to the cell it hangs from (a
-//! breadth-first walk through the thin cells from the cells that stay), spread evenly
-//! over the remaining cells within 2r of that root, where it piles up (the nozzle face's
+//! breadth-first walk through the thin cells from the cells that stay: the opened
+//! footprint and the footprint under the nozzle's face), spread evenly over the cells
+//! that stay within 2r of that root, where it piles up (the nozzle face's
 //! squeeze then pours what stands above the nozzle plane sideways, see `deposition`). Mass is conserved exactly;
 //! features at least 2r wide, beads and corner bulges, keep their shape (a square end
 //! loses the cells of its corners that no disc of radius r reaches inside it).
@@ -42,11 +43,13 @@ pub struct LayerFill<'a> {
 
 impl LayerFill<'_> {
     /// Moves the material of the footprint's thin features (see the module doc) back
-    /// along each feature to its root in the opened footprint, spread over the opened
-    /// cells within 2r of that root; returns the number of cells moved.
+    /// along each feature to its root, spread over the cells that stay within 2r of that
+    /// root; returns the number of cells moved.
     /// Cells where `held` is true (under the nozzle's face somewhere along the path) stay:
     /// the face shapes what lies under it, and a thin bead along the path (the start of
-    /// a layer, before the flow has built up) is a real bead, not a filament.
+    /// a layer, before the flow has built up) is a real bead, not a filament. They are
+    /// roots too: a ray that leaves the face's track where the bead under it is itself
+    /// thin (the tip of a sharp apex) collapses into that bead.
     pub fn collapse_thin_features(&mut self, held: &[bool], radius_cells: usize, max_reach_cells: usize) -> usize {
         let footprint: Vec<bool> = self.fill.iter().map(|f| *f >= 0.5).collect();
         let chords = disc_chords(radius_cells as i64);
@@ -58,14 +61,16 @@ impl LayerFill<'_> {
         let seeds = self.row_distance(false, |i| eroded[i]);
         let opened: Vec<bool> =
             (0..self.fill.len()).map(|i| footprint[i] && self.disc_touches(&seeds, i, &chords)).collect();
-        let thin: Vec<bool> = (0..self.fill.len()).map(|i| footprint[i] && !opened[i] && !held[i]).collect();
-        let roots = self.roots_along_features(&thin, &opened, max_reach_cells);
+        // What stays: the opened footprint, and the footprint under the nozzle's face.
+        let anchored: Vec<bool> = (0..self.fill.len()).map(|i| opened[i] || (footprint[i] && held[i])).collect();
+        let thin: Vec<bool> = (0..self.fill.len()).map(|i| footprint[i] && !anchored[i]).collect();
+        let roots = self.roots_along_features(&thin, &anchored, max_reach_cells);
         let landing = disc_offsets(2.0 * radius_cells as f64);
         let mut moved = 0;
         for (i, root) in roots.into_iter().enumerate() {
             let Some(root) = root else { continue };
             let cells: Vec<usize> =
-                landing.iter().filter_map(|&o| self.offset(root, o)).filter(|&j| opened[j]).collect();
+                landing.iter().filter_map(|&o| self.offset(root, o)).filter(|&j| anchored[j]).collect();
             let share = self.fill[i] / cells.len() as f64;
             let t_s = self.deposit_time_s[i];
             for j in cells {
@@ -126,14 +131,14 @@ impl LayerFill<'_> {
             .then(|| y as usize * self.nx + x as usize)
     }
 
-    /// For every `thin` cell, the cell of `opened` its feature hangs from: a breadth-first
-    /// walk from the opened cells through the thin cells (8-connected), so a ray's
+    /// For every `thin` cell, the `anchored` cell its feature hangs from: a breadth-first
+    /// walk from the anchored cells through the thin cells (8-connected), so a ray's
     /// material goes back along the ray to its root; at most `reach` steps. Cells the
     /// walk does not reach (islands) get None and stay.
-    fn roots_along_features(&self, thin: &[bool], opened: &[bool], reach: usize) -> Vec<Option<usize>> {
+    fn roots_along_features(&self, thin: &[bool], anchored: &[bool], reach: usize) -> Vec<Option<usize>> {
         let mut root: Vec<Option<usize>> = vec![None; self.fill.len()];
         let mut steps = vec![0usize; self.fill.len()];
-        let mut queue: std::collections::VecDeque<usize> = (0..self.fill.len()).filter(|&i| opened[i]).collect();
+        let mut queue: std::collections::VecDeque<usize> = (0..self.fill.len()).filter(|&i| anchored[i]).collect();
         queue.iter().for_each(|&i| root[i] = Some(i));
         const NEIGHBOURS: [(i64, i64); 8] = [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)];
         while let Some(i) = queue.pop_front() {
@@ -238,6 +243,25 @@ mod tests {
             LayerFill { fill: &mut fill, deposit_time_s: &mut time, nx, ny }.collapse_thin_features(&held, 4, 100);
         assert_eq!(moved, 0);
         assert_eq!(fill, original);
+    }
+
+    #[test]
+    fn a_ray_hanging_from_a_thin_bead_under_the_nozzle_collapses_into_it() {
+        // A 6-cell wide bead the nozzle printed (held, narrower than the disc, so nothing
+        // of it is opened), and a 4-cell wide ray off its end where the nozzle never went:
+        // the ray's material goes back into the bead, which stays.
+        let (nx, ny) = (60, 80);
+        let bead = |x: usize, y: usize| (27..33).contains(&x) && (5..40).contains(&y);
+        let ray = |x: usize, y: usize| (28..32).contains(&x) && (40..60).contains(&y);
+        let (mut fill, mut time) = grid(nx, ny, |x, y| if bead(x, y) || ray(x, y) { 1.0 } else { 0.0 });
+        let before: f64 = fill.iter().sum();
+        let held = cells_near((5..38).map(|y| [30.0, y as f64 + 0.5]), 3.0, nx, ny);
+        let moved =
+            LayerFill { fill: &mut fill, deposit_time_s: &mut time, nx, ny }.collapse_thin_features(&held, 4, 100);
+        assert!(moved >= 4 * 18, "{moved} cells moved");
+        assert!((fill.iter().sum::<f64>() - before).abs() < 1e-9);
+        assert!((43..ny).all(|y| (0..nx).all(|x| fill[y * nx + x] == 0.0)), "the ray is gone");
+        assert!((5..38).all(|y| fill[y * nx + 30] >= 1.0), "the bead stays");
     }
 
     #[test]

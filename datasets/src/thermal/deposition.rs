@@ -497,24 +497,6 @@ fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
 
-/// Fill fraction at `p_mm`, bilinear between cell centres (0 outside the grid).
-pub fn fill_at(grid: &DepositGrid, p_mm: [f64; 2]) -> f64 {
-    let fx = (p_mm[0] - grid.origin_mm[0]) / grid.cell_mm - 0.5;
-    let fy = (p_mm[1] - grid.origin_mm[1]) / grid.cell_mm - 0.5;
-    let (x0, y0) = (fx.floor(), fy.floor());
-    let (ax, ay) = (fx - x0, fy - y0);
-    let get = |x: f64, y: f64| -> f64 {
-        if x < 0.0 || y < 0.0 || x >= grid.nx as f64 || y >= grid.ny as f64 {
-            0.0
-        } else {
-            f64::from(grid.fill[y as usize * grid.nx + x as usize])
-        }
-    };
-    let bottom = get(x0, y0) * (1.0 - ax) + get(x0 + 1.0, y0) * ax;
-    let top = get(x0, y0 + 1.0) * (1.0 - ax) + get(x0 + 1.0, y0 + 1.0) * ax;
-    bottom * (1.0 - ay) + top * ay
-}
-
 /// True left and right half widths (mm) of the deposit at every trajectory sample,
 /// measured along the path normal from the nozzle position to where the fill drops
 /// below one half (linear interpolation between 0.005 mm steps, up to 3 mm).
@@ -554,13 +536,13 @@ fn unit_tangents(trajectory: &Trajectory) -> Vec<[f64; 2]> {
 /// of the deposit along any direction, as the truth tables and the evaluation use it.
 pub fn edge_distance_mm(grid: &DepositGrid, p: [f64; 2], dir: [f64; 2]) -> f64 {
     const STEP_MM: f64 = 0.005;
-    let mut prev = fill_at(grid, p);
+    let mut prev = grid.fill_at(p);
     if prev < 0.5 {
         return 0.0;
     }
     for i in 1..=600 {
         let d = i as f64 * STEP_MM;
-        let f = fill_at(grid, [p[0] + d * dir[0], p[1] + d * dir[1]]);
+        let f = grid.fill_at([p[0] + d * dir[0], p[1] + d * dir[1]]);
         if f < 0.5 {
             return d - STEP_MM * (0.5 - f) / (prev - f);
         }

@@ -13,14 +13,17 @@
 //!   Δw at speed |v| is a flow excess ΔE = h·|v|·Δw, i.e. Δv_e = K_e·|v|·Δw/(2·w_d)
 //!   (w_d in place of w0 so that a rotated deposition direction is measured against its
 //!   own desired width). K_e is per span; Sec. 3.2 gives K_e = 1 + (150 − T_p)/15 with
-//!   T_p the corner temperature in °C ([`paper_gain`]). Unmeasured samples ask for no change.
+//!   T_p the corner temperature in °C ([`paper_gain`]). Unmeasured samples (NaN) ask
+//!   for nothing: the fit below leaves them out, so the spline bridges a gap in the
+//!   camera's readings (the first samples of a layer, too thin for the threshold
+//!   contour, a frame the camera skipped) instead of being pulled to zero there.
 //! - Eqs 36-39: the input Δv_er = Σ N_i ΔV_i is a clamped cubic B-spline on uniform knots
 //!   over the extended window (the paper's NURBS with unit weights, which is what an
 //!   m-order spline with control pairs {Δt_i, ΔV_i} at fixed Δt_i amounts to); knot
 //!   spacing 0.02 s by default, about τ/4, fine enough to shape the lag's response and
 //!   coarse enough to keep ~20 unknowns per corner. Each N_i is sampled at T_s and
 //!   filtered through G(s) with [`first_order_lag`] (Ñ_i, eq. 38); the control values
-//!   minimise ‖Σ Ñ_i ΔV_i − Δv_e‖² over the window's samples subject to
+//!   minimise ‖Σ Ñ_i ΔV_i − Δv_e‖² over the window's measured samples subject to
 //!   ΔV_min ≤ ΔV_i ≤ ΔV_max (−2 and +4 mm/s) and ΔV_0 = ΔV_n = 0, by an active-set
 //!   bounded least squares (Lawson-Hanson style) on the normal equations with faer's
 //!   Cholesky. The fit covers the extended window only, as eq. 39 does; the lag's tail
@@ -35,7 +38,7 @@
 //!   straight bead; at a sharp apex the allocated directions fan round a nearly fixed
 //!   point and neighbouring directions cross the same bulge. The swept area counts every
 //!   point once, but on the eqs 5-11 printer it under-counts the apex excess (the oracle
-//!   study: −58 % O_E against −71 % for the literal reading), so `thermal.compensate`
+//!   study: −56 % O_E against −71 % for the literal reading), so `thermal.compensate`
 //!   defaults to the literal reading.
 //! - Tail ([`solve_fbs_with_tail`], `FbsParams::tail_s`). Paper: the fit (eq. 39) runs
 //!   over [Δt̂0, Δt̂1] only. The lag's response to an input that ends at Δt̂1 goes on
@@ -51,6 +54,9 @@ use super::errors::{positive, ThermalError};
 
 /// Degree of the B-spline (cubic).
 const DEGREE: usize = 3;
+/// Relative ridge of the bounded least squares ([`bounded_least_squares`]): far below
+/// anything that moves a fit with every row present (outputs agree to ~1e-9 mm/s).
+pub const RIDGE: f64 = 1e-10;
 
 /// An inclusive range of sample indices.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,7 +127,7 @@ pub struct FbsSolution {
     pub input_mm_s: Vec<f64>,
     /// Predicted output Σ Ñ_i ΔV_i at each window sample (mm/s), eq. 38.
     pub output_mm_s: Vec<f64>,
-    /// ‖output − desired‖₂ over the window (mm/s).
+    /// ‖output − desired‖₂ over the window's measured samples (mm/s).
     pub residual_norm_mm_s: f64,
     /// Active-set iterations used.
     pub iterations: usize,
@@ -165,7 +171,7 @@ pub fn paper_gain(corner_temp_c: f64) -> f64 {
 }
 
 /// Desired change of the deposition velocity Δv_e = K_e·|v|·Δw/(2·w_d) (mm/s), eq. 33
-/// in our units (module doc); NaN width errors ask for no change.
+/// in our units (module doc); NaN where the width error is NaN (unmeasured).
 pub fn desired_velocity_change_mm_s(
     width_error_mm: &[f64],
     speed_mm_s: &[f64],
@@ -176,7 +182,7 @@ pub fn desired_velocity_change_mm_s(
         .iter()
         .zip(speed_mm_s)
         .zip(desired_half_width_mm)
-        .map(|((dw, v), wd)| if dw.is_nan() { 0.0 } else { gain * v * dw / (2.0 * wd) })
+        .map(|((dw, v), wd)| gain * v * dw / (2.0 * wd))
         .collect()
 }
 
@@ -209,8 +215,8 @@ pub fn swept_area_rate_mm2_s(left_mm: f64, right_mm: f64, sample: &SweepSample) 
 /// Eq. 33 by mass conservation in the deposition frame: the flow excess
 /// ΔE = K_e·h·(swept rate of the measured − of the desired half widths) (mm³/s) at
 /// every sample, converted to a deposition velocity by `flow_per_velocity_mm2`
-/// (E = that × v_e: the filament area for an E-axis velocity). Unmeasured samples
-/// (NaN) ask for no change.
+/// (E = that × v_e: the filament area for an E-axis velocity). NaN where a side was
+/// not measured.
 pub fn velocity_change_from_sweep_mm_s(
     measured_mm: &[(f64, f64)],
     desired_mm: &[(f64, f64)],
@@ -225,11 +231,7 @@ pub fn velocity_change_from_sweep_mm_s(
         .zip(sweep)
         .map(|((m, d), g)| {
             let excess = swept_area_rate_mm2_s(m.0, m.1, g) - swept_area_rate_mm2_s(d.0, d.1, g);
-            if excess.is_finite() {
-                gain * layer_height_mm * excess / flow_per_velocity_mm2
-            } else {
-                0.0
-            }
+            gain * layer_height_mm * excess / flow_per_velocity_mm2
         })
         .collect()
 }
@@ -263,7 +265,8 @@ pub struct SpanParams {
 
 /// Sec. 2.4 over one layer: spans of |`width_error_mm`| ≥ ε, extended, merged where the
 /// extended windows touch; for each, the desired output `desired_unit_gain_mm_s` (Δv_e
-/// with K_e = 1) times `gain(span)` over the window, solved by FBS. Spans are solved in
+/// with K_e = 1, NaN where unmeasured) times `gain(span)` over the window, solved by
+/// FBS; after the window the output is fitted to zero for `tail_s`. Spans are solved in
 /// print order and each one's desired output has the lagged tails of the earlier ones
 /// subtracted (G is linear, so their responses add).
 pub fn compensate_spans(
@@ -283,7 +286,7 @@ pub fn compensate_spans(
         let end = (window.last + 1 + tail).min(n);
         let k_e = gain(span);
         let desired: Vec<f64> = (window.first..end)
-            .map(|k| k_e * desired_unit_gain_mm_s[k] * f64::from(k <= window.last) - planned[k])
+            .map(|k| if k <= window.last { k_e * desired_unit_gain_mm_s[k] } else { 0.0 } - planned[k])
             .collect();
         let solution = solve_fbs_with_tail(&desired, end - window.last - 1, dt_s, &params.fbs)?;
         planned[window.first..end].iter_mut().zip(&solution.output_mm_s).for_each(|(p, o)| *p += o);
@@ -310,7 +313,7 @@ pub fn compensated_command(v_e_mm_s: &[f64], window_first: usize, input_mm_s: &[
 }
 
 /// Eqs 36-39: the bounded filtered-B-spline fit of `desired_mm_s` (Δv_e on the extended
-/// window's samples, period `dt_s`).
+/// window's samples, period `dt_s`; NaN samples are left out of the fit).
 pub fn solve_fbs(desired_mm_s: &[f64], dt_s: f64, params: &FbsParams) -> Result<FbsSolution, ThermalError> {
     solve_fbs_with_tail(desired_mm_s, 0, dt_s, params)
 }
@@ -337,15 +340,24 @@ pub fn solve_fbs_with_tail(
     let filtered = filter_columns(&basis, dt_s, params.tau_s);
     let n_basis = basis.ncols();
     // Interior control points only: ΔV_0 = ΔV_n = 0 (eq. 39).
-    let interior = Mat::from_fn(samples, n_basis - 2, |r, c| filtered[(r, c + 1)]);
+    // Unmeasured samples (NaN) get no row weight: the fit leaves them out.
+    let measured = |r: usize| desired_mm_s[r].is_finite();
+    let interior = Mat::from_fn(samples, n_basis - 2, |r, c| if measured(r) { filtered[(r, c + 1)] } else { 0.0 });
+    let target: Vec<f64> = (0..samples).map(|r| if measured(r) { desired_mm_s[r] } else { 0.0 }).collect();
     let lower = vec![params.dv_min_mm_s; n_basis - 2];
     let upper = vec![params.dv_max_mm_s; n_basis - 2];
-    let (x, iterations) = bounded_least_squares(interior.as_ref(), desired_mm_s, &lower, &upper)?;
+    let (x, iterations) = bounded_least_squares(interior.as_ref(), &target, &lower, &upper)?;
     let mut control_mm_s = vec![0.0; n_basis];
     control_mm_s[1..n_basis - 1].copy_from_slice(&x);
     let input_mm_s = combine(&basis, &control_mm_s);
     let output_mm_s = combine(&filtered, &control_mm_s);
-    let residual_norm_mm_s = output_mm_s.iter().zip(desired_mm_s).map(|(o, d)| (o - d).powi(2)).sum::<f64>().sqrt();
+    let residual_norm_mm_s = output_mm_s
+        .iter()
+        .zip(desired_mm_s)
+        .filter(|(_, d)| d.is_finite())
+        .map(|(o, d)| (o - d).powi(2))
+        .sum::<f64>()
+        .sqrt();
     Ok(FbsSolution { control_mm_s, knots_s, input_mm_s, output_mm_s, residual_norm_mm_s, iterations })
 }
 
@@ -388,6 +400,9 @@ pub fn filter_columns(basis: &Mat<f64>, dt_s: f64, tau_s: f64) -> Mat<f64> {
 
 /// Bounded least squares min ‖A x − b‖² s.t. lower ≤ x ≤ upper (0 must be feasible),
 /// by a primal active set on the normal equations. Returns x and the iterations used.
+/// A ridge of [`RIDGE`] times the largest diagonal of AᵀA keeps the normal equations
+/// definite when rows are missing (unmeasured samples): an unknown that no row sees,
+/// or that only a lag's faint tail sees, goes to 0 instead of failing the Cholesky.
 pub fn bounded_least_squares(
     a: MatRef<'_, f64>,
     b: &[f64],
@@ -395,7 +410,11 @@ pub fn bounded_least_squares(
     upper: &[f64],
 ) -> Result<(Vec<f64>, usize), ThermalError> {
     let n = a.ncols();
-    let hessian = a.transpose() * a;
+    let mut hessian = a.transpose() * a;
+    let ridge = RIDGE * (0..n).map(|i| hessian[(i, i)]).fold(f64::MIN_POSITIVE, f64::max);
+    for i in 0..n {
+        hessian[(i, i)] += ridge;
+    }
     let b_mat = Mat::from_fn(b.len(), 1, |r, _| b[r]);
     let rhs_mat = a.transpose() * b_mat.as_ref();
     let rhs: Vec<f64> = (0..n).map(|i| rhs_mat[(i, 0)]).collect();
@@ -631,6 +650,35 @@ mod tests {
     }
 
     #[test]
+    fn unmeasured_samples_are_left_out_of_the_fit() {
+        // The bump with its rising half unmeasured: the fit must not pull the output to
+        // zero there. It matches the measured half as well as with everything measured,
+        // and the output it gives the gap rises towards the bump instead of staying at 0.
+        let params = FbsParams::paper_defaults();
+        let full = bump(1.0);
+        let mut gappy = full.clone();
+        gappy[100..225].iter_mut().for_each(|d| *d = f64::NAN);
+        let sol = solve_fbs(&gappy, DT, &params).unwrap();
+        let measured_err: f64 = (225..450).map(|k| (sol.output_mm_s[k] - full[k]).powi(2)).sum::<f64>().sqrt();
+        let zeroed: Vec<f64> = gappy.iter().map(|d| if d.is_nan() { 0.0 } else { *d }).collect();
+        let old = solve_fbs(&zeroed, DT, &params).unwrap();
+        let old_err: f64 = (225..450).map(|k| (old.output_mm_s[k] - full[k]).powi(2)).sum::<f64>().sqrt();
+        assert!(measured_err < 0.5 * old_err, "{measured_err} vs {old_err}");
+        assert!(sol.output_mm_s[200] > 0.5 * full[200], "{} vs {}", sol.output_mm_s[200], full[200]);
+        let all_measured: f64 = (0..450)
+            .filter(|&k| gappy[k].is_finite())
+            .map(|k| (sol.output_mm_s[k] - full[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!((sol.residual_norm_mm_s - all_measured).abs() < 1e-9);
+        // A window with nothing measured after its first half: the unknowns no row sees are 0.
+        let mut blind = full.clone();
+        blind[200..].iter_mut().for_each(|d| *d = f64::NAN);
+        let sol = solve_fbs(&blind, DT, &params).unwrap();
+        assert!(sol.control_mm_s.iter().all(|c| c.is_finite()));
+    }
+
+    #[test]
     fn end_control_points_and_input_ends_are_zero() {
         let sol = solve_fbs(&bump(3.0), DT, &FbsParams::paper_defaults()).unwrap();
         assert_eq!(sol.control_mm_s[0], 0.0);
@@ -680,7 +728,7 @@ mod tests {
             2.405,
             1.0,
         );
-        assert!(dv[0].abs() < 1e-15 && (dv[1] - 0.25 * 20.0 * 0.1 / 2.405).abs() < 1e-12 && dv[2] == 0.0);
+        assert!(dv[0].abs() < 1e-15 && (dv[1] - 0.25 * 20.0 * 0.1 / 2.405).abs() < 1e-12 && dv[2].is_nan());
     }
 
     #[test]
@@ -735,7 +783,7 @@ mod tests {
         assert_eq!(paper_gain(135.0), 2.0);
         // A 0.1 mm excess on a 0.45 mm bead at 10 mm/s: ΔE = h·10·0.1, Δv_e = 10·0.1/0.45.
         let dv = desired_velocity_change_mm_s(&[0.1, f64::NAN], &[10.0, 10.0], &[0.225, 0.225], 1.0);
-        assert!((dv[0] - 10.0 * 0.1 / 0.45).abs() < 1e-12 && dv[1] == 0.0);
+        assert!((dv[0] - 10.0 * 0.1 / 0.45).abs() < 1e-12 && dv[1].is_nan());
         let wd = desired_half_width_mm(0.225, &[0.0, std::f64::consts::FRAC_PI_3]);
         assert!((wd[1] - 0.45).abs() < 1e-12);
         let err = width_error_mm(&[0.3, f64::NAN], &[0.2, 0.2], &wd);

@@ -48,6 +48,25 @@ impl DepositGrid {
         self.fill.iter().map(|f| f64::from(*f)).sum::<f64>() * self.cell_mm * self.cell_mm
     }
 
+    /// Fill fraction at `point_mm`, bilinear between cell centres (0 beyond the grid):
+    /// the field whose 0.5 iso-line is the printed edge (eq. 41, [`super::metrics`]).
+    pub fn fill_at(&self, point_mm: [f64; 2]) -> f64 {
+        let fx = (point_mm[0] - self.origin_mm[0]) / self.cell_mm - 0.5;
+        let fy = (point_mm[1] - self.origin_mm[1]) / self.cell_mm - 0.5;
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (ax, ay) = (fx - x0, fy - y0);
+        let get = |x: f64, y: f64| -> f64 {
+            if x < 0.0 || y < 0.0 || x >= self.nx as f64 || y >= self.ny as f64 {
+                0.0
+            } else {
+                f64::from(self.fill[y as usize * self.nx + x as usize])
+            }
+        };
+        let bottom = get(x0, y0) * (1.0 - ax) + get(x0 + 1.0, y0) * ax;
+        let top = get(x0, y0 + 1.0) * (1.0 - ax) + get(x0 + 1.0, y0 + 1.0) * ax;
+        bottom * (1.0 - ay) + top * ay
+    }
+
     /// True where a cell is at least half filled: the printed footprint.
     pub fn footprint(&self) -> Vec<bool> {
         self.fill.iter().map(|f| *f >= 0.5).collect()
@@ -65,6 +84,16 @@ mod tests {
         let c = grid.cell_center_mm(3, 4);
         assert_eq!(grid.cell_of(c), Some((3, 4)));
         assert_eq!(grid.cell_of([1.5, 2.5]), None);
+    }
+
+    #[test]
+    fn fill_is_bilinear_between_cell_centres_and_zero_beyond() {
+        let mut grid = DepositGrid::covering([0.0, 0.0], [1.0, 1.0], 0.5);
+        grid.fill = vec![1.0, 0.0, 0.0, 0.0];
+        assert!((grid.fill_at(grid.cell_center_mm(0, 0)) - 1.0).abs() < 1e-12);
+        assert!((grid.fill_at([0.5, 0.25]) - 0.5).abs() < 1e-12, "halfway to the next centre");
+        assert!((grid.fill_at([0.0, 0.25]) - 0.5).abs() < 1e-12, "halfway to the empty outside");
+        assert_eq!(grid.fill_at([5.0, 5.0]), 0.0);
     }
 
     #[test]

@@ -19,6 +19,9 @@
 //!   close); e_t = distance from each CAD point to the nearest iso-line segment (a point on
 //!   the segment rather than a segment end, so e_t is not limited by the sampling of P_m),
 //!   found through a uniform bucket grid. Summary: max and RMS over all points of all layers.
+//!   Eq. 41 is unsigned; each point also records whether the print covers it (the error is
+//!   a bulge beyond it) or not (the print falls short of it), and [`summarize_regions`]
+//!   breaks the error down by where on the part it lies ([`ContourRegion`]).
 
 use super::deposit::DepositGrid;
 use super::errors::{positive, ThermalError};
@@ -69,6 +72,33 @@ pub struct ContourPoint {
     pub y_mm: f64,
     /// Contour error e_t (mm); ∞ if the layer has no footprint.
     pub error_mm: f64,
+    /// True if the CAD point lies inside the printed footprint (fill ≥ 0.5): the printed
+    /// edge is beyond it, a bulge; false: the print falls short of it.
+    pub covered: bool,
+}
+
+/// Where on the part a CAD contour point lies, to break eq. 41's error down.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ContourRegion {
+    /// Within the corner radius of CAD vertex `i`, its nearest vertex.
+    Corner(usize),
+    /// Within the seam radius of the point where every layer starts and ends.
+    Seam,
+    /// Anywhere else: the straight runs between corners.
+    Straight,
+}
+
+/// Eq. 41's error over one [`ContourRegion`], all layers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegionSummary {
+    /// Number of (point, layer) pairs.
+    pub points: usize,
+    /// Largest e_t (mm).
+    pub max_mm: f64,
+    /// Whether the print covers the CAD point of the largest e_t (a bulge) or not (short).
+    pub max_covered: bool,
+    /// Sum of e_t² (mm²): its share of the whole is the region's share of the squared RMS.
+    pub sum_sq_mm2: f64,
 }
 
 /// Max and RMS of e_t over all points of all layers (Table 3).
@@ -240,8 +270,57 @@ pub fn contour_errors(grid: &DepositGrid, cad_points_mm: &[[f64; 2]]) -> Vec<Con
     let index = SegmentBuckets::new(grid, &segments);
     cad_points_mm
         .iter()
-        .map(|p| ContourPoint { x_mm: p[0], y_mm: p[1], error_mm: index.nearest_distance_mm(*p, &segments) })
+        .map(|p| ContourPoint {
+            x_mm: p[0],
+            y_mm: p[1],
+            error_mm: index.nearest_distance_mm(*p, &segments),
+            covered: grid.fill_at(*p) >= FOOTPRINT_LEVEL,
+        })
         .collect()
+}
+
+/// The region of `point_mm`: the nearest of `vertices` if within `corner_radius_mm`,
+/// else the seam if within `seam_radius_mm` of `seam_mm`, else straight.
+pub fn contour_region(
+    point_mm: [f64; 2],
+    vertices: &[[f64; 2]],
+    corner_radius_mm: f64,
+    seam_mm: [f64; 2],
+    seam_radius_mm: f64,
+) -> ContourRegion {
+    let distance = |v: [f64; 2]| (v[0] - point_mm[0]).hypot(v[1] - point_mm[1]);
+    let nearest = (0..vertices.len()).min_by(|&a, &b| distance(vertices[a]).total_cmp(&distance(vertices[b])));
+    match nearest {
+        Some(i) if distance(vertices[i]) <= corner_radius_mm => ContourRegion::Corner(i),
+        _ if distance(seam_mm) <= seam_radius_mm => ContourRegion::Seam,
+        _ => ContourRegion::Straight,
+    }
+}
+
+/// Eq. 41 per region over all layers; `regions[j]` is the region of every layer's CAD
+/// point `j` (every layer has the same CAD points). Regions without points are absent.
+pub fn summarize_regions(
+    layers: &[Vec<ContourPoint>],
+    regions: &[ContourRegion],
+) -> std::collections::BTreeMap<ContourRegion, RegionSummary> {
+    let mut out = std::collections::BTreeMap::new();
+    for layer in layers {
+        for (p, region) in layer.iter().zip(regions) {
+            let s = out.entry(*region).or_insert(RegionSummary {
+                points: 0,
+                max_mm: f64::NEG_INFINITY,
+                max_covered: false,
+                sum_sq_mm2: 0.0,
+            });
+            s.points += 1;
+            s.sum_sq_mm2 += p.error_mm * p.error_mm;
+            if p.error_mm > s.max_mm {
+                s.max_mm = p.error_mm;
+                s.max_covered = p.covered;
+            }
+        }
+    }
+    out
 }
 
 /// Max and RMS of e_t over all layers.
@@ -487,7 +566,37 @@ mod tests {
             (0..=40).flat_map(|i| [[4.0 + 0.05 * i as f64, w0], [4.0 + 0.05 * i as f64, -w0]]).collect();
         let errors = contour_errors(&grid, &cad);
         assert!(errors.iter().all(|e| (e.error_mm - d).abs() < cell), "{:?}", errors[0]);
+        assert!(errors.iter().all(|e| e.covered), "a bulge covers the CAD points");
         assert!((summarize(&[errors]).max_mm - d).abs() < cell);
+        // The strip shrunk by d instead: the same error, but the print falls short.
+        rasterise(&mut grid, 1, |p| p[1].abs() <= w0 - d);
+        let short = contour_errors(&grid, &cad);
+        assert!(short.iter().all(|e| (e.error_mm - d).abs() < cell && !e.covered));
+    }
+
+    #[test]
+    fn regions_split_the_error_and_add_up_to_the_whole() {
+        let vertices = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let seam = [10.0, 5.0];
+        let region = |p: [f64; 2]| contour_region(p, &vertices, 1.0, seam, 2.0);
+        assert_eq!(region([10.5, 0.5]), ContourRegion::Corner(1));
+        assert_eq!(region([-0.5, 10.5]), ContourRegion::Corner(3));
+        assert_eq!(region([10.2, 6.0]), ContourRegion::Seam);
+        assert_eq!(region([5.0, -0.2]), ContourRegion::Straight);
+        let point = |x: f64, e: f64, covered: bool| ContourPoint { x_mm: x, y_mm: 0.0, error_mm: e, covered };
+        let layers = vec![
+            vec![point(0.0, 0.3, false), point(5.0, 0.1, true), point(6.0, 0.2, true)],
+            vec![point(0.0, 0.1, true), point(5.0, 0.4, true), point(6.0, 0.0, false)],
+        ];
+        let regions = [ContourRegion::Corner(0), ContourRegion::Straight, ContourRegion::Straight];
+        let by = summarize_regions(&layers, &regions);
+        let corner = by[&ContourRegion::Corner(0)];
+        assert_eq!((corner.points, corner.max_mm, corner.max_covered), (2, 0.3, false));
+        let straight = by[&ContourRegion::Straight];
+        assert_eq!((straight.points, straight.max_mm, straight.max_covered), (4, 0.4, true));
+        let total: f64 = by.values().map(|r| r.sum_sq_mm2).sum();
+        let whole = summarize(&layers);
+        assert!((total - whole.rms_mm.powi(2) * whole.points as f64).abs() < 1e-12);
     }
 
     #[test]

@@ -156,6 +156,21 @@ pub fn interior_angles_deg(polygon_mm: &[[f64; 2]]) -> Vec<f64> {
         .collect()
 }
 
+/// For each vertex of a closed polygon, whether it is convex: the polygon turns there
+/// the way it turns overall, so the outside of the turn is the outside of the part (an
+/// apex); false at a reflex vertex (a valley, whose outside is the inside of the turn).
+pub fn convex_vertices(polygon_mm: &[[f64; 2]]) -> Vec<bool> {
+    let n = polygon_mm.len();
+    let turn = |i: usize| {
+        let (prev, at, next) = (polygon_mm[(i + n - 1) % n], polygon_mm[i], polygon_mm[(i + 1) % n]);
+        (at[0] - prev[0]) * (next[1] - at[1]) - (at[1] - prev[1]) * (next[0] - at[0])
+    };
+    let area2: f64 = (0..n)
+        .map(|i| polygon_mm[i][0] * polygon_mm[(i + 1) % n][1] - polygon_mm[(i + 1) % n][0] * polygon_mm[i][1])
+        .sum();
+    (0..n).map(|i| turn(i) * area2 > 0.0).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,6 +196,18 @@ mod tests {
         let (p, _) = straight_test_point();
         assert!(v[9][0].abs() < 1e-9 && (v[9][1] - BASE_HEIGHT_MM).abs() < 1e-9 && v[10] == [0.0, 0.0]);
         assert!((p[0] - v[9][0]).abs() < 1e-9 && (p[1] - 0.5 * (v[9][1] + v[10][1])).abs() < 1e-9);
+    }
+
+    #[test]
+    fn teeth_tips_and_sides_are_convex_and_valleys_are_not() {
+        let convex = convex_vertices(&corner_test_path());
+        let valleys = [3, 5, 7, 12, 14, 16];
+        for (i, c) in convex.iter().enumerate() {
+            assert_eq!(*c, !valleys.contains(&i), "vertex {i}");
+        }
+        let mut clockwise = corner_test_path();
+        clockwise.reverse();
+        assert_eq!(convex_vertices(&clockwise).iter().filter(|c| **c).count(), 12);
     }
 
     #[test]

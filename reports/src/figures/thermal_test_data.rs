@@ -353,6 +353,35 @@ pub fn write_reprint(dir: &Path) {
     );
     write_table(dir, "contour_points", contour_points(&poly));
     write_table(dir, "deposit_regions", deposit_regions(&poly));
+    write_table(dir, "contour_regions", contour_regions(&poly));
+}
+
+/// `contour_regions.parquet`: one row per vertex (even vertices apexes, odd ones valleys),
+/// then the seam and the straight runs; the largest error at the first valley before
+/// compensation (a bulge) and at the first apex after (short).
+pub fn contour_regions(poly: &[(f64, f64)]) -> DataFrame {
+    let n = poly.len();
+    let mut kind: Vec<&str> = (0..n).map(|k| if k % 2 == 0 { "apex" } else { "valley" }).collect();
+    kind.extend(["seam", "straight"]);
+    let mut region = vec!["corner"; n];
+    region.extend(["seam", "straight"]);
+    let mut corner: Vec<i64> = (0..n as i64).collect();
+    corner.extend([-1, -1]);
+    let mut angle: Vec<f64> = (0..n).map(|k| angle_deg(poly, k)).collect();
+    angle.extend([f64::NAN, f64::NAN]);
+    let rows = n + 2;
+    let max_before: Vec<f64> = (0..rows).map(|k| if k == 1 { 1.52 } else { 0.5 + 0.1 * noise(k) }).collect();
+    let max_after: Vec<f64> = (0..rows).map(|k| if k == 0 { 0.27 } else { 0.1 + 0.05 * noise(k + 7) }).collect();
+    df!(
+        "region" => region, "corner" => corner, "angle_deg" => angle, "kind" => kind,
+        "points" => vec![100i64; rows],
+        "max_before_mm" => max_before, "max_after_mm" => max_after,
+        "max_before_short" => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
+        "max_after_short" => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
+        "rms_before_mm" => vec![0.41; rows], "rms_after_mm" => vec![0.19; rows],
+        "sq_share_before" => vec![1.0 / rows as f64; rows], "sq_share_after" => vec![1.0 / rows as f64; rows]
+    )
+    .expect("frame")
 }
 
 /// `corners.parquet` for every vertex: O_E falls from about 100 % to about 30 %.

@@ -9,7 +9,7 @@
 //! stage it came from, then the issue's "done when" checks, pass or fail.
 //!
 //! Inputs, in order: a `thermal.compensate` stage (`spans.parquet`), a
-//! `thermal.reprint` stage (`corners.parquet`, `contour.parquet`), a
+//! `thermal.reprint` stage (`corners.parquet`, `contour.parquet`, `contour_regions.parquet`), a
 //! `thermal.accuracy` stage (`accuracy.parquet`) and a `thermal.monitor` stage
 //! (`frames.parquet`), and optionally a fifth: the `thermal.reprint` stage of our
 //! lag-model extension (`thermal.compensate` with `source = "lag_model"`), reported
@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        13
+        14
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -134,8 +134,46 @@ pub struct Reprint {
     pub corners: Vec<CornerOe>,
     /// (max, RMS) contour error, conventional then compensated (mm).
     pub contour_mm: [(f64, f64); 2],
-    /// Sources: corners, contour.
-    pub sources: [String; 2],
+    /// The contour error by region (corners, seam, straight runs).
+    pub regions: Vec<RegionError>,
+    /// Sources: corners, contour, contour regions.
+    pub sources: [String; 3],
+}
+
+/// One row of `contour_regions.parquet`: eq. 41 near a corner, at the seam or along
+/// the straight runs; pairs are (conventional, compensated).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionError {
+    /// "corner", "seam" or "straight".
+    pub region: String,
+    /// CAD vertex of a corner region (−1 otherwise).
+    pub corner: i64,
+    /// "apex", "valley", "seam" or "straight".
+    pub kind: String,
+    /// (point, layer) pairs in the region.
+    pub points: i64,
+    /// Largest e_t (mm).
+    pub max_mm: (f64, f64),
+    /// Whether the print falls short of the CAD point of the largest e_t.
+    pub max_short: (bool, bool),
+    /// RMS of e_t (mm).
+    pub rms_mm: (f64, f64),
+    /// Share of the whole contour's sum of e_t².
+    pub sq_share: (f64, f64),
+}
+
+impl RegionError {
+    /// "corner 11 (45° apex)", "the seam", "the straight runs".
+    fn label(&self, corners: &[CornerOe]) -> String {
+        match self.region.as_str() {
+            "corner" => {
+                let angle = corners.iter().find(|c| c.vertex == self.corner).map(|c| c.angle_deg);
+                format!("corner {} ({}° {})", self.corner, angle.map_or("—".into(), angle_text), self.kind)
+            }
+            "seam" => "the seam".to_string(),
+            _ => "the straight runs".to_string(),
+        }
+    }
 }
 
 impl Reprint {
@@ -143,8 +181,32 @@ impl Reprint {
         Ok(Self {
             corners: read_corners(&reprint.dir.join("corners.parquet"))?,
             contour_mm: read_contour(&reprint.dir.join("contour.parquet"))?,
-            sources: [source(reprint, "corners.parquet"), source(reprint, "contour.parquet")],
+            regions: read_regions(&reprint.dir.join("contour_regions.parquet"))?,
+            sources: [
+                source(reprint, "corners.parquet"),
+                source(reprint, "contour.parquet"),
+                source(reprint, "contour_regions.parquet"),
+            ],
         })
+    }
+
+    /// The region holding the largest e_t of the conventional (`after` false) or the
+    /// compensated print.
+    pub fn worst_region(&self, after: bool) -> Option<&RegionError> {
+        let max = |r: &&RegionError| if after { r.max_mm.1 } else { r.max_mm.0 };
+        self.regions.iter().max_by(|a, b| max(a).total_cmp(&max(b)))
+    }
+
+    /// Over every region of `kind`: the largest e_t and the RMS, conventional then
+    /// compensated (NaN when there is no such region).
+    pub fn kind_error_mm(&self, kind: &str) -> [(f64, f64); 2] {
+        let of_kind = || self.regions.iter().filter(|r| r.kind == kind);
+        let points = of_kind().map(|r| r.points as f64).sum::<f64>();
+        let rms = |pick: fn(&RegionError) -> f64| {
+            (of_kind().map(|r| pick(r).powi(2) * r.points as f64).sum::<f64>() / points).sqrt()
+        };
+        let max = |pick: fn(&RegionError) -> f64| of_kind().map(pick).fold(f64::NAN, f64::max);
+        [(max(|r| r.max_mm.0), rms(|r| r.rms_mm.0)), (max(|r| r.max_mm.1), rms(|r| r.rms_mm.1))]
     }
 
     /// Mean O_E before and after over the corners with finite values (%).
@@ -211,6 +273,38 @@ fn read_contour(path: &Path) -> Result<[(f64, f64); 2], StageError> {
         variant.iter().position(|v| v == name).map(|i| (max[i], rms[i])).ok_or_else(|| no_rows(path, "variant", name))
     };
     Ok([row("conventional")?, row("compensated")?])
+}
+
+fn read_regions(path: &Path) -> Result<Vec<RegionError>, StageError> {
+    let df = read_parquet(path)?;
+    let (region, corner, kind) = (strs(&df, "region", path)?, ints(&df, "corner", path)?, strs(&df, "kind", path)?);
+    let points = ints(&df, "points", path)?;
+    let pair = |a: &str, b: &str| -> Result<Vec<(f64, f64)>, StageError> {
+        Ok(f64s(&df, a, path)?.into_iter().zip(f64s(&df, b, path)?).collect())
+    };
+    let (max, rms, share) = (
+        pair("max_before_mm", "max_after_mm")?,
+        pair("rms_before_mm", "rms_after_mm")?,
+        pair("sq_share_before", "sq_share_after")?,
+    );
+    let short: Vec<(bool, bool)> =
+        bools(&df, "max_before_short", path)?.into_iter().zip(bools(&df, "max_after_short", path)?).collect();
+    let rows: Vec<RegionError> = (0..df.height())
+        .map(|i| RegionError {
+            region: region[i].clone(),
+            corner: corner[i],
+            kind: kind[i].clone(),
+            points: points[i],
+            max_mm: max[i],
+            max_short: short[i],
+            rms_mm: rms[i],
+            sq_share: share[i],
+        })
+        .collect();
+    if rows.is_empty() {
+        return Err(no_rows(path, "region", "one row per region of the contour"));
+    }
+    Ok(rows)
 }
 
 fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageError> {
@@ -324,8 +418,26 @@ pub fn section(ours: &Ours) -> (Vec<Row>, String) {
     (rows, html)
 }
 
+/// `v` to `decimals` places for the page: a true minus sign (−), no "−0.0", "—" when
+/// missing or not finite.
 fn fmt(v: Option<f64>, decimals: usize) -> String {
-    v.filter(|x| x.is_finite()).map_or("—".into(), |x| format!("{x:.decimals$}"))
+    v.filter(|x| x.is_finite()).map_or("—".into(), |x| {
+        let text = format!("{x:.decimals$}");
+        match text.strip_prefix('-') {
+            Some(digits) if digits.chars().all(|c| c == '0' || c == '.') => digits.to_string(),
+            Some(digits) => format!("−{digits}"),
+            None => text,
+        }
+    })
+}
+
+/// An angle in degrees as the path has them: whole degrees, or one decimal (52.5°).
+fn angle_text(deg: f64) -> String {
+    if (deg - deg.round()).abs() < 0.05 {
+        fmt(Some(deg), 0)
+    } else {
+        fmt(Some(deg), 1)
+    }
 }
 
 /// One line of the main table, pushed as a comparison row too when we have a value.
@@ -367,7 +479,7 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
     let (oe0, oe1) = ours.mean_oe_pct();
     let [(max0, rms0), (max1, rms1)] = ours.reprint.contour_mm;
     let [spans, accuracy, frames] = &ours.sources;
-    let [corners, contour] = &ours.reprint.sources;
+    let [corners, contour, _] = &ours.reprint.sources;
     let paper_oe_red = reduction_pct(PAPER_OE_PCT.0, PAPER_OE_PCT.1);
     let m = |name: &str| ours.metric(name);
     let map_text = format!("mAP {PAPER_MAP_PCT} %");
@@ -510,7 +622,7 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
 fn extension_lines(ext: &Reprint, html: &mut String, rows: &mut Vec<Row>) {
     let (oe0, oe1) = ext.mean_oe_pct();
     let [(max0, rms0), (max1, rms1)] = ext.contour_mm;
-    let [corners, contour] = &ext.sources;
+    let [corners, contour, _] = &ext.sources;
     let lines = [
         ("sec_3_3", "extension (lag model): mean O_E after", Some(oe1), "%", 2, corners),
         (
@@ -547,32 +659,69 @@ fn extension_lines(ext: &Reprint, html: &mut String, rows: &mut Vec<Row>) {
 }
 
 fn corner_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
-    let mut html = String::from("<h4>O_E per corner (eq. 40; the paper prints only the mean)</h4>\n<table><tr><th>vertex</th><th>angle (°)</th><th>O_E before (%)</th><th>O_E after (%)</th><th>reduction (%)</th></tr>\n");
-    for c in &ours.reprint.corners {
+    let reprint = &ours.reprint;
+    let mut html = format!(
+        "<h4>Per corner: O_E (eq. 40; the paper prints only the mean) and the contour error near it (eq. 41)</h4>\n\
+<p class=\"run\">Contour error within the corner window of each vertex, at the seam where every layer starts and ends, and along the \
+straight runs, over all layers, conventional → compensated; \"short\" where the print falls short of the CAD point of the largest error, \
+\"bulge\" where it covers it and its edge lies beyond; share = the region's part of the sum of e_t² (Σ = 1). {}.</p>\n\
+<table><tr><th>vertex</th><th>angle (°)</th><th class=\"t\">kind</th><th>O_E before (%)</th><th>O_E after (%)</th><th>reduction (%)</th>\
+<th>max e_t before (mm)</th><th>max e_t after (mm)</th><th>RMS before (mm)</th><th>RMS after (mm)</th><th>share before</th><th>share after</th></tr>\n",
+        escape(&reprint.sources[2])
+    );
+    for c in &reprint.corners {
+        let region = reprint.regions.iter().find(|r| r.region == "corner" && r.corner == c.vertex);
         let red = reduction_pct(c.oe_pct.0, c.oe_pct.1);
         let _ = writeln!(
             html,
-            "<tr><td>{}</td><td>{:.0}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{}</td>{}</tr>",
             c.vertex,
-            c.angle_deg,
+            angle_text(c.angle_deg),
+            region.map_or("", |r| r.kind.as_str()),
             fmt(Some(c.oe_pct.0), 1),
             fmt(Some(c.oe_pct.1), 1),
-            fmt(Some(red), 1)
+            fmt(Some(red), 1),
+            region_cells(region)
         );
         for (when, v) in [("before", c.oe_pct.0), ("after", c.oe_pct.1)] {
             if v.is_finite() {
                 rows.push(Row {
                     section: "sec_3_3",
-                    item: format!("O_E {when}, vertex {} ({:.0}°)", c.vertex, c.angle_deg),
+                    item: format!("O_E {when}, vertex {} ({}°)", c.vertex, angle_text(c.angle_deg)),
                     paper: None,
                     ours: v,
                     unit: "%",
-                    source: ours.reprint.sources[0].clone(),
+                    source: reprint.sources[0].clone(),
                 });
             }
         }
     }
+    for r in reprint.regions.iter().filter(|r| r.region != "corner") {
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\" colspan=\"3\">{}</td><td></td><td></td><td></td>{}</tr>",
+            escape(&r.label(&reprint.corners)),
+            region_cells(Some(r))
+        );
+    }
     html + "</table>\n"
+}
+
+/// The contour-error cells of a region's row (empty cells when it has none).
+fn region_cells(region: Option<&RegionError>) -> String {
+    let Some(r) = region else {
+        return "<td></td>".repeat(6);
+    };
+    let max = |v: f64, short: bool| format!("{} ({})", fmt(Some(v), 3), if short { "short" } else { "bulge" });
+    format!(
+        "<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
+        max(r.max_mm.0, r.max_short.0),
+        max(r.max_mm.1, r.max_short.1),
+        fmt(Some(r.rms_mm.0), 4),
+        fmt(Some(r.rms_mm.1), 4),
+        fmt(Some(r.sq_share.0), 3),
+        fmt(Some(r.sq_share.1), 3)
+    )
 }
 
 fn checks_table(ours: &Ours) -> String {
@@ -614,12 +763,92 @@ fn extension_sentence(ours: &Ours) -> String {
     let [(max0, rms0), (max1, rms1)] = ext.contour_mm;
     format!(
         "Fed instead with the flow excess eq. 34 predicts for the nominal command (our extension, no widths: stage compensate_lag), the same \
-filtered-B-spline solve lowers the mean O_E by {:.1} % and the RMS contour error by {:.1} %, and changes the max by {:+.1} %. It knows nothing of \
-the CAD bead: it removes the whole predicted excess, also where that excess was filling the CAD bead's sharp tips, which the width feedback keeps because \
-the desired width there is the CAD bead's long extent along the bisector. ",
+filtered-B-spline solve lowers the mean O_E by {:.1} % and the RMS contour error by {:.1} %, and changes the max by {} %. It knows nothing of \
+the CAD bead: it removes the whole predicted excess, also where that excess was filling the CAD bead's sharp tips, which the width feedback partly keeps \
+because the desired width there is the CAD bead's long extent along the bisector. ",
         reduction_pct(oe0, oe1),
         reduction_pct(rms0, rms1),
-        -reduction_pct(max0, max1)
+        signed(-reduction_pct(max0, max1), 1)
+    )
+}
+
+/// The maximum and RMS of the contour error over every region of one kind, before →
+/// after, as text.
+fn kind_change(reprint: &Reprint, kind: &str) -> String {
+    let [(max0, rms0), (max1, rms1)] = reprint.kind_error_mm(kind);
+    format!(
+        "the largest error {max0:.3} → {max1:.3} mm, the RMS {rms0:.4} → {rms1:.4} mm ({} %)",
+        signed(-reduction_pct(rms0, rms1), 0)
+    )
+}
+
+/// `value` with an explicit sign, the minus a true minus sign (−).
+fn signed(value: f64, decimals: usize) -> String {
+    let text = fmt(Some(value), decimals);
+    if value > 0.0 && text.chars().any(|c| c.is_ascii_digit() && c != '0') {
+        format!("+{text}")
+    } else {
+        text
+    }
+}
+
+/// "a bulge 0.335 mm beyond the CAD contour" or "0.328 mm short of the CAD contour".
+fn error_kind(max_mm: f64, short: bool) -> String {
+    if short {
+        format!("{max_mm:.3} mm short of the CAD contour")
+    } else {
+        format!("a bulge {max_mm:.3} mm beyond the CAD contour")
+    }
+}
+
+/// Where the largest contour error lies before and after, in one sentence.
+fn worst_points_sentence(reprint: &Reprint) -> String {
+    let (Some(before), Some(after)) = (reprint.worst_region(false), reprint.worst_region(true)) else {
+        return String::new();
+    };
+    format!(
+        "The conventional part's largest error is at {}: {}. The compensated part's is at {}: {}, where the conventional part's was {}. ",
+        escape(&before.label(&reprint.corners)),
+        error_kind(before.max_mm.0, before.max_short.0),
+        escape(&after.label(&reprint.corners)),
+        error_kind(after.max_mm.1, after.max_short.1),
+        error_kind(after.max_mm.0, after.max_short.0),
+    )
+}
+
+/// The contour-error paragraphs: Table 3 beside ours, where ours lies, and why.
+fn contour_paragraphs(reprint: &Reprint, extension: Option<&Reprint>) -> String {
+    let [(max0, rms0), (max1, rms1)] = reprint.contour_mm;
+    let lag = extension.map_or(String::new(), |ext| {
+        let [(m0, _), (m1, _)] = ext.contour_mm;
+        format!(
+            " The lag model, which removes the whole predicted excess, changes the maximum by {} % (stage reprint_lag).",
+            signed(-reduction_pct(m0, m1), 0)
+        )
+    });
+    format!(
+        "<p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm \
+and 0.4301 → 0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper \
+measured the external surface of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary \
+on every layer, at the CAD points of the external surface (stage reprint's inner_face = false; with the wall's inside face too, where the \
+apexes' inner bulges count, the RMS of seed 3 falls by 32 % instead of 28 %), with no profiler noise. Eq. 41 takes each CAD \
+point's distance to the nearest printed edge, so a bulge that pushes the edge out and a part of the CAD bead left empty both cost; the table above \
+says which each region's largest error is. By region, from {source}: at the valleys, where a corner's bulge fills the notch of the external surface, \
+{valley}; at the apexes {apex}; at the seam {seam}; along the straight runs {straight}. {worst}</p>\n\
+<p><b>Why the apexes do not improve.</b> At an apex the external surface is the outside of the turn. A round bead on a blended path does not reach \
+the mitred tip of the CAD bead there (at 45° the tip lies 0.59 mm beyond the vertex, the bead's edge about 0.26 mm), and the corner's excess bulges \
+on the inside of the turn, which the external surface does not include (Fig. 10). The compensation sets one flow for both sides (eq. 32 sums \
+w_l + w_r): removing the inner bulge thins the outside too, so the sharper apexes end up short, and the 45° apexes, already short by about \
+0.3 mm before, stay the largest error whatever the flow does. With the printer's true widths in place of the thermal ones the maximum does not \
+fall either (−3 % on seed 3, the oracle study, datasets/examples/chen2024_oracle.rs).{lag} A 50 % fall of the maximum, the issue's bar, is out of reach of a \
+flow-only compensation on this part; the paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger than this \
+printer's, next to which a tip's shortfall is small.</p>\n",
+        source = escape(&reprint.sources[2]),
+        valley = kind_change(reprint, "valley"),
+        apex = kind_change(reprint, "apex"),
+        seam = kind_change(reprint, "seam"),
+        straight = kind_change(reprint, "straight"),
+        worst = worst_points_sentence(reprint),
     )
 }
 
@@ -634,7 +863,6 @@ fn localisation_verdict(ours: &Ours) -> &'static str {
 
 fn discussion(ours: &Ours) -> String {
     let (oe0, oe1) = ours.mean_oe_pct();
-    let [(max0, rms0), (max1, rms1)] = ours.reprint.contour_mm;
     let loc = fmt(ours.metric("capture_time_err_median_ms"), 2);
     let base = fmt(ours.metric("capture_time_err_baseline_median_ms"), 2);
     let (p, r) = (
@@ -659,40 +887,29 @@ with its true widths: the desired width is the CAD bead's extent along each allo
 narrower than the overlapping beads, so a perfect corner would read as over-deposited); the width error is signed, as eq. 33 is, so thin stretches get \
 material too; the fit runs 3τ past each window so the lagged tail does not starve the bead after the corner; and K_e = 1, since the paper's K_e was \
 identified for corners read at 140-150 °C and ours are read in a wider band (its formula with T_p clamped to that band, stage compensate's gain = \
-\"paper\", gives on seed 3 O_E −77 %, max −43 %, RMS −27 %: it over-corrects the cooler corners).</p>\n\
+\"paper\", gives on seed 3 O_E −77 %, max −2 %, RMS −21 %: it over-corrects the cooler corners).</p>\n\
 <p><b>Monitored layers.</b> The paper verifies on one layer; our camera has the habits of its \
 Lepton 3.5 (it repeats its last image now and then and holds one through a ~0.9 s shutter freeze once a layer; the monitor skips such repeats), so a \
 corner the freeze hides in the first layer is read in another: the widths are the median over the five filmed layers per sample (stage compensate's \
-layer and layers). With the first layer alone, seed 3 gives O_E −63 %, max −6 %, RMS −26 %; with a camera without those habits the first layer alone \
+layer and layers). With the first layer alone, seed 3 gives O_E −62 % and RMS −21 %; with a camera without those habits the first layer alone \
 does as well as all five.</p>\n\
 <p><b>Width feedback against the truth.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
 so the paper's geometric model is the printer's own, except where the nozzle face squeezes the excess sideways. With the printer's true widths of the \
 first layer in place of the thermal ones (datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 71 % and \
-the RMS contour error by 35 %; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E by 80 % but the RMS by only 15 %, because \
+the RMS contour error by 31 %; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E by 79 % but the RMS by only 13 %, because \
 they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much and −0.92 mm³ too little; the true widths of the first layer see +0.54 and \
 −0.80 mm³ of it. The rest is what this reproduction names as the model's blind spot: eqs 31-33 read the flow error along the deposition directions, and \
 the squeezed-out part of a corner's excess lies around the apex, between them. The thermal widths do about as well as the true ones here: within 0.5 mm \
-of a vertex they differ from the true widths by 0.05-0.06 mm (median absolute per layer, 90th percentile 0.10-0.11 mm), against 0.005-0.007 mm away from \
+of a vertex they differ from the true widths by 0.04-0.06 mm (median absolute per layer, 90th percentile 0.10-0.11 mm), against 0.005-0.007 mm away from \
 the corners, because a corner's bulge holds more heat and its warm contour spreads as it ages. Reading them young limits that (stage monitor's \
-measure_age_s = 0.1 s; on seed 3 the RMS falls by 30 % at 0.15 s and by 18 % at 0.25 s; at 0.06 s, where some corners are not yet fully in view, by \
-31 %). The first frames of every layer show no corner; placing them by their recorded time through the fitted mount (stage monitor's \
-place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest: without it O_E falls by 66 % instead \
-of 71 %. {extension}The <code>melt_squeeze_out</code> effect of the virtual printer sends part of every millisecond's melt into \
+measure_age_s = 0.1 s; on seed 3 the RMS falls by 23 % at 0.15 s and not at all at 0.25 s; at 0.06 s, where some corners are not yet fully in view, by \
+19 %). The first frames of every layer show no corner; placing them by their recorded time through the fitted mount (stage monitor's \
+place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest: without it O_E falls by 62 % instead \
+of 69 % and the RMS by 17 % instead of 28 %. The very first millimetre of a layer is too thin for the threshold contour and reads as nothing; the fit \
+of eq. 39 leaves such unread samples out rather than asking for no change there, so the added flow can start with the layer. {extension}The <code>melt_squeeze_out</code> effect of the virtual printer sends part of every millisecond's melt into \
 the nearest free cells instead of along the deposition direction: the more the melt moves after it leaves the nozzle, the less a width says about the \
 flow (an earlier version of this printer that sent all of it there let true widths lower O_E by only a third).</p>\n\
-<p><b>Contour error.</b> Ours: max {max0:.4} → {max1:.4} mm, RMS {rms0:.4} → {rms1:.4} mm over 20 layers (paper, Table 3: 1.6805 → 0.2468 mm and 0.4301 → \
-0.2017 mm; the paper's text calls the second column the mean value, its Table 3 heads it RMS: we compare with our RMS). The paper measured the external \
-surface of a 20-layer part with a laser profiler at 0.5 mm z spacing; ours applies eq. 41 to the virtual deposit's boundary on every layer, at the CAD \
-points of the external surface (stage reprint's inner_face = false; with the wall's inside face too the max falls by 30 % and the RMS by 33 % on seed 3), \
-with no profiler noise. Eq. 41 takes each CAD point's distance to the nearest printed edge, so both a bulge that pushes the edge out and a part of the \
-CAD bead left empty cost. The conventional part's worst point on seed 3 is the notch of the 75° valley, which its bulge fills 0.34 mm deep; after \
-compensation it is the mitred tip of the CAD bead at a 60° apex, 0.45 mm beyond the vertex, left 0.19 mm short. At a sharp apex the two sides want \
-opposite things: a round bead on a blended path does not reach the mitred tip on the outside (at 45° it lies 0.59 mm beyond the vertex), where only the \
-excess fills it, while the same excess bulges on the inside of the turn (Fig. 10). The compensation sets one flow for both sides (eq. 32 sums \
-w_l + w_r), so it trades the inner bulge against the outer tip, and the maximum is whichever of the two it leaves larger. With the true widths the 45° \
-corners lose more of their excess and that tip is 0.33 mm short, so the maximum hardly falls; the lag model, which removes all of it, leaves it 0.40 mm \
-short. A 50 % fall of the maximum, the issue's bar, is not reached \
-by either method. The paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger than this printer's.</p>\n\
+{contour}\
 <p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
 Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
 solve of eq. 39 per corner (models/benches/thermal.rs) and the whole frame pipeline per frame (vision/benches/frames.rs); see the README for the numbers.</p>\n\
@@ -712,6 +929,7 @@ with the arm lines through the ridges' centres so that the heat of the corner's 
 position, the floor set by the camera's vibration being {floor} mm. {loc_verdict} Eq. 30 pays off most with a larger or unknown capture delay (the \
 camera_latency effect of the virtual camera), which the recorded time cannot see.</p>\n",
         n = ours.reprint.corners.len(),
+        contour = contour_paragraphs(&ours.reprint, ours.extension.as_ref()),
         extension = extension_sentence(ours),
         loc_verdict = localisation_verdict(ours),
         dlt = fmt(ours.metric("dlt_capture_time_err_median_ms"), 2),
@@ -772,6 +990,19 @@ mod tests {
         assert_eq!(verdicts, vec![Some(true), Some(true), Some(true), Some(true), Some(true)]);
         assert!(html.contains("<b>pass</b>") && !html.contains("<b>fail</b>"));
         assert!(html.contains("106.75") && html.contains("mAP 99.5 %") && html.contains("within 10"));
+        // Where the contour error lies: the largest errors before and after, from
+        // contour_regions.parquet (synthetic: a 1.52 mm bulge at the first valley, a
+        // 0.27 mm shortfall at the first apex).
+        assert!(html.contains("contour_regions.parquet of stage reprint"));
+        assert!(html.contains("The conventional part's largest error is at corner 1 ("), "{html}");
+        assert!(html.contains("a bulge 1.520 mm beyond the CAD contour"));
+        assert!(
+            html.contains("The compensated part's is at corner 0 (")
+                && html.contains("0.270 mm short of the CAD contour")
+        );
+        assert!(html.contains("<td class=\"t\" colspan=\"3\">the seam</td>"));
+        let [(_, rms0), (_, rms1)] = ours.reprint.kind_error_mm("valley");
+        assert!((rms0 - 0.41).abs() < 1e-12 && (rms1 - 0.19).abs() < 1e-12);
     }
 
     #[test]

@@ -16,6 +16,13 @@
 //!   and RMS over all. The CAD points P_t are "the desirable external surface profile"
 //!   the paper's laser profiler measures from outside the part: the outer offset polygon
 //!   at W/2, every 0.05 mm (`inner_face = true` adds the wall's inside face at −W/2).
+//! - Where that error lies (`contour_regions.parquet`): eq. 41 is unsigned, so each CAD
+//!   point also records whether the print covers it (the error is a bulge beyond it) or
+//!   falls short of it, and the points are grouped by region: within `corner_radius_mm`
+//!   of a CAD vertex (its nearest; an apex if the part is convex there, a valley if
+//!   not), the seam (within one flow time constant of travel, feed·τ, of the point
+//!   where every layer starts and ends), and the straight runs. Per region and variant:
+//!   the max, whether it is a bulge, the RMS and the region's share of the sum of e_t².
 //!
 //! Also writes the first layer's deposit classes near the corners (Fig. 10) and the
 //! CAD polygon.
@@ -24,7 +31,10 @@ use datasets::manifest::Provenance;
 use datasets::thermal::deposition::print_part;
 use datasets::thermal::effects::Effects;
 use datasets::thermal::sequence::ThermalSequence;
-use models::thermal::metrics::{contour_errors, corner_deposition, summarize, ContourPoint, IdealBead};
+use models::thermal::metrics::{
+    contour_errors, contour_region, corner_deposition, summarize, summarize_regions, ContourPoint, ContourRegion,
+    IdealBead, RegionSummary,
+};
 use models::thermal::{DepositGrid, PrintSetup};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
@@ -33,8 +43,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::common::{f64_column, open_sequence, read_table, trajectory_of};
-use crate::table::{f64_col, frame, i64_col, str_col};
-use models::thermal::setup::interior_angles_deg;
+use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+use models::thermal::setup::{convex_vertices, interior_angles_deg};
 
 /// The `thermal.reprint_evaluate` stage kind.
 pub struct ReprintEvaluateStage;
@@ -71,7 +81,7 @@ impl StageKind for ReprintEvaluateStage {
         "thermal.reprint_evaluate"
     }
     fn version(&self) -> u32 {
-        6
+        7
     }
     fn summary(&self) -> &'static str {
         "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
@@ -115,6 +125,12 @@ impl StageKind for ReprintEvaluateStage {
         ctx.write_table("contour", &mut contour)?;
         let mut points = contour_points_frame(&errors_before, &errors_after)?;
         ctx.write_table("contour_points", &mut points)?;
+        let seam_mm = [trajectory.x_mm[0], trajectory.y_mm[0]];
+        let seam_radius_mm = setup.feed_mm_s * setup.tau_s;
+        let regions: Vec<ContourRegion> =
+            cad.iter().map(|p| contour_region(*p, &seq.path_mm, radius_mm, seam_mm, seam_radius_mm)).collect();
+        let mut by_region = regions_summary_frame(&seq.path_mm, &errors_before, &errors_after, &regions)?;
+        ctx.write_table("contour_regions", &mut by_region)?;
         let mut regions = regions_frame(&seq.path_mm, &bead, radius_mm, &before[0], &after[0])?;
         ctx.write_table("deposit_regions", &mut regions)?;
         let path = &seq.path_mm;
@@ -208,7 +224,7 @@ fn contour_points_frame(
     before: &[Vec<ContourPoint>],
     after: &[Vec<ContourPoint>],
 ) -> Result<polars::prelude::DataFrame, StageError> {
-    let mut cols = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut cols = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (variant, layers) in [("conventional", before), ("compensated", after)] {
         for (layer, points) in layers.iter().enumerate() {
             for p in points {
@@ -217,6 +233,7 @@ fn contour_points_frame(
                 cols.2.push(p.x_mm);
                 cols.3.push(p.y_mm);
                 cols.4.push(p.error_mm);
+                cols.5.push(p.covered);
             }
         }
     }
@@ -226,7 +243,81 @@ fn contour_points_frame(
         f64_col("x_mm", cols.2),
         f64_col("y_mm", cols.3),
         f64_col("error_mm", cols.4),
+        bool_col("covered", cols.5),
     ])
+}
+
+/// `contour_regions.parquet`: eq. 41 per region (corners in vertex order, then the seam
+/// and the straight runs), before and after.
+fn regions_summary_frame(
+    path_mm: &[[f64; 2]],
+    before: &[Vec<ContourPoint>],
+    after: &[Vec<ContourPoint>],
+    regions: &[ContourRegion],
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let (b, a) = (summarize_regions(before, regions), summarize_regions(after, regions));
+    let total = |m: &std::collections::BTreeMap<ContourRegion, RegionSummary>| -> f64 {
+        m.values().map(|r| r.sum_sq_mm2).sum()
+    };
+    let (total_b, total_a) = (total(&b), total(&a));
+    let (angles, convex) = (interior_angles_deg(path_mm), convex_vertices(path_mm));
+    let mut cols = RegionColumns::default();
+    for (region, rb) in &b {
+        let ra = &a[region];
+        let (name, corner, angle, kind) = match *region {
+            ContourRegion::Corner(i) => ("corner", i as i64, angles[i], if convex[i] { "apex" } else { "valley" }),
+            ContourRegion::Seam => ("seam", -1, f64::NAN, "seam"),
+            ContourRegion::Straight => ("straight", -1, f64::NAN, "straight"),
+        };
+        cols.region.push(name.into());
+        cols.corner.push(corner);
+        cols.angle_deg.push(angle);
+        cols.kind.push(kind.into());
+        cols.points.push(rb.points as i64);
+        for (side, r, sum) in [(&mut cols.before, rb, total_b), (&mut cols.after, ra, total_a)] {
+            side.max_mm.push(r.max_mm);
+            side.max_short.push(!r.max_covered);
+            side.rms_mm.push((r.sum_sq_mm2 / r.points as f64).sqrt());
+            side.share.push(r.sum_sq_mm2 / sum);
+        }
+    }
+    let RegionColumns { region, corner, angle_deg, kind, points, before, after } = cols;
+    frame(vec![
+        str_col("region", region),
+        i64_col("corner", corner),
+        f64_col("angle_deg", angle_deg),
+        str_col("kind", kind),
+        i64_col("points", points),
+        f64_col("max_before_mm", before.max_mm),
+        f64_col("max_after_mm", after.max_mm),
+        bool_col("max_before_short", before.max_short),
+        bool_col("max_after_short", after.max_short),
+        f64_col("rms_before_mm", before.rms_mm),
+        f64_col("rms_after_mm", after.rms_mm),
+        f64_col("sq_share_before", before.share),
+        f64_col("sq_share_after", after.share),
+    ])
+}
+
+/// Columns of `contour_regions.parquet`.
+#[derive(Default)]
+struct RegionColumns {
+    region: Vec<String>,
+    corner: Vec<i64>,
+    angle_deg: Vec<f64>,
+    kind: Vec<String>,
+    points: Vec<i64>,
+    before: VariantColumns,
+    after: VariantColumns,
+}
+
+/// The per-variant columns of `contour_regions.parquet`.
+#[derive(Default)]
+struct VariantColumns {
+    max_mm: Vec<f64>,
+    max_short: Vec<bool>,
+    rms_mm: Vec<f64>,
+    share: Vec<f64>,
 }
 
 /// `deposit_regions.parquet`: the first layer's cells near the corners as desired
