@@ -89,6 +89,16 @@ fn chen2024_writes_its_tables_figures_and_section() {
     assert!(dead_reckoned.iter().all(|&i| estimated[i].is_nan()));
     let used_flags = frames.column("used").unwrap().bool().unwrap().clone();
     assert!(dead_reckoned.iter().all(|&i| used_flags.get(i) == Some(false)), "used = localised by eqs 27-30");
+    // The camera films on through the layer change: a frame recorded after the layer's
+    // last move is placed but not timed, and the last stretch of the layer is read.
+    let recorded = f64s(&frames, "recorded_time_s");
+    let parked: Vec<usize> = (0..placed_by.len()).filter(|&i| placed_by[i] == "parked").collect();
+    assert!(parked.len() >= 5 * 6, "about eight frames of every layer change: {}", parked.len());
+    assert!(parked.iter().all(|&i| estimated[i].is_nan() && used_flags.get(i) == Some(false) && recorded[i] > 7.1));
+    let widths = read(&out.join("widths.parquet"));
+    let (t, left) = (f64s(&widths, "t_s"), f64s(&widths, "w_left_mm"));
+    let last_read = (0..t.len()).filter(|&i| left[i].is_finite()).map(|i| t[i]).fold(0.0, f64::max);
+    assert!(last_read > 7.1, "the layer's last samples (to 7.119 s) are read: last {last_read} s");
     // The shipped camera has the Lepton habits: a frame that repeats the image before it
     // is skipped with a reason naming that frame.
     let repeat_of = frames.column("repeat_of_frame").unwrap().i64().unwrap().into_no_null_iter().collect::<Vec<_>>();

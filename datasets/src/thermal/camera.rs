@@ -17,7 +17,8 @@
 //! distortion model onto the layer plane reading the temperature field; then a Gaussian
 //! PSF (σ = 0.7 px), 50 mK white noise and quantisation to centi-kelvin.
 //! Capture schedule (eq. 28): recorded times every 0.125 s from the layer start
-//! (Sec. 3.2), true capture time = recorded + jitter (N(0, 3 ms) clipped at ±8 ms) +
+//! (Sec. 3.2) through the layer change that follows it (the camera films on while the
+//! nozzle stands at the layer's end point), true capture time = recorded + jitter (N(0, 3 ms) clipped at ±8 ms) +
 //! `camera_latency`. Lepton habits (off by default): repeated frames (probability 5 %:
 //! the previous image is delivered again) and one ~0.9 s shutter freeze per layer (the
 //! last image before it is repeated).
@@ -287,7 +288,8 @@ pub fn to_centikelvin(temp_c: f64) -> u16 {
     ((temp_c + KELVIN_AT_ZERO_C) * 100.0).round().clamp(1.0, 65535.0) as u16
 }
 
-/// The capture schedule of a layer lasting `duration_s`.
+/// The capture schedule of a layer filmed for `duration_s` (its moves and the layer
+/// change after them).
 pub fn schedule<R: Rng>(duration_s: f64, latency_s: f64, habits: &LeptonHabits, rng: &mut R) -> Vec<FrameCapture> {
     let jitter: Normal<f64> = Normal::new(0.0, 0.003).expect("valid sd");
     let count = (duration_s / FRAME_PERIOD_S).floor() as usize + 1;

@@ -42,7 +42,8 @@ use sequence::{CameraFile, ProcessFile, StagedDir, TruthFile};
 
 /// Generator name recorded in the provenance.
 pub const GENERATOR: &str = "amrepro-thermal";
-/// Time between the end of one layer and the start of the next (travel and z move) (s).
+/// Time between the end of one layer and the start of the next (travel and z move) (s);
+/// the nozzle stands at the layer's end point and the camera films on.
 pub const LAYER_CHANGE_S: f64 = 1.0;
 
 /// What to generate (the CLI `amrepro datasets generate thermal --seed S [--layers L]
@@ -110,7 +111,7 @@ pub fn generate(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSumma
     let schedules: Vec<Vec<FrameCapture>> = (0..layers)
         .map(|_| {
             camera::schedule(
-                trajectory.duration_s(),
+                trajectory.duration_s() + LAYER_CHANGE_S,
                 config.effects.camera_latency_s,
                 &config.lepton_habits,
                 &mut rng_schedule,

@@ -161,19 +161,22 @@ pub fn write_monitor(dir: &Path) {
 /// `frames.parquet`: 40 frames of two layers, every fifth skipped.
 pub fn frames() -> DataFrame {
     let n = 40;
-    // Frames 0 and 1 show no corner: placed by their recorded time for widths, not used.
+    // Frames 0 and 1 show no corner: placed by their recorded time for widths, not used;
+    // the last was filmed after the layer's last move: parked.
     let used: Vec<bool> = (0..n).map(|i| i % 5 != 4 && i >= 2).collect();
     let placed_by: Vec<&str> = (0..n)
-        .map(|i| match (i < 2, used[i]) {
-            (true, _) => "recorded_time",
-            (false, true) => "corners",
-            (false, false) => "",
+        .map(|i| match (i < 2, i == n - 1, used[i]) {
+            (true, _, _) => "recorded_time",
+            (_, true, _) => "parked",
+            (false, false, true) => "corners",
+            (false, false, false) => "",
         })
         .collect();
     let reason: Vec<String> = (0..n)
         .map(|i| match (used[i], i < 2, i % 10) {
             (true, _, _) => String::new(),
             (false, true, _) => "rigid mount: no corner pairs; placed by its recorded time, for its widths only".into(),
+            _ if i == n - 1 => "filmed after the layer's last move: placed, but not timed".into(),
             (false, false, 4) => format!("same image as frame {}: a repeated or frozen camera frame", i - 1),
             (false, false, _) => "fewer than 4 corners".into(),
         })

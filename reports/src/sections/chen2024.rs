@@ -56,7 +56,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        14
+        15
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -119,6 +119,8 @@ pub struct Ours {
     pub frames_used: usize,
     /// Frames with no corner in view, placed by their recorded time (widths only).
     pub frames_by_recorded_time: usize,
+    /// Frames filmed after the layer's last move, placed but not timed (widths only).
+    pub frames_parked: usize,
     /// Skipped frames by reason.
     pub skipped: BTreeMap<String, usize>,
     /// Sources: spans, accuracy, frames.
@@ -224,14 +226,15 @@ impl Ours {
     /// fifth (the extension's reprint).
     pub fn read(inputs: &[InputArtifact]) -> Result<Self, StageError> {
         let (compensate, reprint, accuracy, monitor) = (&inputs[0], &inputs[1], &inputs[2], &inputs[3]);
-        let (frames_used, frames_by_recorded_time, skipped) = read_frames(&monitor.dir.join("frames.parquet"))?;
+        let frames = read_frames(&monitor.dir.join("frames.parquet"))?;
         Ok(Self {
             reprint: Reprint::read(reprint)?,
             spans: read_parquet(&compensate.dir.join("spans.parquet"))?.height(),
             accuracy: read_accuracy(&accuracy.dir.join("accuracy.parquet"))?,
-            frames_used,
-            frames_by_recorded_time,
-            skipped,
+            frames_used: frames.used,
+            frames_by_recorded_time: frames.by_recorded_time,
+            frames_parked: frames.parked,
+            skipped: frames.skipped,
             sources: [
                 source(compensate, "spans.parquet"),
                 source(accuracy, "accuracy.parquet"),
@@ -314,21 +317,31 @@ fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageErro
     Ok((0..df.height()).map(|i| (metric[i].clone(), (value[i], unit[i].clone(), n[i], note[i].clone()))).collect())
 }
 
-/// Frames placed from their corners (`used`), placed by their recorded time (`placed_by`,
-/// absent in tables of older monitors) and skipped by reason.
-fn read_frames(path: &Path) -> Result<(usize, usize, BTreeMap<String, usize>), StageError> {
+/// How the monitor's frames were placed.
+struct FrameCounts {
+    used: usize,
+    by_recorded_time: usize,
+    parked: usize,
+    skipped: BTreeMap<String, usize>,
+}
+
+/// Frames placed from their corners (`used`), placed by their recorded time or parked
+/// (`placed_by`, absent in tables of older monitors) and skipped by reason.
+fn read_frames(path: &Path) -> Result<FrameCounts, StageError> {
     let df = read_parquet(path)?;
     let (used, reason) = (bools(&df, "used", path)?, strs(&df, "skip_reason", path)?);
-    let dead_reckoned: Vec<bool> = match df.column("placed_by") {
-        Ok(_) => strs(&df, "placed_by", path)?.iter().map(|p| p == "recorded_time").collect(),
-        Err(_) => vec![false; used.len()],
+    let placed_by: Vec<String> = match df.column("placed_by") {
+        Ok(_) => strs(&df, "placed_by", path)?,
+        Err(_) => vec![String::new(); used.len()],
     };
+    let dead_reckoned: Vec<bool> = placed_by.iter().map(|p| p == "recorded_time").collect();
+    let parked: Vec<bool> = placed_by.iter().map(|p| p == "parked").collect();
     let repeated: Vec<bool> = match df.column("repeat_of_frame") {
         Ok(_) => ints(&df, "repeat_of_frame", path)?.iter().map(|r| *r >= 0).collect(),
         Err(_) => vec![false; used.len()],
     };
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
-    for (i, r) in reason.into_iter().enumerate().filter(|(i, _)| !used[*i] && !dead_reckoned[*i]) {
+    for (i, r) in reason.into_iter().enumerate().filter(|(i, _)| !used[*i] && !dead_reckoned[*i] && !parked[*i]) {
         let class = match (repeated[i], r.is_empty()) {
             (true, _) => REPEATED_FRAMES.to_string(),
             (false, true) => "unstated".to_string(),
@@ -337,7 +350,7 @@ fn read_frames(path: &Path) -> Result<(usize, usize, BTreeMap<String, usize>), S
         *skipped.entry(class).or_default() += 1;
     }
     let count = |v: &[bool]| v.iter().filter(|b| **b).count();
-    Ok((count(&used), count(&dead_reckoned), skipped))
+    Ok(FrameCounts { used: count(&used), by_recorded_time: count(&dead_reckoned), parked: count(&parked), skipped })
 }
 
 /// The skip class of the frames that repeat the image before them (`repeat_of_frame`):
@@ -588,6 +601,16 @@ fn comparison_table(ours: &Ours, rows: &mut Vec<Row>) -> String {
             None,
             "—",
             Some(ours.frames_by_recorded_time as f64),
+            "frames",
+            0,
+            frames,
+        ),
+        (
+            "sec_3_2",
+            "frames filmed after the layer's last move (placed, not timed; widths only)",
+            None,
+            "—",
+            Some(ours.frames_parked as f64),
             "frames",
             0,
             frames,
@@ -887,12 +910,12 @@ with its true widths: the desired width is the CAD bead's extent along each allo
 narrower than the overlapping beads, so a perfect corner would read as over-deposited); the width error is signed, as eq. 33 is, so thin stretches get \
 material too; the fit runs 3τ past each window so the lagged tail does not starve the bead after the corner; and K_e = 1, since the paper's K_e was \
 identified for corners read at 140-150 °C and ours are read in a wider band (its formula with T_p clamped to that band, stage compensate's gain = \
-\"paper\", gives on seed 3 O_E −77 %, max −2 %, RMS −21 %: it over-corrects the cooler corners).</p>\n\
+\"paper\", gives on seed 3 O_E −76 %, max −2 %, RMS −21 %: it over-corrects the cooler corners).</p>\n\
 <p><b>Monitored layers.</b> The paper verifies on one layer; our camera has the habits of its \
 Lepton 3.5 (it repeats its last image now and then and holds one through a ~0.9 s shutter freeze once a layer; the monitor skips such repeats), so a \
 corner the freeze hides in the first layer is read in another: the widths are the median over the five filmed layers per sample (stage compensate's \
-layer and layers). With the first layer alone, seed 3 gives O_E −62 % and RMS −21 %; with a camera without those habits the first layer alone \
-does as well as all five.</p>\n\
+layer and layers). With the first layer alone, seed 3 gives O_E −67 % and RMS −27 %; with a camera without those habits the first layer alone \
+does as well as all five (−69 %, −28 %).</p>\n\
 <p><b>Width feedback against the truth.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
 so the paper's geometric model is the printer's own, except where the nozzle face squeezes the excess sideways. With the printer's true widths of the \
 first layer in place of the thermal ones (datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 71 % and \
@@ -902,10 +925,11 @@ they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much a
 the squeezed-out part of a corner's excess lies around the apex, between them. The thermal widths do about as well as the true ones here: within 0.5 mm \
 of a vertex they differ from the true widths by 0.04-0.06 mm (median absolute per layer, 90th percentile 0.10-0.11 mm), against 0.005-0.007 mm away from \
 the corners, because a corner's bulge holds more heat and its warm contour spreads as it ages. Reading them young limits that (stage monitor's \
-measure_age_s = 0.1 s; on seed 3 the RMS falls by 23 % at 0.15 s and not at all at 0.25 s; at 0.06 s, where some corners are not yet fully in view, by \
-19 %). The first frames of every layer show no corner; placing them by their recorded time through the fitted mount (stage monitor's \
-place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest: without it O_E falls by 62 % instead \
-of 69 % and the RMS by 17 % instead of 28 %. The very first millimetre of a layer is too thin for the threshold contour and reads as nothing; the fit \
+measure_age_s = 0.1 s; on seed 3 the RMS falls by 23 % at 0.15 s and by 10 % at 0.25 s; at 0.06 s, where some corners are not yet fully in view, by \
+25 %). The first frames of every layer show no corner; placing them by their recorded time through the fitted mount (stage monitor's \
+place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest: without it O_E falls by 65 % instead \
+of 70 % and the RMS by 18 % instead of 28 %. The camera films on through the layer change, while the nozzle stands at the layer's end point; those \
+frames are placed but not timed (eq. 30 needs a moving nozzle) and give the widths of the layer's last stretch, where the head stops while the flow lags on. The very first millimetre of a layer is too thin for the threshold contour and reads as nothing; the fit \
 of eq. 39 leaves such unread samples out rather than asking for no change there, so the added flow can start with the layer. {extension}The <code>melt_squeeze_out</code> effect of the virtual printer sends part of every millisecond's melt into \
 the nearest free cells instead of along the deposition direction: the more the melt moves after it leaves the nozzle, the less a width says about the \
 flow (an earlier version of this printer that sent all of it there let true widths lower O_E by only a third).</p>\n\
@@ -970,7 +994,9 @@ mod tests {
     fn section_reports_every_number_and_the_checks() {
         let root = tempfile::tempdir().expect("tempdir");
         let ours = Ours::read(&inputs(root.path())).expect("reads");
-        assert_eq!((ours.frames_used, ours.frames_by_recorded_time, ours.skipped.values().sum::<usize>()), (30, 2, 8));
+        let counts =
+            (ours.frames_used, ours.frames_by_recorded_time, ours.frames_parked, ours.skipped.values().sum::<usize>());
+        assert_eq!(counts, (30, 2, 1, 7));
         // Repeats of different frames count as one reason.
         let repeats = ours.skipped.get(REPEATED_FRAMES);
         assert_eq!((ours.skipped.len(), repeats), (2, Some(&4)), "{:?}", ours.skipped);

@@ -28,7 +28,8 @@
 //!   the detector's band (the "newly printed corners" of Sec. 3.2), within 3 px, on every
 //!   frame but those the monitor skipped as repeats of the frame before;
 //! - frames placed from their corners, placed by their recorded time (no corner in view,
-//!   `thermal.monitor`'s `place_cornerless`; their nozzle is also scored) and skipped.
+//!   `thermal.monitor`'s `place_cornerless`), filmed parked after the layer's last move
+//!   (the nozzle of both also scored) and skipped.
 
 use std::path::Path;
 
@@ -76,7 +77,7 @@ impl StageKind for AccuracyEvaluateStage {
         "thermal.accuracy_evaluate"
     }
     fn version(&self) -> u32 {
-        7
+        8
     }
     fn summary(&self) -> &'static str {
         "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
@@ -117,7 +118,15 @@ impl StageKind for AccuracyEvaluateStage {
             dead_reckoned,
             "no corner in view: placed at the commanded position at t_r + median offset through the fitted mount, widths only",
         );
-        let skipped = frames.used.len() - used - dead_reckoned;
+        let parked = frames.parked.iter().filter(|r| **r).count();
+        metrics.push(
+            "frames_parked",
+            parked as f64,
+            "frames",
+            parked,
+            "filmed after the layer's last move: placed (corners, or the end point) but not timed (eq. 30 needs motion), widths only",
+        );
+        let skipped = frames.used.len() - used - dead_reckoned - parked;
         metrics.push(
             "frames_skipped",
             skipped as f64,
@@ -169,6 +178,8 @@ struct FrameRows {
     used: Vec<bool>,
     /// Placed by the recorded time (`placed_by` = recorded_time): no estimate of its own.
     by_recorded_time: Vec<bool>,
+    /// Filmed after the layer's last move (`placed_by` = parked): placed, not timed.
+    parked: Vec<bool>,
     /// Skipped as a repeat of the frame before (`repeat_of_frame` ≥ 0; absent in older
     /// tables: none).
     repeated: Vec<bool>,
@@ -211,15 +222,16 @@ impl FrameRows {
             (Some(x), Some(y)) => Some(x.iter().zip(&y).map(|(x, y)| [*x, *y]).collect()),
             _ => None,
         };
-        let by_recorded_time = match df.column("placed_by") {
+        let placed_by: Vec<Option<String>> = match df.column("placed_by") {
             Ok(c) => c
                 .str()
                 .map_err(|source| StageError::Table { path: file.clone(), source })?
                 .iter()
-                .map(|v| v == Some("recorded_time"))
+                .map(|v| v.map(str::to_string))
                 .collect(),
-            Err(_) => vec![false; estimated_s.len()],
+            Err(_) => vec![None; estimated_s.len()],
         };
+        let placed = |how: &str| -> Vec<bool> { placed_by.iter().map(|p| p.as_deref() == Some(how)).collect() };
         let repeated = match df.column("repeat_of_frame") {
             Ok(_) => i64_column(&df, &file, "repeat_of_frame")?.iter().map(|r| *r >= 0).collect(),
             Err(_) => vec![false; estimated_s.len()],
@@ -238,7 +250,8 @@ impl FrameRows {
             frame: i64_column(&df, &file, "frame")?,
             recorded_s: f64_column(&df, &file, "recorded_time_s")?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
-            by_recorded_time,
+            by_recorded_time: placed("recorded_time"),
+            parked: placed("parked"),
             repeated,
             at_window_edge,
             estimated_s,
@@ -318,7 +331,7 @@ fn estimator_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Met
 }
 
 /// Distance of P_N,i (eq. 29) from the true nozzle at the capture time.
-/// Also for the frames placed by their recorded time.
+/// Also for the frames placed by their recorded time and those filmed parked.
 fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metrics) {
     let Some(nozzle) = &frames.nozzle_mm else { return };
     let errors = |rows: &[bool]| -> Vec<f64> {
@@ -338,6 +351,12 @@ fn nozzle_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Metric
         let n = dead_reckoned.len();
         let note = "frames placed by their recorded time (plus the median capture offset) to the true nozzle at t_c";
         metrics.push("recorded_time_nozzle_err_median_mm", median(&dead_reckoned), "mm", n, note);
+    }
+    let parked = errors(&frames.parked);
+    if !parked.is_empty() {
+        let n = parked.len();
+        let note = "frames filmed after the layer's last move to the true (parked) nozzle";
+        metrics.push("parked_nozzle_err_median_mm", median(&parked), "mm", n, note);
     }
 }
 

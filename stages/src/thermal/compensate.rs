@@ -24,9 +24,9 @@
 //!   models::thermal::compensation); with the printer's true widths of layer 0 it lowers
 //!   the mean O_E by only 56 % where `linear` lowers it by 71 % (the oracle study, seed
 //!   3), because it counts less of the excess at the apex, where most of it is; on the
-//!   thermal widths 46-50 % against 68-70 % (seeds 1-5), below the 50 % on four
-//!   of them, though it thins the apexes less and lowers the RMS contour error by 30-31 %
-//!   against 27-28 %.
+//!   thermal widths 46-51 % against 69-70 % (seeds 1-5), below the 50 % on four
+//!   of them, though it thins the apexes less and lowers the RMS contour error by 30-32 %
+//!   against 27-29 %.
 //! - Both signs (`add_material = true`). Paper eq. 33 is signed, and the spans are
 //!   |Δw| ≥ ε. The earlier default dropped Δw < 0 because eq. 31's w0/cos ψ made them
 //!   spurious; with the CAD desired width they are the real thinning after a corner
@@ -37,8 +37,8 @@
 //!   scale (above 165 °C it turns negative); clamped to the band, it gives K_e = 1.67 to
 //!   every corner read below 140 °C and 1 to every one above 150 °C. Without an identification
 //!   experiment of ours, the mass balance (K_e = 1) is the neutral choice; `paper`
-//!   keeps the clamped formula (on `specs/chen2024.toml`, seeds 1-5: O_E −75 to −77 %
-//!   against −68 to −70 %, but RMS contour error −20 to −24 % against −27 to −28 %).
+//!   keeps the clamped formula (on `specs/chen2024.toml`, seeds 1-5: O_E −75 to −78 %
+//!   against −69 to −70 %, but RMS contour error −20 to −25 % against −27 to −29 %).
 //! - Tail (`tail_s` = 3τ): the lagged output is fitted to zero for 0.26 s after each
 //!   extended window (the paper fits the window only).
 //!

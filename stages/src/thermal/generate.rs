@@ -38,7 +38,7 @@ impl StageKind for GenerateSequenceStage {
         "thermal.generate_sequence"
     }
     fn version(&self) -> u32 {
-        5
+        6
     }
     fn summary(&self) -> &'static str {
         "Virtual extrusion printer + nozzle-mounted thermal camera → a thermal-sequence dataset (the output folder)"

@@ -38,19 +38,24 @@
 //!   delivers its last image again (now and then, and through its ~0.9 s shutter freeze)
 //!   under a new timestamp, and that image shows the part as it was before, so its
 //!   corners would place the nozzle wrongly and, with no corner, dead reckoning would.
+//! - A frame recorded after the layer's last move (the camera films on through the layer
+//!   change) is placed as above, from its corners or at the end point, but not timed:
+//!   the nozzle stands still, so every instant of eq. 30's window fits it equally
+//!   ([`Placement::Parked`]). Its widths are read: they are the only view of the
+//!   layer's last stretch, where the head stops while the lagging flow goes on.
 //!
 //! Measured on the eqs 5-11 printer with the nozzle face's squeeze, filmed by a camera
 //! with the Lepton habits (five layers, seeds 1-5, `thermal.accuracy_evaluate`): median
-//! capture-time error 0.79-0.91 ms against 1.87-2.21 ms for the recorded time (the
-//! paper's DLT: 1.66-2.81 ms on its 66-77 frames), nozzle 0.024-0.029 mm against the
-//! 0.024-0.027 mm the camera vibration leaves with perfect vertices and mount, mount
-//! 0.005-0.018 mm; 45-50 repeated frames skipped; the 28-30 frames placed by their
-//! recorded time 0.028-0.051 mm. Before (ridge lines fitted from
-//! 1.2 mm of arm gap, one re-pairing from the first fit's arms) the vertices of the sharp
-//! corners sat up to 1 px inside them (0.23 px median, 0.88 px p90), the mount fit
-//! absorbed that bias and came out 0.18 mm off on every seed (the nominal mount is
-//! 0.02-0.14 mm off), and the capture error was 3.10-3.27 ms, worse than the recorded
-//! time.
+//! capture-time error 0.73-0.93 ms against 1.92-2.14 ms for the recorded time (the
+//! paper's DLT: 1.65-3.71 ms on its 61-79 frames), nozzle 0.024-0.029 mm against the
+//! 0.024-0.028 mm the camera vibration leaves with perfect vertices and mount, mount
+//! 0.004-0.018 mm; 45-53 frames skipped, nearly all repeats; the 28-31 frames placed by
+//! their recorded time 0.028-0.038 mm, the 31-36 parked ones 0.012-0.019 mm. Before
+//! (ridge lines fitted from 1.2 mm of arm gap, one re-pairing from the first fit's arms)
+//! the vertices of the sharp corners sat up to 1 px inside them (0.23 px median, 0.88 px
+//! p90), the mount fit absorbed that bias and came out 0.18 mm off on every seed (the
+//! nominal mount is 0.02-0.14 mm off), and the capture error was 3.10-3.27 ms, worse
+//! than the recorded time.
 
 use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
 use models::stats::finite_median;
@@ -115,6 +120,9 @@ impl Localisation {
 
 /// The skip reason of a frame placed by its recorded time.
 const PLACED_BY_RECORDED_TIME: &str = "rigid mount: no corner pairs; placed by its recorded time, for its widths only";
+/// The skip reason of a frame filmed after the layer's last move.
+const PARKED: &str =
+    "filmed after the layer's last move: placed, but eq. 30 cannot time a nozzle at rest; for its widths only";
 
 /// How a frame was placed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,6 +131,11 @@ pub enum Placement {
     Corners,
     /// No corner: the commanded position at the recorded time, through the fitted mount.
     RecordedTime,
+    /// Filmed after the layer's last move (the camera keeps filming through the layer
+    /// change), placed from its corners or, with none, at the end point where the nozzle
+    /// stands: eq. 30 cannot time it, every instant of its window putting the nozzle at
+    /// the same place, so its time is the recorded time.
+    Parked,
 }
 
 impl Placement {
@@ -131,6 +144,7 @@ impl Placement {
         match self {
             Self::Corners => "corners",
             Self::RecordedTime => "recorded_time",
+            Self::Parked => "parked",
         }
     }
 }
@@ -184,12 +198,17 @@ impl Located {
         Ok(Self { placed_by: Placement::RecordedTime, ..Self::new(time, nozzle_mm, h, f64::NAN, 0)? })
     }
 
-    /// Eq. 30's capture-time estimate; NaN for a frame placed by its recorded time.
+    /// Eq. 30's capture-time estimate; NaN for a frame placed by its recorded time or parked.
     pub fn estimated_time_s(&self) -> f64 {
         match self.placed_by {
             Placement::Corners => self.t_s,
-            Placement::RecordedTime => f64::NAN,
+            Placement::RecordedTime | Placement::Parked => f64::NAN,
         }
+    }
+
+    /// The same placement of a frame filmed after the layer's last move, at its recorded time.
+    fn parked(self, recorded_time_s: f64) -> Self {
+        Self { t_s: recorded_time_s, placed_by: Placement::Parked, at_window_edge: false, ..self }
     }
 }
 
@@ -256,6 +275,7 @@ impl FrameOutcome {
         match &self.chosen {
             Err(reason) => Some(reason),
             Ok(l) if l.placed_by == Placement::RecordedTime => Some(PLACED_BY_RECORDED_TIME),
+            Ok(l) if l.placed_by == Placement::Parked => Some(PARKED),
             Ok(_) => None,
         }
     }
@@ -404,6 +424,7 @@ impl<'a> Localiser<'a> {
             let h = r.homography.homography;
             Located::new(r.capture, r.nozzle_mm, h, r.homography.rms_error_mm, r.homography.inlier_count())
         });
+        let dlt = dlt.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
         FrameOutcome {
             entry: entry.clone(),
             corners_found,
@@ -498,6 +519,11 @@ impl<'a> Localiser<'a> {
         }
     }
 
+    /// The frame recorded at `t_r` was filmed after the layer's last move.
+    fn parked(&self, t_r: f64) -> bool {
+        t_r >= self.trajectory.duration_s()
+    }
+
     /// Both arms of corner `id` are readable at `t_r` and it is at most `max_age_s` old.
     fn is_young_and_ready(&self, id: u32, t_r: f64) -> bool {
         let i = id as usize;
@@ -523,10 +549,13 @@ impl<'a> Localiser<'a> {
             f.rigid = f.dlt.clone();
             return false;
         }
-        match localise_rigid(ctx, mount, &f.pairs, f.entry.recorded_time_s) {
+        let t_r = f.entry.recorded_time_s;
+        match localise_rigid(ctx, mount, &f.pairs, t_r) {
             Ok(r) => {
                 f.pair_used = r.fix.inliers.clone();
-                f.rigid = Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
+                let located =
+                    Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
+                f.rigid = located.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
                 false
             }
             Err(skip) => {
@@ -547,13 +576,16 @@ impl<'a> Localiser<'a> {
         cornerless: &[usize],
         mount: &Homography,
     ) {
-        let offset_s =
-            finite_median(frames.iter().filter_map(|f| f.rigid.as_ref().ok().map(|l| l.t_s - f.entry.recorded_time_s)));
+        let offset_s = finite_median(
+            frames.iter().filter_map(|f| f.rigid.as_ref().ok().map(|l| l.estimated_time_s() - f.entry.recorded_time_s)),
+        );
         let offset_s = if offset_s.is_finite() { offset_s } else { 0.0 };
         for &i in cornerless {
-            let t_s = frames[i].entry.recorded_time_s + offset_s;
+            let t_r = frames[i].entry.recorded_time_s;
+            let t_s = t_r + offset_s;
             let nozzle_mm = ctx.trajectory.position_mm(t_s);
-            frames[i].rigid = Located::by_recorded_time(t_s, nozzle_mm, frame_homography(mount, nozzle_mm));
+            let located = Located::by_recorded_time(t_s, nozzle_mm, frame_homography(mount, nozzle_mm));
+            frames[i].rigid = located.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
         }
     }
 }

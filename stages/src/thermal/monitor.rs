@@ -28,8 +28,8 @@
 //! We read each sample at 0.1 s, when it is 2 mm behind the nozzle at 20 mm/s. Measured
 //! on seed 3 (`specs/chen2024.toml`): at 0.1 s the median width error is 0.009 mm and the
 //! compensated part's RMS contour error falls by 28 %; at 0.15 s (0.012 mm) by 23 %; at
-//! 0.25 s the width error is 0.017 mm and the RMS does not fall at all; at 0.06 s some
-//! corners are not yet fully in view and the RMS falls by only 19 %.
+//! 0.25 s the width error is 0.017 mm and the RMS falls by only 10 %; at 0.06 s some
+//! corners are not yet fully in view and it falls by 25 %.
 //!
 //! T_t: the paper does not give it. Heat spreads sideways as the bead cools, so the
 //! contour at any fixed temperature drifts with age; we calibrate T_t per layer the way
@@ -132,7 +132,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        9
+        10
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
