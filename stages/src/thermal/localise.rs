@@ -49,7 +49,7 @@
 //! capture-time error 0.73-0.93 ms against 1.92-2.14 ms for the recorded time (the
 //! paper's DLT: 1.65-3.71 ms on its 61-79 frames), nozzle 0.024-0.029 mm against the
 //! 0.024-0.028 mm the camera vibration leaves with perfect vertices and mount, mount
-//! 0.004-0.018 mm; 45-53 frames skipped, nearly all repeats; the 28-31 frames placed by
+//! 0.004-0.018 mm; 45-53 frames skipped, all repeats; the 28-31 frames placed by
 //! their recorded time 0.028-0.038 mm, the 31-36 parked ones 0.012-0.019 mm. Before
 //! (ridge lines fitted from 1.2 mm of arm gap, one re-pairing from the first fit's arms)
 //! the vertices of the sharp corners sat up to 1 px inside them (0.23 px median, 0.88 px
