@@ -424,7 +424,7 @@ impl<'a> Localiser<'a> {
             let h = r.homography.homography;
             Located::new(r.capture, r.nozzle_mm, h, r.homography.rms_error_mm, r.homography.inlier_count())
         });
-        let dlt = dlt.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
+        let dlt = dlt.map(|l| self.unless_parked(l, t_r));
         FrameOutcome {
             entry: entry.clone(),
             corners_found,
@@ -519,9 +519,14 @@ impl<'a> Localiser<'a> {
         }
     }
 
-    /// The frame recorded at `t_r` was filmed after the layer's last move.
-    fn parked(&self, t_r: f64) -> bool {
-        t_r >= self.trajectory.duration_s()
+    /// `located` as it stands, or parked at `t_r` if the frame was recorded after the
+    /// layer's last move ([`Placement::Parked`]).
+    fn unless_parked(&self, located: Located, t_r: f64) -> Located {
+        if t_r >= self.trajectory.duration_s() {
+            located.parked(t_r)
+        } else {
+            located
+        }
     }
 
     /// Both arms of corner `id` are readable at `t_r` and it is at most `max_age_s` old.
@@ -555,7 +560,7 @@ impl<'a> Localiser<'a> {
                 f.pair_used = r.fix.inliers.clone();
                 let located =
                     Located::new(r.capture, r.fix.nozzle_mm, r.homography, r.fix.rms_mm, r.fix.inlier_count());
-                f.rigid = located.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
+                f.rigid = located.map(|l| self.unless_parked(l, t_r));
                 false
             }
             Err(skip) => {
@@ -585,7 +590,7 @@ impl<'a> Localiser<'a> {
             let t_s = t_r + offset_s;
             let nozzle_mm = ctx.trajectory.position_mm(t_s);
             let located = Located::by_recorded_time(t_s, nozzle_mm, frame_homography(mount, nozzle_mm));
-            frames[i].rigid = located.map(|l| if self.parked(t_r) { l.parked(t_r) } else { l });
+            frames[i].rigid = located.map(|l| self.unless_parked(l, t_r));
         }
     }
 }
