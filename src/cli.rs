@@ -91,6 +91,37 @@ pub enum DatasetsCommand {
     /// Write datasets from a virtual printer.
     #[command(subcommand)]
     Generate(GenerateCommand),
+    /// Copy an fdm-widths dataset with one effect hidden in its widths by its physics
+    /// (bed_tilt, gear_eccentricity, flow_saturation or none); what was injected goes to
+    /// DEST/truth/effect.toml.
+    Inject(InjectArgs),
+}
+
+/// `amrepro datasets inject`.
+#[derive(Debug, Args)]
+pub struct InjectArgs {
+    /// The effect: none, bed_tilt (strength: relative width change from the line's start
+    /// to its end, signed), gear_eccentricity (relative flow ripple), flow_saturation
+    /// (relative width loss at the fastest line's cruise flow).
+    #[arg(long)]
+    pub effect: String,
+    /// Its strength (0 for none).
+    #[arg(long, allow_negative_numbers = true)]
+    pub strength: f64,
+    /// Seed of its random parts (the gear's period when not given, each line's phase).
+    #[arg(long)]
+    pub seed: u64,
+    /// The gear ripple's period in path length (mm, 2-60); drawn in 4-40 mm from the
+    /// seed when not given.
+    #[arg(long, value_name = "MM")]
+    pub period_mm: Option<f64>,
+    /// The bead's smoothing along the path (mm), as the model's.
+    #[arg(long, value_name = "MM", default_value_t = 0.5)]
+    pub smoothing_mm: f64,
+    /// The fdm-widths dataset to copy.
+    pub src: PathBuf,
+    /// The folder to write (absent, empty, or an earlier output of this command).
+    pub dest: PathBuf,
 }
 
 /// Virtual-printer generators, one variant each (arguments in one struct per generator).

@@ -9,7 +9,7 @@ use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
     Cli, Command, DatasetsCommand, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg, ImportCommand,
-    InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
+    InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
 };
 
 /// Every stage kind this binary knows: domain stages and figures.
@@ -29,6 +29,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Datasets(DatasetsCommand::Import(ImportCommand::FsuLinewidth(args))) => import_fsu(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Inkjet(args))) => generate_inkjet(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Thermal(args))) => generate_thermal(args),
+        Command::Datasets(DatasetsCommand::Inject(args)) => inject(args),
         Command::Report(ReportArgs { out }) => report(&out),
     }
 }
@@ -197,6 +198,23 @@ fn generate_inkjet(args: InkjetGenerateArgs) -> Result<()> {
     };
     let dir = write_dataset(&opts, &args.out).with_context(|| format!("generating {}", args.out.display()))?;
     println!("wrote inkjet-scans dataset {} (effects: {})", dir.display(), opts.effects.describe());
+    Ok(())
+}
+
+fn inject(args: InjectArgs) -> Result<()> {
+    use models::fdm::discrepancy::inject::InjectSettings;
+    let settings = InjectSettings { smoothing_mm: args.smoothing_mm, gear_period_mm: args.period_mm };
+    let truth =
+        datasets::fdm_inject::inject_dataset(&args.src, &args.dest, &args.effect, args.strength, args.seed, &settings)
+            .with_context(|| format!("injecting `{}` into a copy of {}", args.effect, args.src.display()))?;
+    let period = truth.gear_period_mm.map(|p| format!(", period {p:.3} mm")).unwrap_or_default();
+    println!(
+        "wrote fdm-widths dataset {} ({} of strength {}{period}; truth in {})",
+        args.dest.display(),
+        truth.effect,
+        truth.strength,
+        args.dest.join(datasets::fdm_inject::TRUTH_FILE).display()
+    );
     Ok(())
 }
 

@@ -9,6 +9,7 @@
 
 pub mod csv_table;
 pub mod error;
+pub mod fdm_inject;
 pub mod fdm_widths;
 pub mod fsu;
 pub mod inkjet;

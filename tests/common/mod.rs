@@ -28,6 +28,17 @@ pub fn amrepro(cwd: &Path, args: &[&str]) -> Output {
         .expect("amrepro runs")
 }
 
+/// Runs `amrepro args...` in `cwd` with one extra environment variable.
+pub fn amrepro_with_env(cwd: &Path, args: &[&str], (key, value): (&str, &str)) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_amrepro"))
+        .args(args)
+        .current_dir(cwd)
+        .env_remove("AMREPRO_DATA")
+        .env(key, value)
+        .output()
+        .expect("amrepro runs")
+}
+
 /// Runs and asserts success; returns stdout + stderr.
 pub fn ok(cwd: &Path, args: &[&str]) -> String {
     let out = amrepro(cwd, args);
@@ -71,12 +82,27 @@ pub fn shipped_spec_names() -> Vec<String> {
     names
 }
 
+/// The power study's draws in the shipped `specs/discrepancy_fdm.toml` (about four
+/// minutes, run by `make run`), and the small fixed-seed study the tests run instead.
+pub const SHIPPED_POWER_STUDY: &str = "draws = 28, null_draws = 200";
+/// See [`SHIPPED_POWER_STUDY`].
+pub const TEST_POWER_STUDY: &str =
+    "draws = 2, null_draws = 4, bed_tilt = \"0.2\", gear_eccentricity = \"0.1\", flow_saturation = \"0.2\"";
+
 /// The shipped `specs/<name>.toml` with its FSU dataset path (if it has one) pointed
-/// at `raw`, written into `dir`.
+/// at `raw` and its power study (if it has one) cut to [`TEST_POWER_STUDY`], written
+/// into `dir`.
 pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
     let file = format!("specs/{name}.toml");
     let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
     let text = shipped.replace("${AMREPRO_DATA:-../../shared/data}/fsu-linewidth", &raw.display().to_string());
+    if text.contains("fdm.discovery_power") {
+        assert!(
+            text.contains(SHIPPED_POWER_STUDY),
+            "{file}: the power study's draws changed; update SHIPPED_POWER_STUDY"
+        );
+    }
+    let text = text.replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY);
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path

@@ -9,6 +9,9 @@
 //! - [`loo`]: leave-one-out evaluation (Sec. III-A, Table II).
 //! - [`lag`]: physics baseline: mass conservation with a first-order extrusion lag
 //!   (DESIGN §5.1), not in the paper.
+//! - [`discrepancy`](mod@discrepancy): what the lag model gets wrong on measured widths — the
+//!   candidate mechanisms, their forward model, injection and the power study, as the
+//!   FDM domain of the generic `discrepancy` engine (DESIGN §7).
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
 //! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
 //!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
@@ -16,6 +19,7 @@
 //! Architecture invariant: no file I/O and no tables here; functions take slices and
 //! structs and return structs.
 
+pub mod discrepancy;
 pub mod errors;
 pub mod fit;
 pub mod hyperparams;

@@ -1,6 +1,7 @@
 //! Figure stage kinds: each reads published tables of its input stages and draws one
 //! figure as PNG and SVG, in the style of the paper it reproduces.
 
+mod discrepancy;
 mod infill;
 mod inkjet_height_maps;
 mod inkjet_model_vs_scan;
@@ -20,6 +21,7 @@ pub(crate) mod thermal_test_data;
 mod transfer_cv;
 mod width_profiles;
 
+pub use discrepancy::{DiscoveryPowerFigure, DiscrepancyLinesFigure, DiscrepancyResidualsFigure};
 pub use infill::InfillFigure;
 pub use inkjet_height_maps::InkjetHeightMapsFigure;
 pub use inkjet_model_vs_scan::InkjetModelVsScanFigure;
@@ -57,6 +59,9 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(ThermalContourErrorFigure));
     registry.register(Box::new(InkjetModelVsScanFigure));
     registry.register(Box::new(InkjetPipeJunctionFigure));
+    registry.register(Box::new(DiscrepancyResidualsFigure));
+    registry.register(Box::new(DiscrepancyLinesFigure));
+    registry.register(Box::new(DiscoveryPowerFigure));
 }
 
 /// The `title` parameter of a figure whose default title is a fixed description.

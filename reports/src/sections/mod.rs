@@ -3,10 +3,12 @@
 //! number beside ours, with where ours came from).
 
 mod chen2024;
+mod discrepancy_fdm;
 mod lu2015;
 mod ren2021;
 
 pub use chen2024::Chen2024Section;
+pub use discrepancy_fdm::DiscrepancyFdmSection;
 pub use lu2015::Lu2015Section;
 
 pub use ren2021::Ren2021Section;
@@ -19,6 +21,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(Ren2021Section));
     registry.register(Box::new(Lu2015Section));
     registry.register(Box::new(Chen2024Section));
+    registry.register(Box::new(DiscrepancyFdmSection));
 }
 
 /// One comparison row.

@@ -1,7 +1,10 @@
 //! Stages of paper 000 (Ren et al. 2021): importing and summarising measured line
 //! widths, kinematics, the piecewise model's and the lag baseline's leave-one-out,
-//! transfer learning between printers, and infill nonuniformity.
+//! transfer learning between printers, infill nonuniformity, and what the lag model
+//! gets wrong (the discrepancy engine and its power study).
 
+mod discovery_power;
+mod discrepancy;
 mod import;
 mod infill;
 mod kinematics;
@@ -10,6 +13,8 @@ mod lines;
 mod loo;
 mod transfer;
 
+pub use discovery_power::DiscoveryPowerStage;
+pub use discrepancy::DiscrepancyStage;
 pub use import::ImportStage;
 pub use infill::InfillStage;
 pub use kinematics::KinematicsStage;
@@ -28,4 +33,6 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(LagLooStage));
     registry.register(Box::new(TransferCvStage));
     registry.register(Box::new(InfillStage));
+    registry.register(Box::new(DiscrepancyStage));
+    registry.register(Box::new(DiscoveryPowerStage));
 }

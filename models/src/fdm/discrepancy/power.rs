@@ -1,0 +1,313 @@
+//! The power study (DESIGN §7): how often the engine names an effect hidden in a
+//! measured data set, how often it names something that is not there, and whether its
+//! interval for the effect's strength covers the truth.
+//!
+//! First the engine runs on the base data as measured; the causes it names there are
+//! the data's own, and every draw starts from the lag model extended by them, so a
+//! draw's rounds are spent on what is new and the data's own causes are never counted
+//! as false alarms. A draw is a surrogate of the base ([`super::surrogate`]: the
+//! own-cause model's widths plus a phase-randomised copy of each line's residual), with
+//! one effect of a given strength injected by [`super::inject`] (the tilt's sign and
+//! the gear's period and phases drawn from the draw's seed). The engine is then run
+//! without being told what was injected and scored: *correct* when it names the
+//! injected mechanism and nothing else, *wrong* when it names anything else, *none*
+//! when it names nothing. Null draws inject `none`.
+
+use rayon::prelude::*;
+
+use ::discrepancy::stats::{clopper_pearson, mix_seed};
+use ::discrepancy::{discover, discover_warm, EngineError, Model, Settings};
+
+use super::inject::{inject, Effect, InjectError, InjectSettings};
+use super::mechanisms::{candidate_index, CANDIDATES};
+use super::surrogate::Surrogates;
+use super::{FdmFit, FdmLine, FdmModel};
+
+/// What to draw.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PowerDesign {
+    /// `(effect, strength)` cells; strengths are magnitudes (the tilt's sign is drawn).
+    pub cells: Vec<(Effect, f64)>,
+    /// Draws per cell.
+    pub draws_per_cell: usize,
+    /// Null draws (effect `none`).
+    pub null_draws: usize,
+    /// Seed of every draw.
+    pub seed: u64,
+    /// The engine's settings (its seed is replaced by the draw's).
+    pub engine: Settings,
+    /// How effects are injected.
+    pub inject: InjectSettings,
+}
+
+/// A base data set with the engine's verdict on it.
+pub struct Base {
+    /// Label (printer).
+    pub label: String,
+    /// The model of its lines.
+    pub model: FdmModel,
+    /// Its lines.
+    pub lines: Vec<FdmLine>,
+    /// Causes the engine names on it as measured.
+    pub own: Vec<usize>,
+    /// The own-cause model's widths of every line (fitted on all lines).
+    pub fitted: Vec<Vec<f64>>,
+    /// The own-cause model's fold fits on the measured lines: the draws' folds start
+    /// from them (fold `k` never saw line `k`).
+    pub folds: Vec<FdmFit>,
+}
+
+/// Why the study could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PowerError {
+    /// The engine failed.
+    #[error(transparent)]
+    Engine(#[from] EngineError),
+    /// An injection was refused.
+    #[error(transparent)]
+    Inject(#[from] InjectError),
+}
+
+impl Base {
+    /// Runs the engine on the measured lines to find the data's own causes.
+    pub fn new(
+        label: impl Into<String>,
+        model: FdmModel,
+        lines: Vec<FdmLine>,
+        engine: &Settings,
+    ) -> Result<Self, PowerError> {
+        let found = discover(&model, &lines, &[], engine)?;
+        let all = vec![true; lines.iter().map(|l| l.line.len()).max().unwrap_or(0)];
+        let fitted = lines
+            .iter()
+            .map(|l| model.predict(&found.final_fit, l, Some(&all[..l.line.len()])))
+            .collect::<Result<_, _>>()
+            .map_err(EngineError::from)?;
+        Ok(Self { label: label.into(), model, lines, own: found.named, fitted, folds: found.extended.folds })
+    }
+}
+
+/// How one draw came out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// The injected mechanism and nothing else was named.
+    Correct,
+    /// Something other than the injected mechanism was named.
+    Wrong,
+    /// Nothing was named.
+    None,
+}
+
+/// One draw.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DrawResult {
+    /// The effect injected.
+    pub effect: Effect,
+    /// The cell's strength (a magnitude).
+    pub strength: f64,
+    /// Draw number within its cell.
+    pub draw: usize,
+    /// Its seed.
+    pub seed: u64,
+    /// The strength as injected (signed for the tilt).
+    pub injected: f64,
+    /// Mechanisms named (beyond the data's own).
+    pub named: Vec<usize>,
+    /// The verdict against the truth.
+    pub outcome: Outcome,
+    /// Fitted strength with its 95 % interval, when correct.
+    pub fitted: Option<(f64, f64, f64)>,
+}
+
+impl DrawResult {
+    /// Whether the interval covers the injected strength (when correct).
+    pub fn covered(&self) -> Option<bool> {
+        self.fitted.map(|(_, lo, hi)| lo <= self.injected && self.injected <= hi)
+    }
+}
+
+/// Runs every draw of `design` on `base`, in parallel; the results are in design order
+/// and do not depend on the number of threads.
+pub fn run_draws(base: &Base, design: &PowerDesign) -> Result<Vec<DrawResult>, PowerError> {
+    let surrogates = Surrogates::new(base.lines.iter().map(|l| l.line.len()));
+    let mut jobs: Vec<(usize, Effect, f64, usize)> =
+        (0..design.null_draws).map(|d| (0, Effect::None, 0.0, d)).collect();
+    for (c, &(effect, strength)) in design.cells.iter().enumerate() {
+        jobs.extend((0..design.draws_per_cell).map(|d| (c + 1, effect, strength, d)));
+    }
+    jobs.par_iter()
+        .map(|&(cell, effect, strength, draw)| {
+            let seed = mix_seed(design.seed, cell as u64, draw as u64);
+            one_draw(base, design, &surrogates, effect, strength, draw, seed)
+        })
+        .collect()
+}
+
+fn one_draw(
+    base: &Base,
+    design: &PowerDesign,
+    surrogates: &Surrogates,
+    effect: Effect,
+    strength: f64,
+    draw: usize,
+    seed: u64,
+) -> Result<DrawResult, PowerError> {
+    let measured: Vec<_> = base
+        .lines
+        .iter()
+        .zip(&base.fitted)
+        .enumerate()
+        .map(|(i, (l, fitted))| {
+            let residual: Vec<f64> = l.line.widths_mm.iter().zip(fitted).map(|(y, f)| y - f).collect();
+            let noise = surrogates.draw(&residual, mix_seed(seed, 1_000 + i as u64, 0));
+            let widths = fitted.iter().zip(&noise).map(|(f, e)| (f + e).max(1e-3)).collect();
+            crate::fdm::line::MeasuredLine { widths_mm: widths, ..l.line.clone() }
+        })
+        .collect();
+    let signed = if effect == Effect::BedTilt && seed & 1 == 1 { -strength } else { strength };
+    let (injected, record) = inject(&measured, effect, signed, seed, &design.inject)?;
+    let lines: Vec<FdmLine> = base.lines.iter().zip(injected).map(|(l, m)| FdmLine::new(l.label.clone(), m)).collect();
+    let engine = Settings { seed, ..design.engine };
+    let found = discover_warm(&base.model, &lines, &base.own, Some(&base.folds), &engine)?;
+    let target = candidate_index(effect.name());
+    let outcome = match (found.named.is_empty(), target) {
+        (true, _) => Outcome::None,
+        (false, Some(t)) if found.named.iter().all(|&n| n == t) => Outcome::Correct,
+        _ => Outcome::Wrong,
+    };
+    let fitted = (outcome == Outcome::Correct)
+        .then(|| {
+            let name = effect.strength_parameter()?;
+            found
+                .extension
+                .iter()
+                .find(|e| e.mechanism == target && e.parameter.name == name)
+                .map(|e| (e.estimate, e.ci_lo, e.ci_hi))
+        })
+        .flatten();
+    Ok(DrawResult { effect, strength, draw, seed, injected: record.strength, named: found.named, outcome, fitted })
+}
+
+/// One row of the power table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PowerRow {
+    /// The effect (`none` for the null).
+    pub effect: Effect,
+    /// Its strength (magnitude).
+    pub strength: f64,
+    /// Draws.
+    pub draws: usize,
+    /// Draws that named the injected mechanism only.
+    pub correct: usize,
+    /// Draws that named something else.
+    pub wrong: usize,
+    /// Draws that named nothing.
+    pub none: usize,
+    /// `correct / draws` with its Clopper–Pearson 95 % interval.
+    pub correct_rate: (f64, f64, f64),
+    /// `wrong / draws` with its Clopper–Pearson 95 % interval (for the null: any cause).
+    pub false_alarm_rate: (f64, f64, f64),
+    /// Correct draws whose strength interval covers the injected strength, of those
+    /// with an interval.
+    pub covered: (usize, usize),
+}
+
+/// The draws summarised per (effect, strength), in the order first seen.
+pub fn summarize(draws: &[DrawResult]) -> Vec<PowerRow> {
+    let mut cells: Vec<(Effect, f64)> = Vec::new();
+    for d in draws {
+        if !cells.iter().any(|c| c.0 == d.effect && c.1 == d.strength) {
+            cells.push((d.effect, d.strength));
+        }
+    }
+    cells
+        .into_iter()
+        .map(|(effect, strength)| {
+            let cell: Vec<&DrawResult> =
+                draws.iter().filter(|d| d.effect == effect && d.strength == strength).collect();
+            let count = |o: Outcome| cell.iter().filter(|d| d.outcome == o).count();
+            let n = cell.len();
+            let rate = |k: usize| {
+                let (lo, hi) = clopper_pearson(k, n, 0.95);
+                (k as f64 / n.max(1) as f64, lo, hi)
+            };
+            let with_interval: Vec<bool> = cell.iter().filter_map(|d| d.covered()).collect();
+            let (correct, wrong, none) = (count(Outcome::Correct), count(Outcome::Wrong), count(Outcome::None));
+            PowerRow {
+                effect,
+                strength,
+                draws: n,
+                correct,
+                wrong,
+                none,
+                correct_rate: rate(correct),
+                false_alarm_rate: rate(wrong),
+                covered: (with_interval.iter().filter(|&&c| c).count(), with_interval.len()),
+            }
+        })
+        .collect()
+}
+
+/// The names of mechanisms, joined by `+` (`none` for none).
+pub fn names(mechanisms: &[usize]) -> String {
+    if mechanisms.is_empty() {
+        return "none".into();
+    }
+    mechanisms.iter().map(|&m| CANDIDATES[m].name()).collect::<Vec<_>>().join("+")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fdm::test_support::real_lines;
+
+    fn taz5() -> Option<Vec<FdmLine>> {
+        let lines = real_lines("taz5")?;
+        Some(lines.into_iter().enumerate().map(|(k, l)| FdmLine::new(format!("line{k}"), l)).collect())
+    }
+
+    #[test]
+    fn small_fixed_seed_power_study_on_the_taz5() {
+        // 60 null draws and 20 draws of each effect at a strength the full study
+        // (`specs/discrepancy_fdm.toml`) names in at least 95 % of draws. Binomial slack:
+        // a rate must not be significantly worse than its bar at 95 % (Clopper–Pearson).
+        let Some(lines) = taz5() else { return };
+        let model = FdmModel::new(&lines, true, 0.5);
+        let engine = Settings { bootstrap_draws: 200, ..Settings::standard(1) };
+        let base = Base::new("taz5", model, lines, &engine).unwrap();
+        assert_eq!(names(&base.own), "width_cap", "the Taz 5's own cause");
+        let design = PowerDesign {
+            cells: vec![(Effect::GearEccentricity, 0.1), (Effect::FlowSaturation, 0.2)],
+            draws_per_cell: 20,
+            null_draws: 60,
+            seed: 11,
+            engine,
+            inject: InjectSettings::default(),
+        };
+        let rows = summarize(&run_draws(&base, &design).unwrap());
+        for r in &rows {
+            eprintln!(
+                "{} {}: correct {} wrong {} none {} covered {:?}",
+                r.effect.name(),
+                r.strength,
+                r.correct,
+                r.wrong,
+                r.none,
+                r.covered
+            );
+        }
+        let null = &rows[0];
+        assert_eq!((null.effect, null.draws), (Effect::None, 60));
+        assert!(null.false_alarm_rate.1 < 0.05, "null false alarms {} of 60", null.wrong);
+        for r in &rows[1..] {
+            assert!(r.correct_rate.2 >= 0.95, "{}: named {} of {}", r.effect.name(), r.correct, r.draws);
+            assert!(r.false_alarm_rate.1 < 0.02, "{}: wrong {} of {}", r.effect.name(), r.wrong, r.draws);
+        }
+        // The strength intervals' coverage over all correct draws: not significantly
+        // outside 90-98 %.
+        let (covered, with): (usize, usize) =
+            rows[1..].iter().fold((0, 0), |a, r| (a.0 + r.covered.0, a.1 + r.covered.1));
+        let (lo, hi) = clopper_pearson(covered, with, 0.95);
+        assert!(lo <= 0.98 && hi >= 0.90, "coverage {covered} of {with}");
+    }
+}

@@ -1,0 +1,662 @@
+//! The discrepancy engine's figures (DESIGN §7) on paper 000's lines:
+//!
+//! - `figure.fdm_discrepancy_residuals`: the held-out residuals of the lag model and of
+//!   the extended model against each candidate variable, bin means with their 95 %
+//!   intervals over lines, and each variable's structure share (`residuals.parquet`);
+//!   the named cause's signature is the structure the extension removes.
+//! - `figure.fdm_discrepancy_lines`: measured, lag-model and extended-model widths
+//!   along the lines the lag model predicts worst (`predictions.parquet`).
+//! - `figure.fdm_discovery_power`: the power curves — the share of draws in which the
+//!   engine names a hidden effect, against its strength, per base printer, with the
+//!   null draws' false-alarm rate (`power.parquet`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
+use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
+
+use super::draw_width_profile_mesh;
+use super::loo_predictions::step_points;
+
+/// Colour of the lag model (the baseline) in every figure here.
+const BASELINE: RGBColor = PALETTE[1];
+/// Colour of the extended model.
+const EXTENDED: RGBColor = PALETTE[0];
+/// Colour of measured widths.
+const MEASURED: RGBColor = RGBColor(70, 70, 70);
+/// The baseline's name in the tables (`extended_model` equals it when nothing was named).
+const LAG_MODEL: &str = "lag_model";
+
+const PRINTER: ParamSpec = ParamSpec {
+    name: "printer",
+    ty: ParamType::Text,
+    default: ParamDefault::Required,
+    doc: "Printer whose results are drawn.",
+};
+
+/// The `figure.fdm_discrepancy_residuals` stage kind.
+pub struct DiscrepancyResidualsFigure;
+
+/// The `figure.fdm_discrepancy_lines` stage kind.
+pub struct DiscrepancyLinesFigure;
+
+/// The `figure.fdm_discovery_power` stage kind.
+pub struct DiscoveryPowerFigure;
+
+impl StageKind for DiscrepancyResidualsFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_discrepancy_residuals"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Held-out residuals of the lag model and the extended model against every candidate variable, bin means with 95 % intervals → discrepancy_residuals.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 step 1 (show)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        &[PRINTER]
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printer = ctx.params.str("printer").to_string();
+        let path = ctx.inputs[0].dir.join("residuals.parquet");
+        let panels = read_residuals(&path, &printer)?;
+        let extended = read_extended_name(&ctx.inputs[0].dir.join("gain.parquet"), &printer)?;
+        let title = if extended == LAG_MODEL {
+            format!("{printer}: held-out residual (measured − predicted) of the lag model (no cause named)")
+        } else {
+            format!("{printer}: held-out residual (measured − predicted) of the lag model and of {extended}")
+        };
+        let stem = ctx.output_path("discrepancy_residuals")?;
+        draw_png_and_svg(
+            &stem,
+            (1500, 1150),
+            |a| draw_residuals(a, &title, &extended, &panels),
+            |a| draw_residuals(a, &title, &extended, &panels),
+        )
+    }
+}
+
+/// One variable's bins for both models.
+struct ResidualPanel {
+    variable: String,
+    unit: String,
+    /// Per model (`baseline`, `extended`): structure share and `(x, mean, lo, hi)` bins.
+    models: BTreeMap<String, (f64, Vec<[f64; 4]>)>,
+    /// Category labels at their codes, for a categorical variable.
+    labels: Vec<(f64, String)>,
+}
+
+fn read_residuals(path: &Path, printer: &str) -> Result<Vec<ResidualPanel>, StageError> {
+    let df = read_parquet(path)?;
+    let (printers, models, variables) =
+        (strs(&df, "printer", path)?, strs(&df, "model", path)?, strs(&df, "variable", path)?);
+    let (units, labels) = (strs(&df, "unit", path)?, strs(&df, "label", path)?);
+    let (lo, hi, mean) = (f64s(&df, "bin_lo", path)?, f64s(&df, "bin_hi", path)?, f64s(&df, "mean_residual_mm", path)?);
+    let (ci_lo, ci_hi, structure) =
+        (f64s(&df, "ci_lo_mm", path)?, f64s(&df, "ci_hi_mm", path)?, f64s(&df, "structure", path)?);
+    let mut panels: Vec<ResidualPanel> = Vec::new();
+    for i in (0..df.height()).filter(|&i| printers[i] == printer) {
+        let index = match panels.iter().position(|p| p.variable == variables[i]) {
+            Some(k) => k,
+            None => {
+                panels.push(ResidualPanel {
+                    variable: variables[i].clone(),
+                    unit: units[i].clone(),
+                    models: BTreeMap::new(),
+                    labels: Vec::new(),
+                });
+                panels.len() - 1
+            }
+        };
+        let panel = &mut panels[index];
+        let x = 0.5 * (lo[i] + hi[i]);
+        if units[i].is_empty() && !panel.labels.iter().any(|l| l.0 == x) {
+            panel.labels.push((x, labels[i].clone()));
+        }
+        let entry = panel.models.entry(models[i].clone()).or_insert((structure[i], Vec::new()));
+        if mean[i].is_finite() {
+            entry.1.push([x, mean[i], ci_lo[i], ci_hi[i]]);
+        }
+    }
+    if panels.is_empty() {
+        return Err(no_rows(path, "printer", &format!("printer `{printer}`")));
+    }
+    Ok(panels)
+}
+
+/// `lag_model + width_cap` (or `lag_model`) from `gain.parquet`.
+fn read_extended_name(path: &Path, printer: &str) -> Result<String, StageError> {
+    let df = read_parquet(path)?;
+    let (printers, names) = (strs(&df, "printer", path)?, strs(&df, "extended_model", path)?);
+    (0..df.height())
+        .find(|&i| printers[i] == printer)
+        .map(|i| names[i].clone())
+        .ok_or_else(|| no_rows(path, "printer", &format!("printer `{printer}`")))
+}
+
+fn draw_residuals<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    extended: &str,
+    panels: &[ResidualPanel],
+) -> Result<(), String> {
+    let area = area.margin(12, 6, 6, 14).titled(title, text(24.0)).map_err(|e| e.to_string())?;
+    let cols = 3;
+    let rows = panels.len().div_ceil(cols);
+    let cells = area.split_evenly((rows, cols));
+    for (k, (panel, cell)) in panels.iter().zip(&cells).enumerate() {
+        draw_residual_panel(cell, panel, extended, k == 0).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// The panel's half-height: the largest bin mean, or interval end within three times
+/// it (a bin with few lines has a wide interval that would flatten every mean).
+fn residual_span(panel: &ResidualPanel) -> f64 {
+    let bins = || panel.models.values().flat_map(|m| m.1.iter());
+    let means = bins().map(|b| b[1].abs()).filter(|v| v.is_finite()).fold(0.0f64, f64::max).max(0.005);
+    let ends = bins().flat_map(|b| [b[2].abs(), b[3].abs()]).filter(|v| v.is_finite() && *v <= 3.0 * means);
+    ends.fold(means, f64::max) * 1.15
+}
+
+fn draw_residual_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &ResidualPanel,
+    extended: &str,
+    legend: bool,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let span = residual_span(panel);
+    let share = |m: &str| panel.models.get(m).map_or(f64::NAN, |v| v.0);
+    let caption = if extended == LAG_MODEL {
+        format!("{}: structure {:.0} %", panel.variable, 100.0 * share("baseline"))
+    } else {
+        format!("{}: structure {:.0} % → {:.0} %", panel.variable, 100.0 * share("baseline"), 100.0 * share("extended"))
+    };
+    let xs: Vec<f64> = panel.models.values().flat_map(|m| m.1.iter().map(|b| b[0])).collect();
+    let (x_min, x_max) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let pad = ((x_max - x_min) * 0.06).max(0.5 * if panel.unit.is_empty() { 1.0 } else { 1e-6 });
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(17.0))
+        .margin(8)
+        .x_label_area_size(36)
+        .y_label_area_size(58)
+        .build_cartesian_2d((x_min - pad)..(x_max + pad), -span..span)?;
+    let labels = panel.labels.clone();
+    let x_desc =
+        if panel.unit.is_empty() { panel.variable.clone() } else { format!("{} ({})", panel.variable, panel.unit) };
+    house_mesh(&mut chart)
+        .x_desc(x_desc)
+        .y_desc("residual (mm)")
+        .x_labels(if labels.is_empty() { 6 } else { labels.len() })
+        .x_label_formatter(&|x| match labels.iter().find(|l| (l.0 - x).abs() < 1e-9) {
+            Some(l) => l.1.clone(),
+            None if labels.is_empty() => format_tick(*x),
+            None => String::new(),
+        })
+        .y_label_formatter(&|y| format!("{y:.3}"))
+        .draw()?;
+    chart.draw_series(LineSeries::new([(x_min - pad, 0.0), (x_max + pad, 0.0)], BLACK.mix(0.5).stroke_width(1)))?;
+    let offset = 0.012 * (x_max - x_min + 2.0 * pad);
+    let series =
+        [("baseline", BASELINE, -offset, LAG_MODEL.to_string()), ("extended", EXTENDED, offset, extended.to_string())];
+    let unchanged = extended == LAG_MODEL;
+    for (model, colour, shift, label) in series {
+        let Some((_, bins)) = panel.models.get(model) else { continue };
+        if unchanged && model == "extended" {
+            continue;
+        }
+        let shift = if unchanged { 0.0 } else { shift };
+        let style = colour.stroke_width(2);
+        let clip = |y: f64| y.clamp(-span, span);
+        chart.draw_series(
+            bins.iter()
+                .filter(|b| b[2].is_finite() && b[3].is_finite())
+                .map(move |b| PathElement::new([(b[0] + shift, clip(b[2])), (b[0] + shift, clip(b[3]))], style)),
+        )?;
+        chart
+            .draw_series(bins.iter().map(move |b| Circle::new((b[0] + shift, b[1]), 4, colour.filled())))?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
+    }
+    if legend {
+        draw_house_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+    }
+    Ok(())
+}
+
+fn format_tick(x: f64) -> String {
+    if x.abs() >= 100.0 {
+        format!("{x:.0}")
+    } else if x.abs() >= 1.0 {
+        format!("{x:.1}")
+    } else {
+        format!("{x:.2}")
+    }
+}
+
+const LINES_PARAMS: &[ParamSpec] = &[
+    PRINTER,
+    ParamSpec {
+        name: "lines",
+        ty: ParamType::Int { min: 1, max: 9 },
+        default: ParamDefault::Int(3),
+        doc: "How many lines to draw: those the lag model predicts worst (held-out RMSE).",
+    },
+];
+
+impl StageKind for DiscrepancyLinesFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_discrepancy_lines"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Measured vs lag model vs extended model along the lines the lag model predicts worst (held out) → discrepancy_lines.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 steps 3-4 (extend, gain), in the style of paper 000 Fig. 6"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        LINES_PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printer = ctx.params.str("printer").to_string();
+        let count = ctx.params.i64("lines") as usize;
+        let lines = read_lines(&ctx.inputs[0].dir.join("predictions.parquet"), &printer)?;
+        let extended = read_extended_name(&ctx.inputs[0].dir.join("gain.parquet"), &printer)?;
+        let worst = worst_lines(lines, count);
+        let title = if extended == LAG_MODEL {
+            format!("{printer}: the lines the lag model predicts worst, held out (no cause named)")
+        } else {
+            format!("{printer}: the lines the lag model predicts worst, held out, and {extended}")
+        };
+        let stem = ctx.output_path("discrepancy_lines")?;
+        let height = 420 * worst.len().max(1) as u32 + 60;
+        draw_png_and_svg(
+            &stem,
+            (1400, height),
+            |a| draw_lines(a, &title, &extended, &worst),
+            |a| draw_lines(a, &title, &extended, &worst),
+        )
+    }
+}
+
+/// One line's held-out predictions: `(position, measured, baseline, extended)`.
+struct LinePredictions {
+    condition: String,
+    accel_mm_s2: f64,
+    feed_mm_s: f64,
+    samples: Vec<[f64; 4]>,
+}
+
+impl LinePredictions {
+    fn rmse(&self, column: usize) -> f64 {
+        let n = self.samples.len().max(1) as f64;
+        (self.samples.iter().map(|s| (s[column] - s[1]).powi(2)).sum::<f64>() / n).sqrt()
+    }
+}
+
+fn read_lines(path: &Path, printer: &str) -> Result<Vec<LinePredictions>, StageError> {
+    let df = read_parquet(path)?;
+    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
+    let (accel, feed, pos) =
+        (f64s(&df, "accel_mm_s2", path)?, f64s(&df, "feed_mm_s", path)?, f64s(&df, "position_mm", path)?);
+    let (meas, base, ext) = (
+        f64s(&df, "measured_width_mm", path)?,
+        f64s(&df, "baseline_width_mm", path)?,
+        f64s(&df, "extended_width_mm", path)?,
+    );
+    let mut lines: Vec<LinePredictions> = Vec::new();
+    for i in (0..df.height()).filter(|&i| printers[i] == printer) {
+        if lines.last().is_none_or(|l| l.condition != conditions[i]) {
+            lines.push(LinePredictions {
+                condition: conditions[i].clone(),
+                accel_mm_s2: accel[i],
+                feed_mm_s: feed[i],
+                samples: Vec::new(),
+            });
+        }
+        if let Some(l) = lines.last_mut() {
+            l.samples.push([pos[i], meas[i], base[i], ext[i]]);
+        }
+    }
+    if lines.is_empty() {
+        return Err(no_rows(path, "printer", &format!("printer `{printer}`")));
+    }
+    Ok(lines)
+}
+
+/// The `count` lines with the highest baseline RMSE, worst first.
+fn worst_lines(mut lines: Vec<LinePredictions>, count: usize) -> Vec<LinePredictions> {
+    lines.sort_by(|a, b| b.rmse(2).total_cmp(&a.rmse(2)));
+    lines.truncate(count);
+    lines
+}
+
+fn draw_lines<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    extended: &str,
+    lines: &[LinePredictions],
+) -> Result<(), String> {
+    let area = area.margin(12, 6, 6, 14).titled(title, text(24.0)).map_err(|e| e.to_string())?;
+    let panels = area.split_evenly((lines.len().max(1), 1));
+    let y_max = lines
+        .iter()
+        .flat_map(|l| l.samples.iter().flat_map(|s| [s[1], s[2], s[3]]))
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        * 1.06;
+    for (line, panel) in lines.iter().zip(&panels) {
+        draw_line_panel(panel, line, extended, y_max).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_line_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    line: &LinePredictions,
+    extended: &str,
+    y_max: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let head = format!("{}: a = {} mm/s², F = {} mm/s", line.condition, line.accel_mm_s2, line.feed_mm_s);
+    let caption = if extended == LAG_MODEL {
+        format!("{head}; held-out RMSE {:.3} mm (lag model)", line.rmse(2))
+    } else {
+        format!("{head}; held-out RMSE {:.3} mm (lag model) → {:.3} mm", line.rmse(2), line.rmse(3))
+    };
+    let x_max = line.samples.last().map_or(1.0, |s| s[0]);
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(17.0))
+        .margin(8)
+        .margin_right(20)
+        .x_label_area_size(38)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
+    draw_width_profile_mesh(&mut chart)?;
+    let measured: Vec<(f64, f64)> = line.samples.iter().map(|s| (s[0], s[1])).collect();
+    let mut series = vec![(2, BASELINE, format!("{LAG_MODEL} (held out)"))];
+    if extended != LAG_MODEL {
+        series.push((3, EXTENDED, format!("{extended} (held out)")));
+    }
+    let grey = MEASURED.stroke_width(1);
+    chart
+        .draw_series(LineSeries::new(step_points(&measured), grey))?
+        .label("measured")
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], grey));
+    for (column, colour, label) in series {
+        let style = colour.stroke_width(2);
+        chart
+            .draw_series(LineSeries::new(line.samples.iter().map(|s| (s[0], s[column])), style))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+    }
+    draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+impl StageKind for DiscoveryPowerFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_discovery_power"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Power curves of the discrepancy engine: share of draws naming a hidden effect against its strength, per base, with the null false-alarm rate → discovery_power.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 (tests that hide an effect and require finding it)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        &[]
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let bases = read_power(&ctx.inputs[0].dir.join("power.parquet"))?;
+        let stem = ctx.output_path("discovery_power")?;
+        let title =
+            "How strong a hidden effect must be before the engine names it (surrogate draws of the measured lines)";
+        draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, title, &bases), |a| draw_power(a, title, &bases))
+    }
+}
+
+/// One base's curves.
+struct PowerBase {
+    base: String,
+    own: String,
+    /// Per effect: `(strength, rate, lo, hi)`.
+    curves: BTreeMap<String, Vec<[f64; 4]>>,
+    /// Null draws: count, false-alarm rate and its upper bound.
+    null: Option<(i64, f64, f64)>,
+}
+
+fn read_power(path: &Path) -> Result<Vec<PowerBase>, StageError> {
+    let df = read_parquet(path)?;
+    let (bases, own, effects) = (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
+    let (strength, rate) = (f64s(&df, "strength", path)?, f64s(&df, "correct_rate", path)?);
+    let (lo, hi) = (f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
+    let (fa, fa_hi, draws) =
+        (f64s(&df, "false_alarm_rate", path)?, f64s(&df, "false_alarm_ci_hi", path)?, ints(&df, "draws", path)?);
+    let mut out: Vec<PowerBase> = Vec::new();
+    for i in 0..df.height() {
+        if out.last().is_none_or(|b| b.base != bases[i]) {
+            out.push(PowerBase { base: bases[i].clone(), own: own[i].clone(), curves: BTreeMap::new(), null: None });
+        }
+        let b = out.last_mut().expect("pushed");
+        if effects[i] == "none" {
+            b.null = Some((draws[i], fa[i], fa_hi[i]));
+        } else {
+            b.curves.entry(effects[i].clone()).or_default().push([strength[i], rate[i], lo[i], hi[i]]);
+        }
+    }
+    if out.is_empty() {
+        return Err(no_rows(path, "base", "any base"));
+    }
+    Ok(out)
+}
+
+fn draw_power<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    bases: &[PowerBase],
+) -> Result<(), String> {
+    let area = area.margin(12, 6, 6, 14).titled(title, text(22.0)).map_err(|e| e.to_string())?;
+    let panels = area.split_evenly((1, bases.len().max(1)));
+    let x_max = bases.iter().flat_map(|b| b.curves.values().flatten().map(|p| p[0])).fold(0.0f64, f64::max) * 1.05;
+    for (base, panel) in bases.iter().zip(&panels) {
+        draw_power_panel(panel, base, x_max.max(1e-3)).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_power_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    base: &PowerBase,
+    x_max: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let caption = format!("base {}: engine starting from lag_model + its own causes ({})", base.base, base.own);
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, text(17.0))
+        .margin(10)
+        .margin_right(20)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..x_max * 100.0, 0.0..1.02)?;
+    house_mesh(&mut chart)
+        .x_desc("strength of the hidden effect (%)")
+        .y_desc("share of draws naming it")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .draw()?;
+    for (k, (effect, points)) in base.curves.iter().enumerate() {
+        let colour = PALETTE[(k + 2) % PALETTE.len()];
+        let style = colour.stroke_width(2);
+        chart.draw_series(
+            points.iter().map(move |p| PathElement::new([(100.0 * p[0], p[2]), (100.0 * p[0], p[3])], style)),
+        )?;
+        chart
+            .draw_series(LineSeries::new(points.iter().map(|p| (100.0 * p[0], p[1])), style).point_size(4))?
+            .label(effect.clone())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+    }
+    if let Some((n, rate, upper)) = base.null {
+        let dashed = BLACK.stroke_width(1);
+        chart
+            .draw_series(DashedLineSeries::new([(0.0, upper), (x_max * 100.0, upper)], 6, 4, dashed))?
+            .label(format!(
+                "false alarms in {n} null draws: {:.1} % (upper 95 % bound {:.1} %)",
+                100.0 * rate,
+                100.0 * upper
+            ))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], dashed));
+    }
+    draw_house_legend(&mut chart, SeriesLabelPosition::MiddleRight)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use polars::df;
+
+    #[test]
+    fn worst_lines_are_ordered_by_baseline_rmse() {
+        let line = |c: &str, err: f64| LinePredictions {
+            condition: c.into(),
+            accel_mm_s2: 1.0,
+            feed_mm_s: 1.0,
+            samples: vec![[0.0, 1.0, 1.0 + err, 1.0]],
+        };
+        let worst = worst_lines(vec![line("a", 0.1), line("b", 0.3), line("c", 0.2)], 2);
+        let names: Vec<&str> = worst.iter().map(|l| l.condition.as_str()).collect();
+        assert_eq!(names, ["b", "c"]);
+        assert!((worst[0].rmse(2) - 0.3).abs() < 1e-12 && worst[0].rmse(3) == 0.0);
+    }
+
+    /// `residuals.parquet` for taz5: three variables (one categorical) × two models, a
+    /// linear trend of the bin means that the extension shrinks tenfold.
+    fn residuals_table(bins: usize) -> polars::prelude::DataFrame {
+        let (mut model, mut variable, mut unit, mut label) = (vec![], vec![], vec![], vec![]);
+        let (mut lo, mut hi, mut mean) = (vec![], vec![], vec![]);
+        for m in ["baseline", "extended"] {
+            for v in ["position_mm", "speed_mm_s", "phase"] {
+                for b in 0..bins {
+                    let edges =
+                        if v == "phase" { (b as f64, b as f64) } else { (10.0 * b as f64, 10.0 * (b + 1) as f64) };
+                    let scale = if m == "baseline" { 0.1 } else { 0.01 };
+                    model.push(m);
+                    variable.push(v);
+                    unit.push(if v == "phase" { "" } else { "mm" });
+                    label.push(format!("p{b}"));
+                    lo.push(edges.0);
+                    hi.push(edges.1);
+                    mean.push(scale * (b as f64 - 6.0) / 6.0);
+                }
+            }
+        }
+        let n = mean.len();
+        let ci_lo: Vec<f64> = mean.iter().map(|v| v - 0.01).collect();
+        let ci_hi: Vec<f64> = mean.iter().map(|v| v + 0.01).collect();
+        df!("printer" => vec!["taz5"; n], "model" => model, "variable" => variable, "unit" => unit, "label" => label,
+            "bin_lo" => lo, "bin_hi" => hi, "mean_residual_mm" => mean, "ci_lo_mm" => ci_lo, "ci_hi_mm" => ci_hi,
+            "structure" => vec![0.3; n])
+        .unwrap()
+    }
+
+    #[test]
+    fn draws_all_three_figures_from_their_tables() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut pos, mut meas, mut base, mut ext, mut cond) = (vec![], vec![], vec![], vec![], vec![]);
+        for (k, c) in ["S400F3000", "S800F9000"].iter().enumerate() {
+            for i in 0..=600 {
+                let x = i as f64 * 0.2;
+                let w = 0.8 + 0.3 * (-(120.0 - x) / 3.0).exp() + 0.01 * noise(i + 1000 * k);
+                pos.push(x);
+                meas.push(w);
+                base.push(0.8 + 0.9 * (-(120.0 - x) / 2.0).exp());
+                ext.push(0.8 + 0.3 * (-(120.0 - x) / 3.0).exp());
+                cond.push(c.to_string());
+            }
+        }
+        let n = pos.len();
+        write_table(
+            dir.path(),
+            "predictions",
+            df!(
+            "printer" => vec!["taz5"; n], "condition" => cond, "accel_mm_s2" => vec![400.0; n],
+            "feed_mm_s" => vec![50.0; n], "position_mm" => pos, "measured_width_mm" => meas,
+            "baseline_width_mm" => base, "extended_width_mm" => ext)
+            .unwrap(),
+        );
+        write_table(
+            dir.path(),
+            "gain",
+            df!("printer" => ["taz5"], "extended_model" => ["lag_model + width_cap"]).unwrap(),
+        );
+        let bins = 12;
+        write_table(dir.path(), "residuals", residuals_table(bins));
+        write_table(
+            dir.path(),
+            "power",
+            df!(
+            "base" => ["taz5"; 4], "own_causes" => ["width_cap"; 4],
+            "effect" => ["none", "bed_tilt", "bed_tilt", "gear_eccentricity"], "strength" => [0.0, 0.02, 0.1, 0.05],
+            "draws" => [100i64, 20, 20, 20], "correct_rate" => [0.0, 0.1, 0.9, 0.6],
+            "correct_ci_lo" => [0.0, 0.01, 0.7, 0.4], "correct_ci_hi" => [0.04, 0.3, 0.99, 0.8],
+            "false_alarm_rate" => [0.01, 0.0, 0.0, 0.05], "false_alarm_ci_hi" => [0.05, 0.17, 0.17, 0.25])
+            .unwrap(),
+        );
+        let out = tempfile::tempdir().unwrap();
+        let p = read_residuals(&dir.path().join("residuals.parquet"), "taz5").unwrap();
+        assert_eq!(p.len(), 3);
+        assert_eq!(p[2].labels.len(), bins);
+        let stem = out.path().join("r");
+        draw_png_and_svg(
+            &stem,
+            (1500, 1150),
+            |a| draw_residuals(a, "t", "lag_model + width_cap", &p),
+            |a| draw_residuals(a, "t", "x", &p),
+        )
+        .unwrap();
+        assert_drawn(&stem);
+        let lines = worst_lines(read_lines(&dir.path().join("predictions.parquet"), "taz5").unwrap(), 2);
+        let stem = out.path().join("l");
+        draw_png_and_svg(
+            &stem,
+            (1400, 900),
+            |a| draw_lines(a, "t", "ext", &lines),
+            |a| draw_lines(a, "t", "ext", &lines),
+        )
+        .unwrap();
+        assert_drawn(&stem);
+        let bases = read_power(&dir.path().join("power.parquet")).unwrap();
+        assert_eq!(bases[0].null, Some((100, 0.01, 0.05)));
+        let stem = out.path().join("p");
+        draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, "t", &bases), |a| draw_power(a, "t", &bases)).unwrap();
+        assert_drawn(&stem);
+        assert!(read_residuals(&dir.path().join("residuals.parquet"), "taz6").is_err());
+    }
+}

@@ -1,0 +1,549 @@
+//! `report.discrepancy_fdm`: what the lag model gets wrong on paper 000's real lines,
+//! the cause the discrepancy engine names, the extended model and its held-out gain,
+//! and how strong a hidden effect must be before the engine names it (DESIGN §7).
+//! Every number is read from the tables of `fdm.discrepancy` and `fdm.discovery_power`.
+//!
+//! Inputs: the `fdm.discrepancy` stage, then the `fdm.discovery_power` stage.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+
+use super::{comparison_frame, Row};
+use crate::html::escape;
+use crate::read::{bools, f64s, ints, read_parquet, strs};
+
+/// The `report.discrepancy_fdm` stage kind.
+pub struct DiscrepancyFdmSection;
+
+impl StageKind for DiscrepancyFdmSection {
+    fn name(&self) -> &'static str {
+        "report.discrepancy_fdm"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "What the lag model gets wrong on the measured lines, the cause named, the extension and its gain, and the engine's power → section.html, comparison.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 on paper 000's Taz 5 / Taz 6 data"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        &[]
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(2)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let dir = &ctx.inputs[0].dir;
+        let causes = Cause::read(&dir.join("causes.parquet"))?;
+        let params = Param::read(&dir.join("extension.parquet"))?;
+        let gains = GainRow::read(&dir.join("gain.parquet"))?;
+        let structure = Structure::read(&dir.join("residuals.parquet"))?;
+        let power = PowerRow::read(&ctx.inputs[1].dir.join("power.parquet"))?;
+        let (stage, power_stage) = (ctx.inputs[0].name.clone(), ctx.inputs[1].name.clone());
+        let mut html = String::from("<h3>What the lag model gets wrong, and why</h3>\n");
+        html += &method(&causes);
+        let mut rows = Vec::new();
+        for g in &gains {
+            html += &printer_part(g, &causes, &params, &structure, &stage, &mut rows);
+        }
+        html += &power_part(&power, &power_stage, &mut rows);
+        pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
+        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        Ok(())
+    }
+}
+
+/// A row of `causes.parquet`.
+struct Cause {
+    printer: String,
+    round: i64,
+    base_model: String,
+    mechanism: String,
+    before: f64,
+    after: f64,
+    gain: (f64, f64, f64),
+    helped: i64,
+    groups: i64,
+    p: f64,
+    p_adjusted: f64,
+    alpha: f64,
+    named: bool,
+    verdict: String,
+}
+
+impl Cause {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let (printer, base, mechanism, verdict) = (
+            strs(&df, "printer", path)?,
+            strs(&df, "base_model", path)?,
+            strs(&df, "mechanism", path)?,
+            strs(&df, "verdict", path)?,
+        );
+        let (round, helped, groups) =
+            (ints(&df, "round", path)?, ints(&df, "groups_helped", path)?, ints(&df, "groups", path)?);
+        let (before, after) = (f64s(&df, "cv_rmse_before_mm", path)?, f64s(&df, "cv_rmse_after_mm", path)?);
+        let (gain, lo, hi) =
+            (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
+        let (p, padj, alpha) = (f64s(&df, "p_value", path)?, f64s(&df, "p_adjusted", path)?, f64s(&df, "alpha", path)?);
+        let named = bools(&df, "named", path)?;
+        Ok((0..df.height())
+            .map(|i| Self {
+                printer: printer[i].clone(),
+                round: round[i],
+                base_model: base[i].clone(),
+                mechanism: mechanism[i].clone(),
+                before: before[i],
+                after: after[i],
+                gain: (gain[i], lo[i], hi[i]),
+                helped: helped[i],
+                groups: groups[i],
+                p: p[i],
+                p_adjusted: padj[i],
+                alpha: alpha[i],
+                named: named[i],
+                verdict: verdict[i].clone(),
+            })
+            .collect())
+    }
+}
+
+/// A row of `extension.parquet`.
+struct Param {
+    printer: String,
+    mechanism: String,
+    parameter: String,
+    unit: String,
+    estimate: f64,
+    ci: (f64, f64),
+    meaning: String,
+}
+
+impl Param {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let (printer, mechanism, parameter, unit, meaning) = (
+            strs(&df, "printer", path)?,
+            strs(&df, "mechanism", path)?,
+            strs(&df, "parameter", path)?,
+            strs(&df, "unit", path)?,
+            strs(&df, "meaning", path)?,
+        );
+        let (estimate, lo, hi) = (f64s(&df, "estimate", path)?, f64s(&df, "ci_lo", path)?, f64s(&df, "ci_hi", path)?);
+        Ok((0..df.height())
+            .map(|i| Self {
+                printer: printer[i].clone(),
+                mechanism: mechanism[i].clone(),
+                parameter: parameter[i].clone(),
+                unit: unit[i].clone(),
+                estimate: estimate[i],
+                ci: (lo[i], hi[i]),
+                meaning: meaning[i].clone(),
+            })
+            .collect())
+    }
+}
+
+/// A row of `gain.parquet`.
+struct GainRow {
+    printer: String,
+    extended: String,
+    groups: i64,
+    before: f64,
+    after: f64,
+    gain: (f64, f64, f64),
+}
+
+impl GainRow {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let (printer, extended) = (strs(&df, "printer", path)?, strs(&df, "extended_model", path)?);
+        let groups = ints(&df, "groups", path)?;
+        let (before, after) = (f64s(&df, "rmse_before_mm", path)?, f64s(&df, "rmse_after_mm", path)?);
+        let (gain, lo, hi) =
+            (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
+        Ok((0..df.height())
+            .map(|i| Self {
+                printer: printer[i].clone(),
+                extended: extended[i].clone(),
+                groups: groups[i],
+                before: before[i],
+                after: after[i],
+                gain: (gain[i], lo[i], hi[i]),
+            })
+            .collect())
+    }
+}
+
+/// One variable's structure share per (printer, model).
+struct Structure {
+    printer: String,
+    model: String,
+    variable: String,
+    share: f64,
+}
+
+impl Structure {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let (printer, model, variable) =
+            (strs(&df, "printer", path)?, strs(&df, "model", path)?, strs(&df, "variable", path)?);
+        let share = f64s(&df, "structure", path)?;
+        let mut out: Vec<Self> = Vec::new();
+        for i in 0..df.height() {
+            let seen = out.iter().any(|s| s.printer == printer[i] && s.model == model[i] && s.variable == variable[i]);
+            if !seen {
+                out.push(Self {
+                    printer: printer[i].clone(),
+                    model: model[i].clone(),
+                    variable: variable[i].clone(),
+                    share: share[i],
+                });
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A row of `power.parquet`.
+struct PowerRow {
+    base: String,
+    own: String,
+    effect: String,
+    strength: f64,
+    draws: i64,
+    correct: (f64, f64, f64),
+    wrong: i64,
+    false_alarm: (f64, f64, f64),
+    covered: i64,
+    with_interval: i64,
+}
+
+impl PowerRow {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let (base, own, effect) =
+            (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
+        let strength = f64s(&df, "strength", path)?;
+        let (draws, wrong, covered, with) = (
+            ints(&df, "draws", path)?,
+            ints(&df, "wrong", path)?,
+            ints(&df, "covered", path)?,
+            ints(&df, "with_interval", path)?,
+        );
+        let (rate, lo, hi) =
+            (f64s(&df, "correct_rate", path)?, f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
+        let (fa, fa_lo, fa_hi) = (
+            f64s(&df, "false_alarm_rate", path)?,
+            f64s(&df, "false_alarm_ci_lo", path)?,
+            f64s(&df, "false_alarm_ci_hi", path)?,
+        );
+        Ok((0..df.height())
+            .map(|i| Self {
+                base: base[i].clone(),
+                own: own[i].clone(),
+                effect: effect[i].clone(),
+                strength: strength[i],
+                draws: draws[i],
+                correct: (rate[i], lo[i], hi[i]),
+                wrong: wrong[i],
+                false_alarm: (fa[i], fa_lo[i], fa_hi[i]),
+                covered: covered[i],
+                with_interval: with[i],
+            })
+            .collect())
+    }
+}
+
+fn method(causes: &[Cause]) -> String {
+    let alpha = causes.first().map_or(f64::NAN, |c| c.alpha);
+    let groups = causes.first().map_or(0, |c| c.groups);
+    format!(
+        "<p>The lag model of the paper-000 reproduction (mass conservation with a first-order extrusion lag and a start blob) is extended in turn by each of seven \
+named physical mechanisms — a tilted bed, a drive gear's runout ripple, flow lost at high flow, a flow-dependent lag, a second slower lag path, a cap on the extra width \
+the bead takes, and actual acceleration and feed off the G-code's — and every candidate is scored by leave-one-line-out cross-validation on the {groups} printed lines \
+of a printer. Each held-out line contributes the log ratio of its squared error before and after; a one-sided sign-flip test over lines gives each candidate a p-value, \
+Holm's step-down holds the family-wise false-alarm rate of a round at α = {alpha}, and the cause named is the significant candidate with the largest held-out gain. \
+The extended model then becomes the baseline and the search repeats. A gear's phase belongs to one line only: it is estimated on one half of the held-out line and \
+scored on the other. Parameter intervals are delete-one-line jackknife intervals of the cross-validation's own fits; gain intervals are a bootstrap over lines.</p>\n"
+    )
+}
+
+fn printer_part(
+    g: &GainRow,
+    causes: &[Cause],
+    params: &[Param],
+    structure: &[Structure],
+    stage: &str,
+    rows: &mut Vec<Row>,
+) -> String {
+    let printer = &g.printer;
+    let mine: Vec<&Cause> = causes.iter().filter(|c| &c.printer == printer).collect();
+    let source = format!("out/discrepancy/causes.parquet (stage {stage}, fdm.discrepancy)");
+    let mut html = format!("<h4>{}</h4>\n", escape(&printer_name(printer)));
+    html += &finding(g, &mine, structure);
+    html += &causes_table(&mine);
+    html += &parameter_table(params.iter().filter(|p| &p.printer == printer));
+    let _ = writeln!(
+        html,
+        "<p class=\"run\">Run discrepancy_fdm, stage {stage} (fdm.discrepancy): tables out/discrepancy/causes.parquet, extension.parquet, gain.parquet, residuals.parquet.</p>"
+    );
+    for (item, value, unit) in [
+        ("held-out rmse, lag model", g.before, "mm"),
+        ("held-out rmse, extended model", g.after, "mm"),
+        ("held-out gain", g.gain.0, "%"),
+        ("held-out gain, 95 % lower bound", g.gain.1, "%"),
+        ("held-out gain, 95 % upper bound", g.gain.2, "%"),
+    ] {
+        rows.push(Row {
+            section: "discrepancy_fdm",
+            item: format!("{printer} {item} ({})", g.extended),
+            paper: None,
+            ours: value,
+            unit,
+            source: source.replace("causes.parquet", "gain.parquet"),
+        });
+    }
+    html
+}
+
+fn printer_name(printer: &str) -> String {
+    match printer {
+        "taz5" => "LulzBot Taz 5 (source printer of paper 000)".into(),
+        "taz6" => "LulzBot Taz 6 (target printer of paper 000)".into(),
+        other => other.into(),
+    }
+}
+
+/// The paragraph that says what was found, in computed numbers.
+fn finding(g: &GainRow, causes: &[&Cause], structure: &[Structure]) -> String {
+    let strongest = structure
+        .iter()
+        .filter(|s| s.printer == g.printer && s.model == "baseline")
+        .max_by(|a, b| a.share.total_cmp(&b.share));
+    let extended = causes.iter().any(|c| c.named);
+    let shows = strongest.map_or(String::new(), |s| {
+        let after = structure
+            .iter()
+            .find(|t| t.printer == g.printer && t.model == "extended" && t.variable == s.variable)
+            .map_or(f64::NAN, |t| t.share);
+        let after = if extended { format!(" ({:.0} % after the extension)", 100.0 * after) } else { String::new() };
+        format!(
+            " Its held-out residuals carry the most structure against <code>{}</code>: the bin means there explain {:.0} % of the residual sum of squares{after}.",
+            escape(&s.variable),
+            100.0 * s.share,
+        )
+    });
+    let first = causes.iter().find(|c| c.round == 1);
+    let rmse = first.map_or(g.before, |c| c.before);
+    let mut text = format!(
+        "<p>Predicted from the commanded kinematics only, the lag model misses the {} measured lines by a held-out RMSE of {rmse:.4} mm.{shows}",
+        g.groups
+    );
+    let named: Vec<&&Cause> = causes.iter().filter(|c| c.named).collect();
+    for c in &named {
+        let _ = write!(
+            text,
+            " In round {}, <b>{}</b> lowers the held-out RMSE of {} from {:.4} to {:.4} mm ({:+.1} %, 95 % interval {:+.1} to {:+.1} %), helping {} of {} lines; \
+its Holm-adjusted p-value is {:.4}.",
+            c.round,
+            escape(&c.mechanism),
+            escape(&c.base_model),
+            c.before,
+            c.after,
+            c.gain.0,
+            c.gain.1,
+            c.gain.2,
+            c.helped,
+            c.groups,
+            c.p_adjusted
+        );
+    }
+    let last_round = causes.iter().map(|c| c.round).max().unwrap_or(0);
+    let last: Vec<&&Cause> = causes.iter().filter(|c| c.round == last_round).collect();
+    if let Some(verdict) = last.first().map(|c| c.verdict.as_str()).filter(|v| *v != "named") {
+        let best = last.iter().max_by(|a, b| a.gain.0.total_cmp(&b.gain.0));
+        let reason = match verdict {
+            "too_few_groups" => "there are too few lines for any candidate to reach the corrected level".to_string(),
+            _ => best.map_or("no candidate is significant".into(), |b| {
+                format!(
+                    "no {}candidate is significant (the best, {}, changes the held-out RMSE by {:+.1} % with adjusted p = {:.3})",
+                    if last_round > 1 { "further " } else { "" },
+                    escape(&b.mechanism),
+                    b.gain.0,
+                    b.p_adjusted
+                )
+            }),
+        };
+        let _ = write!(text, " In round {last_round} {reason}.");
+    }
+    if named.is_empty() {
+        text += " <b>No significant discrepancy</b> is named: what the lag model gets wrong here is not one of the candidate mechanisms.";
+    } else {
+        let _ = write!(
+            text,
+            " Over all rounds the held-out RMSE falls from {:.4} to {:.4} mm, a gain of {:.1} % (95 % interval {:.1} to {:.1} %, bootstrap over lines).",
+            g.before, g.after, g.gain.0, g.gain.1, g.gain.2
+        );
+    }
+    text + "</p>\n"
+}
+
+fn causes_table(causes: &[&Cause]) -> String {
+    let mut html = String::from(
+        "<table><tr><th>round</th><th class=\"t\">candidate</th><th>held-out RMSE before (mm)</th><th>after (mm)</th><th>gain (%)</th><th>95 % interval (%)</th><th>lines helped</th><th>p</th><th>p, Holm</th><th class=\"t\">outcome</th></tr>\n",
+    );
+    for c in causes {
+        let verdict = if c.named {
+            "named"
+        } else if c.p_adjusted <= c.alpha {
+            "significant, smaller gain"
+        } else {
+            "not significant"
+        };
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td class=\"t\">{}{}</td><td>{:.4}</td><td>{:.4}</td><td>{:+.2}</td><td>{:+.1} to {:+.1}</td><td>{} / {}</td><td>{:.4}</td><td>{:.4}</td><td class=\"t\">{}</td></tr>",
+            c.round,
+            if c.named { "<b>" } else { "" },
+            escape(&c.mechanism) + if c.named { "</b>" } else { "" },
+            c.before,
+            c.after,
+            c.gain.0,
+            c.gain.1,
+            c.gain.2,
+            c.helped,
+            c.groups,
+            c.p,
+            c.p_adjusted,
+            verdict
+        );
+    }
+    html + "</table>\n"
+}
+
+fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
+    let mut html = String::from(
+        "<table><tr><th class=\"t\">model part</th><th class=\"t\">parameter</th><th>estimate</th><th>95 % interval</th><th class=\"t\">unit</th><th class=\"t\">meaning</th></tr>\n",
+    );
+    for p in params {
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{}</td><td>{} to {}</td><td class=\"t\">{}</td><td class=\"t\">{}</td></tr>",
+            escape(&p.mechanism),
+            escape(&p.parameter),
+            sig(p.estimate),
+            sig(p.ci.0),
+            sig(p.ci.1),
+            escape(&p.unit),
+            escape(&p.meaning)
+        );
+    }
+    html + "</table>\n"
+}
+
+fn sig(x: f64) -> String {
+    crate::html::format_sig(x)
+}
+
+fn power_part(power: &[PowerRow], stage: &str, rows: &mut Vec<Row>) -> String {
+    let mut html = String::from(
+        "<h4>How strong must a hidden effect be?</h4>\n<p>Each draw keeps a printer's lines and kinematics, replaces the measured widths by the model its own causes give plus a new, \
+phase-randomised copy of each line's residual (the same power spectrum, so the same slow swells and the same scatter, in a new realisation), and hides one effect by its physics: \
+a bed tilt of the given relative width change from the start of the line to its end (sign drawn), a gear ripple of the given relative flow amplitude (period and each line's phase drawn \
+from the draw's seed), or a flow loss of the given size at the fastest line's cruise. The engine, starting from the lag model extended by the printer's own causes and not told \
+what was hidden, is correct when it names the hidden mechanism and nothing else; wrong when it names anything else.</p>\n",
+    );
+    html += "<table><tr><th class=\"t\">base</th><th class=\"t\">its own causes</th><th class=\"t\">hidden effect</th><th>strength (%)</th><th>draws</th><th>named (%)</th><th>95 % interval (%)</th><th>wrong cause (%)</th><th>strength interval covers the truth</th></tr>\n";
+    for r in power {
+        let named = if r.effect == "none" { "—".to_string() } else { format!("{:.0}", 100.0 * r.correct.0) };
+        let ci = if r.effect == "none" {
+            "—".to_string()
+        } else {
+            format!("{:.0} to {:.0}", 100.0 * r.correct.1, 100.0 * r.correct.2)
+        };
+        let wrong = format!("{:.1} (up to {:.1})", 100.0 * r.false_alarm.0, 100.0 * r.false_alarm.2);
+        let coverage =
+            if r.with_interval > 0 { format!("{} of {}", r.covered, r.with_interval) } else { "—".to_string() };
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{named}</td><td>{ci}</td><td>{wrong}</td><td>{coverage}</td></tr>",
+            escape(&r.base),
+            escape(&r.own),
+            escape(&r.effect),
+            sig(100.0 * r.strength),
+            r.draws
+        );
+        let item = format!("{} {} {} correct rate", r.base, r.effect, r.strength);
+        let value = if r.effect == "none" { r.false_alarm.0 } else { r.correct.0 };
+        let item = if r.effect == "none" { format!("{} null false-alarm rate", r.base) } else { item };
+        rows.push(Row {
+            section: "discrepancy_fdm",
+            item,
+            paper: None,
+            ours: value,
+            unit: "1",
+            source: format!("out/discrepancy/power.parquet (stage {stage}, fdm.discovery_power)"),
+        });
+    }
+    html += "</table>\n";
+    html += &power_summary(power);
+    let _ = writeln!(
+        html,
+        "<p class=\"run\">Run discrepancy_fdm, stage {stage} (fdm.discovery_power): tables out/discrepancy/power.parquet and power_draws.parquet (one row per draw). \
+Intervals of rates are Clopper–Pearson.</p>"
+    );
+    html
+}
+
+/// Per base: the null false alarms and, per effect, the weakest strength named in at
+/// least 95 % of draws.
+fn power_summary(power: &[PowerRow]) -> String {
+    let mut bases: Vec<&str> = power.iter().map(|r| r.base.as_str()).collect();
+    bases.dedup();
+    let mut text = String::from("<p>");
+    for base in bases {
+        let mine: Vec<&PowerRow> = power.iter().filter(|r| r.base == base).collect();
+        if let Some(null) = mine.iter().find(|r| r.effect == "none") {
+            let _ = write!(
+                text,
+                "On {base}, {} of {} null draws named a cause beyond the data's own ({:.1} %, at most {:.1} % at 95 % confidence). ",
+                null.wrong, null.draws, 100.0 * null.false_alarm.0, 100.0 * null.false_alarm.2
+            );
+        }
+        let mut effects: Vec<&str> = mine.iter().filter(|r| r.effect != "none").map(|r| r.effect.as_str()).collect();
+        effects.dedup();
+        let parts: Vec<String> = effects
+            .iter()
+            .map(|e| {
+                let strengths: Vec<&&PowerRow> = mine.iter().filter(|r| r.effect == *e).collect();
+                let weakest =
+                    strengths.iter().filter(|r| r.correct.0 >= 0.95).min_by(|a, b| a.strength.total_cmp(&b.strength));
+                let strongest = strengths.iter().max_by(|a, b| a.strength.total_cmp(&b.strength));
+                match (weakest, strongest) {
+                    (Some(w), _) => format!(
+                        "{e} from {} % (named in {:.0} % of draws)",
+                        sig(100.0 * w.strength),
+                        100.0 * w.correct.0
+                    ),
+                    (None, Some(s)) => format!(
+                        "{e} at none of the strengths tried (at {} %: {:.0} % of draws)",
+                        sig(100.0 * s.strength),
+                        100.0 * s.correct.0
+                    ),
+                    _ => String::new(),
+                }
+            })
+            .collect();
+        if !parts.is_empty() {
+            let _ = write!(text, "It names, in at least 95 % of draws, {}. ", parts.join("; "));
+        }
+    }
+    text + "</p>\n"
+}

@@ -1,0 +1,295 @@
+//! `fdm.discovery_power`: how strong an effect must be before the discrepancy engine
+//! names it in a measured data set (DESIGN §7). For every input printer (a *base*),
+//! effects are hidden by their physics in surrogate draws of the base at a grid of
+//! strengths, plus null draws, and the engine — not told what was hidden — is scored
+//! against what was injected (`models::fdm::discrepancy::power`). An evaluation stage:
+//! it knows the truth because it made it.
+//!
+//! Outputs: `power.parquet` (per base, effect and strength: draws, correct, wrong and
+//! none counts, the correct rate with its Clopper–Pearson interval, the false-alarm
+//! rate, and how often the strength's interval covered the truth) and
+//! `power_draws.parquet` (one row per draw).
+
+use discrepancy::stats::{clopper_pearson, mix_seed};
+use models::fdm::discrepancy::inject::{Effect, InjectSettings};
+use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Outcome, PowerDesign};
+use models::fdm::discrepancy::FdmModel;
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The `fdm.discovery_power` stage kind.
+pub struct DiscoveryPowerStage;
+
+const PARAMS: &[ParamSpec] = &[
+    START_BLOB,
+    SMOOTHING,
+    ParamSpec {
+        name: "bed_tilt",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.02, 0.05, 0.1, 0.2"),
+        doc: "Strengths of bed_tilt (relative width change end to end, its sign drawn per draw), comma-separated; empty for none.",
+    },
+    ParamSpec {
+        name: "gear_eccentricity",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.02, 0.05, 0.1"),
+        doc: "Strengths of gear_eccentricity (relative flow ripple; period drawn in 4-40 mm, phase per line), comma-separated.",
+    },
+    ParamSpec {
+        name: "flow_saturation",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.05, 0.1, 0.2, 0.4"),
+        doc: "Strengths of flow_saturation (relative width loss at the fastest line's cruise), comma-separated.",
+    },
+    ParamSpec {
+        name: "draws",
+        ty: ParamType::Int { min: 1, max: 100_000 },
+        default: ParamDefault::Int(20),
+        doc: "Draws per base, effect and strength.",
+    },
+    ParamSpec {
+        name: "null_draws",
+        ty: ParamType::Int { min: 0, max: 100_000 },
+        default: ParamDefault::Int(100),
+        doc: "Draws per base with nothing injected.",
+    },
+    ParamSpec {
+        name: "alpha",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "The engine's family-wise false-alarm rate per round.",
+    },
+    ParamSpec {
+        name: "max_rounds",
+        ty: ParamType::Int { min: 1, max: 7 },
+        default: ParamDefault::Int(3),
+        doc: "The engine's most rounds per draw (beyond the data's own causes).",
+    },
+    ParamSpec {
+        name: "bootstrap_draws",
+        ty: ParamType::Int { min: 100, max: 100_000 },
+        default: ParamDefault::Int(500),
+        doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
+    },
+];
+
+impl StageKind for DiscoveryPowerStage {
+    fn name(&self) -> &'static str {
+        "fdm.discovery_power"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Power study of the discrepancy engine: effects hidden in surrogate draws of each measured base at a grid of strengths, plus null draws, scored against the injection → power.parquet, power_draws.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 (tests that hide an effect and require finding it), on paper 000's lines"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::at_least(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printers = read_printers(ctx)?;
+        let blob = StartBlob::parse(ctx, &printers)?;
+        let design = design(ctx)?;
+        let smoothing = ctx.params.f64("smoothing_mm");
+        let (mut rows, mut draws) = (PowerRows::default(), DrawRows::default());
+        for (b, (printer, lines)) in printers.into_iter().enumerate() {
+            let model = FdmModel::new(&lines, blob.has(&printer), smoothing);
+            let base =
+                Base::new(printer.clone(), model, lines, &design.engine).map_err(|e| engine_failed(&printer, e))?;
+            let base_design = PowerDesign { seed: mix_seed(design.seed, b as u64, 0), ..design.clone() };
+            let results = run_draws(&base, &base_design).map_err(|e| engine_failed(&printer, e))?;
+            rows.add(&base, &results);
+            draws.add(&base.label, &results);
+        }
+        let mut power = rows.into_frame()?;
+        ctx.write_table("power", &mut power)?;
+        let mut per_draw = draws.into_frame()?;
+        ctx.write_table("power_draws", &mut per_draw)?;
+        Ok(())
+    }
+}
+
+/// The study's design from the parameters.
+fn design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
+    let p = &ctx.params;
+    let mut cells = Vec::new();
+    for effect in [Effect::BedTilt, Effect::GearEccentricity, Effect::FlowSaturation] {
+        for strength in strengths(ctx, effect)? {
+            cells.push((effect, strength));
+        }
+    }
+    let engine = discrepancy::Settings {
+        alpha: p.f64("alpha"),
+        max_rounds: p.i64("max_rounds") as usize,
+        bootstrap_draws: p.i64("bootstrap_draws") as usize,
+        ..discrepancy::Settings::standard(ctx.seed)
+    };
+    Ok(PowerDesign {
+        cells,
+        draws_per_cell: p.i64("draws") as usize,
+        null_draws: p.i64("null_draws") as usize,
+        seed: ctx.seed,
+        engine,
+        inject: InjectSettings { smoothing_mm: p.f64("smoothing_mm"), gear_period_mm: None },
+    })
+}
+
+/// The strengths listed for `effect`, each checked against the effect's range.
+fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
+    let raw = ctx.params.str(effect.name());
+    let (lo, hi) = effect.strength_range();
+    raw.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            let bad = |why: String| StageError::Params {
+                stage: ctx.stage.clone(),
+                message: format!("{}: `{s}` {why}", effect.name()),
+            };
+            let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
+            if x > 0.0 && x <= hi.max(-lo) {
+                Ok(x)
+            } else {
+                Err(bad(format!("is outside (0, {}]", hi.max(-lo))))
+            }
+        })
+        .collect()
+}
+
+/// Columns of `power.parquet`.
+#[derive(Default)]
+struct PowerRows {
+    base: Vec<String>,
+    own: Vec<String>,
+    effect: Vec<String>,
+    strength: Vec<f64>,
+    draws: Vec<i64>,
+    correct: Vec<i64>,
+    wrong: Vec<i64>,
+    none: Vec<i64>,
+    rate: [Vec<f64>; 3],
+    false_alarm: [Vec<f64>; 3],
+    covered: Vec<i64>,
+    with_interval: Vec<i64>,
+    coverage: [Vec<f64>; 3],
+}
+
+impl PowerRows {
+    fn add(&mut self, base: &Base, results: &[DrawResult]) {
+        for row in summarize(results) {
+            self.base.push(base.label.clone());
+            self.own.push(names(&base.own));
+            self.effect.push(row.effect.name().into());
+            self.strength.push(row.strength);
+            self.draws.push(row.draws as i64);
+            self.correct.push(row.correct as i64);
+            self.wrong.push(row.wrong as i64);
+            self.none.push(row.none as i64);
+            push3(&mut self.rate, row.correct_rate);
+            push3(&mut self.false_alarm, row.false_alarm_rate);
+            let (covered, with) = row.covered;
+            self.covered.push(covered as i64);
+            self.with_interval.push(with as i64);
+            let (lo, hi) = clopper_pearson(covered, with, 0.95);
+            push3(&mut self.coverage, (if with > 0 { covered as f64 / with as f64 } else { f64::NAN }, lo, hi));
+        }
+    }
+
+    fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
+        let [rate, rate_lo, rate_hi] = self.rate;
+        let [fa, fa_lo, fa_hi] = self.false_alarm;
+        let [cov, cov_lo, cov_hi] = self.coverage;
+        frame(vec![
+            str_col("base", self.base),
+            str_col("own_causes", self.own),
+            str_col("effect", self.effect),
+            f64_col("strength", self.strength),
+            i64_col("draws", self.draws),
+            i64_col("correct", self.correct),
+            i64_col("wrong", self.wrong),
+            i64_col("none", self.none),
+            f64_col("correct_rate", rate),
+            f64_col("correct_ci_lo", rate_lo),
+            f64_col("correct_ci_hi", rate_hi),
+            f64_col("false_alarm_rate", fa),
+            f64_col("false_alarm_ci_lo", fa_lo),
+            f64_col("false_alarm_ci_hi", fa_hi),
+            i64_col("covered", self.covered),
+            i64_col("with_interval", self.with_interval),
+            f64_col("coverage_rate", cov),
+            f64_col("coverage_ci_lo", cov_lo),
+            f64_col("coverage_ci_hi", cov_hi),
+        ])
+    }
+}
+
+fn push3(columns: &mut [Vec<f64>; 3], (a, b, c): (f64, f64, f64)) {
+    columns[0].push(a);
+    columns[1].push(b);
+    columns[2].push(c);
+}
+
+/// Columns of `power_draws.parquet`.
+#[derive(Default)]
+struct DrawRows {
+    base: Vec<String>,
+    effect: Vec<String>,
+    strength: Vec<f64>,
+    draw: Vec<i64>,
+    seed: Vec<String>,
+    injected: Vec<f64>,
+    named: Vec<String>,
+    outcome: Vec<String>,
+    fitted: [Vec<f64>; 3],
+}
+
+impl DrawRows {
+    fn add(&mut self, base: &str, results: &[DrawResult]) {
+        for d in results {
+            self.base.push(base.into());
+            self.effect.push(d.effect.name().into());
+            self.strength.push(d.strength);
+            self.draw.push(d.draw as i64);
+            self.seed.push(format!("{:016x}", d.seed));
+            self.injected.push(d.injected);
+            self.named.push(names(&d.named));
+            self.outcome.push(
+                match d.outcome {
+                    Outcome::Correct => "correct",
+                    Outcome::Wrong => "wrong",
+                    Outcome::None => "none",
+                }
+                .into(),
+            );
+            push3(&mut self.fitted, d.fitted.unwrap_or((f64::NAN, f64::NAN, f64::NAN)));
+        }
+    }
+
+    fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
+        let [estimate, lo, hi] = self.fitted;
+        frame(vec![
+            str_col("base", self.base),
+            str_col("effect", self.effect),
+            f64_col("strength", self.strength),
+            i64_col("draw", self.draw),
+            str_col("seed", self.seed),
+            f64_col("injected", self.injected),
+            str_col("named", self.named),
+            str_col("outcome", self.outcome),
+            f64_col("estimate", estimate),
+            f64_col("ci_lo", lo),
+            f64_col("ci_hi", hi),
+        ])
+    }
+}

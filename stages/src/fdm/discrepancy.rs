@@ -1,0 +1,482 @@
+//! `fdm.discrepancy`: what the lag model (`fdm.lag_model`, DESIGN §5.1) gets wrong on
+//! measured line widths, which physical cause explains it, the extended model and its
+//! held-out gain (DESIGN §7) — the FDM domain of the `discrepancy` engine
+//! (`models::fdm::discrepancy`). One run per printer over the lines of every input
+//! of that printer; a group is one printed line.
+//!
+//! Outputs (documented in docs/OUTPUTS.md): `residuals.parquet` (held-out residuals
+//! binned per candidate variable, baseline and extended), `causes.parquet` (every
+//! candidate of every round with its cross-validated gain, p-values and the verdict),
+//! `extension.parquet` (the final model's parameters with jackknife intervals),
+//! `gain.parquet` (held-out RMSE before and after) and `predictions.parquet` (each
+//! line's held-out predictions before and after, for the figures).
+
+use discrepancy::{discover, Discovery, Model, Settings, VariableKind, Verdict};
+use models::fdm::discrepancy::{FdmFit, FdmLine, FdmModel};
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::fdm::lines::PrinterLines;
+use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+
+/// The `fdm.discrepancy` stage kind.
+pub struct DiscrepancyStage;
+
+const PARAMS: &[ParamSpec] = &[
+    START_BLOB,
+    ParamSpec {
+        name: "alpha",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
+    },
+    ParamSpec {
+        name: "max_rounds",
+        ty: ParamType::Int { min: 0, max: 7 },
+        default: ParamDefault::Int(3),
+        doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
+    },
+    ParamSpec {
+        name: "bins",
+        ty: ParamType::Int { min: 2, max: 60 },
+        default: ParamDefault::Int(12),
+        doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
+    },
+    SMOOTHING,
+    ParamSpec {
+        name: "bootstrap_draws",
+        ty: ParamType::Int { min: 100, max: 100_000 },
+        default: ParamDefault::Int(2000),
+        doc: "Bootstrap draws over lines of every gain interval.",
+    },
+];
+
+/// Which printers' lines start with a blob.
+pub(crate) const START_BLOB: ParamSpec = ParamSpec {
+    name: "start_blob",
+    ty: ParamType::Text,
+    default: ParamDefault::Str("all"),
+    doc: "Printers whose lines start with a blob (the lag's initial flow excess is fitted): `all`, `none` or a comma-separated list of printer names (paper 000: `taz5`; the Taz 6 has none, Fig. 8).",
+};
+
+/// The along-path smoothing of the lag model.
+pub(crate) const SMOOTHING: ParamSpec = ParamSpec {
+    name: "smoothing_mm",
+    ty: ParamType::Float { min: 0.0, max: 10.0 },
+    default: ParamDefault::Float(0.5),
+    doc: "Width smoothing along the path: about one nozzle diameter (0.5 mm, paper 000 Table I), as fdm.lag_model.",
+};
+
+impl StageKind for DiscrepancyStage {
+    fn name(&self) -> &'static str {
+        "fdm.discrepancy"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 on paper 000's lines (lag model of DESIGN §5.1 as the baseline)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::at_least(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printers = read_printers(ctx)?;
+        let blob = StartBlob::parse(ctx, &printers)?;
+        let settings = engine_settings(ctx)?;
+        let smoothing = ctx.params.f64("smoothing_mm");
+        let mut tables = Tables::new(settings.alpha);
+        for (printer, lines) in &printers {
+            let model = FdmModel::new(lines, blob.has(printer), smoothing);
+            let found = discover(&model, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
+            tables.add(printer, &model, lines, &found);
+        }
+        tables.write(ctx)
+    }
+}
+
+/// Every input's lines as groups, pooled by printer in the order first seen.
+pub(crate) fn read_printers(ctx: &StageContext) -> Result<Vec<(String, Vec<FdmLine>)>, StageError> {
+    let mut printers: Vec<(String, Vec<FdmLine>)> = Vec::new();
+    for input in &ctx.inputs {
+        let read = PrinterLines::read(&input.dir)?;
+        let groups = read.lines.into_iter().zip(read.conditions).map(|(l, c)| FdmLine::new(c, l));
+        match printers.iter_mut().find(|(p, _)| *p == read.printer) {
+            Some((_, lines)) => lines.extend(groups),
+            None => printers.push((read.printer, groups.collect())),
+        }
+    }
+    Ok(printers)
+}
+
+/// The engine's settings from the stage's parameters and seed.
+pub(crate) fn engine_settings(ctx: &StageContext) -> Result<Settings, StageError> {
+    let p = &ctx.params;
+    let settings = Settings {
+        alpha: p.f64("alpha"),
+        max_rounds: p.i64("max_rounds") as usize,
+        bins: p.i64("bins") as usize,
+        bootstrap_draws: p.i64("bootstrap_draws") as usize,
+        level: 0.95,
+        seed: ctx.seed,
+    };
+    settings.check().map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
+    Ok(settings)
+}
+
+/// An engine failure as a stage error naming the printer.
+pub(crate) fn engine_failed(printer: &str, err: impl std::fmt::Display) -> StageError {
+    StageError::Domain(format!("discrepancy engine on printer `{printer}`: {err}").into())
+}
+
+/// The `start_blob` parameter, checked against the printers present.
+pub(crate) enum StartBlob {
+    All,
+    None,
+    Only(Vec<String>),
+}
+
+impl StartBlob {
+    pub(crate) fn parse(ctx: &StageContext, printers: &[(String, Vec<FdmLine>)]) -> Result<Self, StageError> {
+        let raw = ctx.params.str("start_blob").trim();
+        let parsed = match raw {
+            "all" => Self::All,
+            "none" => Self::None,
+            list => Self::Only(list.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect()),
+        };
+        if let Self::Only(names) = &parsed {
+            if let Some(unknown) = names.iter().find(|n| !printers.iter().any(|(p, _)| p == *n)) {
+                let known: Vec<&str> = printers.iter().map(|(p, _)| p.as_str()).collect();
+                return Err(StageError::Params {
+                    stage: ctx.stage.clone(),
+                    message: format!(
+                        "start_blob names printer `{unknown}`, which no input has (inputs: {}); use `all`, `none` or a list of these",
+                        known.join(", ")
+                    ),
+                });
+            }
+        }
+        Ok(parsed)
+    }
+
+    pub(crate) fn has(&self, printer: &str) -> bool {
+        match self {
+            Self::All => true,
+            Self::None => false,
+            Self::Only(names) => names.iter().any(|n| n == printer),
+        }
+    }
+}
+
+/// The name of a mechanism of the model (`None`: the baseline).
+fn mechanism_name(model: &FdmModel, mechanism: Option<usize>) -> String {
+    mechanism.map_or(model.name(), |c| model.candidates()[c].name()).to_string()
+}
+
+/// A column's type.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Kind {
+    F,
+    I,
+    S,
+    B,
+}
+
+/// One value of a row.
+#[derive(Clone)]
+enum Value {
+    F(f64),
+    I(i64),
+    S(String),
+    B(bool),
+}
+
+impl Value {
+    fn kind(&self) -> Kind {
+        match self {
+            Self::F(_) => Kind::F,
+            Self::I(_) => Kind::I,
+            Self::S(_) => Kind::S,
+            Self::B(_) => Kind::B,
+        }
+    }
+}
+
+/// The columns of each output table, declared once (docs/OUTPUTS.md lists them).
+const RESIDUALS: &[(&str, Kind)] = &[
+    ("printer", Kind::S),
+    ("model", Kind::S),
+    ("variable", Kind::S),
+    ("unit", Kind::S),
+    ("bin", Kind::I),
+    ("label", Kind::S),
+    ("bin_lo", Kind::F),
+    ("bin_hi", Kind::F),
+    ("mean_residual_mm", Kind::F),
+    ("ci_lo_mm", Kind::F),
+    ("ci_hi_mm", Kind::F),
+    ("n", Kind::I),
+    ("groups", Kind::I),
+    ("structure", Kind::F),
+];
+const CAUSES: &[(&str, Kind)] = &[
+    ("printer", Kind::S),
+    ("round", Kind::I),
+    ("base_model", Kind::S),
+    ("mechanism", Kind::S),
+    ("cv_rmse_before_mm", Kind::F),
+    ("cv_rmse_after_mm", Kind::F),
+    ("gain_pct", Kind::F),
+    ("gain_ci_lo_pct", Kind::F),
+    ("gain_ci_hi_pct", Kind::F),
+    ("groups_helped", Kind::I),
+    ("groups", Kind::I),
+    ("p_value", Kind::F),
+    ("p_adjusted", Kind::F),
+    ("alpha", Kind::F),
+    ("named", Kind::B),
+    ("verdict", Kind::S),
+    ("failure", Kind::S),
+];
+const EXTENSION: &[(&str, Kind)] = &[
+    ("printer", Kind::S),
+    ("round", Kind::I),
+    ("mechanism", Kind::S),
+    ("parameter", Kind::S),
+    ("unit", Kind::S),
+    ("estimate", Kind::F),
+    ("ci_lo", Kind::F),
+    ("ci_hi", Kind::F),
+    ("meaning", Kind::S),
+];
+const GAIN: &[(&str, Kind)] = &[
+    ("printer", Kind::S),
+    ("baseline", Kind::S),
+    ("extended_model", Kind::S),
+    ("groups", Kind::I),
+    ("rmse_before_mm", Kind::F),
+    ("rmse_after_mm", Kind::F),
+    ("gain_pct", Kind::F),
+    ("gain_ci_lo_pct", Kind::F),
+    ("gain_ci_hi_pct", Kind::F),
+];
+const PREDICTIONS: &[(&str, Kind)] = &[
+    ("printer", Kind::S),
+    ("condition", Kind::S),
+    ("accel_mm_s2", Kind::F),
+    ("feed_mm_s", Kind::F),
+    ("position_mm", Kind::F),
+    ("measured_width_mm", Kind::F),
+    ("baseline_width_mm", Kind::F),
+    ("extended_width_mm", Kind::F),
+];
+
+/// A table being filled row by row against its declared columns.
+struct Table {
+    name: &'static str,
+    schema: &'static [(&'static str, Kind)],
+    columns: Vec<Vec<Value>>,
+}
+
+impl Table {
+    fn new(name: &'static str, schema: &'static [(&'static str, Kind)]) -> Self {
+        Self { name, schema, columns: vec![Vec::new(); schema.len()] }
+    }
+
+    fn push(&mut self, row: Vec<Value>) {
+        debug_assert_eq!(row.len(), self.schema.len(), "{}: row length", self.name);
+        for ((column, value), (name, kind)) in self.columns.iter_mut().zip(row).zip(self.schema) {
+            debug_assert_eq!(value.kind(), *kind, "{}.{name}", self.name);
+            column.push(value);
+        }
+    }
+
+    fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let columns =
+            self.schema.iter().zip(&self.columns).map(|((name, kind), values)| to_column(name, *kind, values));
+        let mut df = frame(columns.collect())?;
+        ctx.write_table(self.name, &mut df)?;
+        Ok(())
+    }
+}
+
+fn to_column(name: &str, kind: Kind, values: &[Value]) -> polars::prelude::Column {
+    match kind {
+        Kind::I => i64_col(name, values.iter().map(|v| if let Value::I(x) = v { *x } else { 0 }).collect()),
+        Kind::S => {
+            str_col(name, values.iter().map(|v| if let Value::S(x) = v { x.clone() } else { String::new() }).collect())
+        }
+        Kind::B => bool_col(name, values.iter().map(|v| matches!(v, Value::B(true))).collect()),
+        Kind::F => f64_col(name, values.iter().map(|v| if let Value::F(x) = v { *x } else { f64::NAN }).collect()),
+    }
+}
+
+/// Rows of every output table.
+struct Tables {
+    alpha: f64,
+    residuals: Table,
+    causes: Table,
+    extension: Table,
+    gain: Table,
+    predictions: Table,
+}
+
+impl Tables {
+    fn new(alpha: f64) -> Self {
+        Self {
+            alpha,
+            residuals: Table::new("residuals", RESIDUALS),
+            causes: Table::new("causes", CAUSES),
+            extension: Table::new("extension", EXTENSION),
+            gain: Table::new("gain", GAIN),
+            predictions: Table::new("predictions", PREDICTIONS),
+        }
+    }
+}
+
+fn s(text: &str) -> Value {
+    Value::S(text.to_string())
+}
+
+impl Tables {
+    fn add(&mut self, printer: &str, model: &FdmModel, lines: &[FdmLine], found: &Discovery<FdmFit>) {
+        self.add_residuals(printer, model, found);
+        self.add_causes(printer, model, lines.len(), found);
+        self.add_extension(printer, model, found);
+        self.add_gain(printer, model, lines.len(), found);
+        self.add_predictions(printer, lines, found);
+    }
+
+    fn add_residuals(&mut self, printer: &str, model: &FdmModel, found: &Discovery<FdmFit>) {
+        for (label, structure) in [("baseline", &found.structure_before), ("extended", &found.structure_after)] {
+            for v in structure {
+                let variable = model.variables()[v.variable];
+                for b in &v.bins {
+                    let bin_label = match variable.kind {
+                        VariableKind::Categorical(labels) => labels[b.bin].to_string(),
+                        VariableKind::Continuous if b.lo == b.hi => format!("{}", b.lo),
+                        VariableKind::Continuous => format!("[{:.4}, {:.4}]", b.lo, b.hi),
+                    };
+                    self.residuals.push(vec![
+                        s(printer),
+                        s(label),
+                        s(variable.name),
+                        s(variable.unit),
+                        Value::I(b.bin as i64),
+                        Value::S(bin_label),
+                        Value::F(b.lo),
+                        Value::F(b.hi),
+                        Value::F(b.mean),
+                        Value::F(b.ci_lo),
+                        Value::F(b.ci_hi),
+                        Value::I(b.n as i64),
+                        Value::I(b.groups as i64),
+                        Value::F(v.structure),
+                    ]);
+                }
+            }
+        }
+    }
+
+    fn add_causes(&mut self, printer: &str, model: &FdmModel, groups: usize, found: &Discovery<FdmFit>) {
+        let alpha = self.alpha;
+        for round in &found.rounds {
+            let base: Vec<String> = round.base.iter().map(|&c| mechanism_name(model, Some(c))).collect();
+            for c in &round.candidates {
+                self.causes.push(vec![
+                    s(printer),
+                    Value::I(round.index as i64),
+                    Value::S(base_label(model, &base)),
+                    Value::S(mechanism_name(model, Some(c.mechanism))),
+                    Value::F(c.rmse_before),
+                    Value::F(c.rmse_after),
+                    Value::F(c.gain_pct),
+                    Value::F(c.gain_ci_pct.0),
+                    Value::F(c.gain_ci_pct.1),
+                    Value::I(c.log_gains.iter().filter(|&&d| d > 0.0).count() as i64),
+                    Value::I(groups as i64),
+                    Value::F(c.p_value),
+                    Value::F(c.p_adjusted),
+                    Value::F(alpha),
+                    Value::B(c.named),
+                    s(round.verdict.label()),
+                    Value::S(c.failure.clone().unwrap_or_default()),
+                ]);
+            }
+        }
+    }
+
+    fn add_extension(&mut self, printer: &str, model: &FdmModel, found: &Discovery<FdmFit>) {
+        let round_of = |c: Option<usize>| -> i64 {
+            let named_in = |r: &&discrepancy::Round| c.is_some_and(|c| r.verdict == Verdict::Named(c));
+            found.rounds.iter().find(named_in).map_or(0, |r| r.index as i64)
+        };
+        for e in &found.extension {
+            self.extension.push(vec![
+                s(printer),
+                Value::I(round_of(e.mechanism)),
+                Value::S(mechanism_name(model, e.mechanism)),
+                s(e.parameter.name),
+                s(e.parameter.unit),
+                Value::F(e.estimate),
+                Value::F(e.ci_lo),
+                Value::F(e.ci_hi),
+                s(e.parameter.meaning),
+            ]);
+        }
+    }
+
+    fn add_gain(&mut self, printer: &str, model: &FdmModel, groups: usize, found: &Discovery<FdmFit>) {
+        let named: Vec<String> = found.named.iter().map(|&c| mechanism_name(model, Some(c))).collect();
+        let g = &found.gain;
+        self.gain.push(vec![
+            s(printer),
+            s(model.name()),
+            Value::S(base_label(model, &named)),
+            Value::I(groups as i64),
+            Value::F(g.rmse_before),
+            Value::F(g.rmse_after),
+            Value::F(g.gain_pct),
+            Value::F(g.ci_pct.0),
+            Value::F(g.ci_pct.1),
+        ]);
+    }
+
+    fn add_predictions(&mut self, printer: &str, lines: &[FdmLine], found: &Discovery<FdmFit>) {
+        for (k, line) in lines.iter().enumerate() {
+            let m = &line.line;
+            for i in 0..m.len() {
+                self.predictions.push(vec![
+                    s(printer),
+                    s(&line.label),
+                    Value::F(m.nominal.accel_mm_s2),
+                    Value::F(m.nominal.feed_mm_s),
+                    Value::F(m.positions_mm[i]),
+                    Value::F(m.widths_mm[i]),
+                    Value::F(found.baseline.predictions[k][i]),
+                    Value::F(found.extended.predictions[k][i]),
+                ]);
+            }
+        }
+    }
+
+    fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
+        for table in [self.residuals, self.causes, self.extension, self.gain, self.predictions] {
+            table.write(ctx)?;
+        }
+        Ok(())
+    }
+}
+
+/// `lag_model` or `lag_model + width_cap + …`.
+fn base_label(model: &FdmModel, extensions: &[String]) -> String {
+    std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
+}
