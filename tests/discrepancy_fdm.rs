@@ -90,6 +90,7 @@ fn names_what_the_lag_model_gets_wrong_on_the_real_lines() {
 
     let power = read(&out.join("power.parquet"));
     assert_eq!(power.height(), 2 * 4, "2 bases × (null + 3 effects at one strength)");
+    assert_eq!(read(&out.join("power_white.parquet")).height(), 2 * 4);
     assert_eq!(strs(&power, "own_causes")[..1], ["width_cap".to_string()]);
 
     for fig in ["residuals_taz5/discrepancy_residuals", "lines_taz6/discrepancy_lines", "power_curves/discovery_power"]

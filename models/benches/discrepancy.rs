@@ -13,7 +13,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use discrepancy::{discover, Settings};
 use models::fdm::discrepancy::forward::{widths, LineSetting, Scratch, Theta};
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
-use models::fdm::discrepancy::power::{run_draws, Base, PowerDesign};
+use models::fdm::discrepancy::power::{run_draws, Base, Noise, PowerDesign};
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::synthetic::TABLE_I;
 use models::fdm::{LineKinematics, MeasuredLine};
@@ -92,6 +92,7 @@ fn bench_power_draw(c: &mut Criterion) {
         seed: 3,
         engine,
         inject: InjectSettings::default(),
+        noise: Noise::Measured,
     };
     let mut g = c.benchmark_group("discovery_power");
     g.sample_size(10).measurement_time(Duration::from_secs(20));

@@ -88,10 +88,14 @@ pub const SHIPPED_POWER_STUDY: &str = "draws = 28, null_draws = 200";
 /// See [`SHIPPED_POWER_STUDY`].
 pub const TEST_POWER_STUDY: &str =
     "draws = 2, null_draws = 4, bed_tilt = \"0.2\", gear_eccentricity = \"0.1\", flow_saturation = \"0.2\"";
+/// The shipped study with measurement noise only, and the tests' cut of it.
+pub const SHIPPED_WHITE_STUDY: &str = "draws = 10, null_draws = 50";
+/// See [`SHIPPED_WHITE_STUDY`].
+pub const TEST_WHITE_STUDY: &str = "draws = 1, null_draws = 2";
 
 /// The shipped `specs/<name>.toml` with its FSU dataset path (if it has one) pointed
-/// at `raw` and its power study (if it has one) cut to [`TEST_POWER_STUDY`], written
-/// into `dir`.
+/// at `raw` and its power studies (if it has them) cut to [`TEST_POWER_STUDY`] and
+/// [`TEST_WHITE_STUDY`], written into `dir`.
 pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
     let file = format!("specs/{name}.toml");
     let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
@@ -101,8 +105,12 @@ pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
             text.contains(SHIPPED_POWER_STUDY),
             "{file}: the power study's draws changed; update SHIPPED_POWER_STUDY"
         );
+        assert!(
+            text.contains(SHIPPED_WHITE_STUDY),
+            "{file}: the white-noise study changed; update SHIPPED_WHITE_STUDY"
+        );
     }
-    let text = text.replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY);
+    let text = text.replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY).replace(SHIPPED_WHITE_STUDY, TEST_WHITE_STUDY);
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path

@@ -159,17 +159,25 @@ fn draw_residuals<DB: DrawingBackend>(
     let cols = 3;
     let rows = panels.len().div_ceil(cols);
     let cells = area.split_evenly((rows, cols));
+    // No panel's scale is finer than a third of the largest mean of any, so that a
+    // variable without structure does not look as if it had some.
+    let floor = panels.iter().map(largest_mean).fold(0.0f64, f64::max) / 3.0;
     for (k, (panel, cell)) in panels.iter().zip(&cells).enumerate() {
-        draw_residual_panel(cell, panel, extended, k == 0).map_err(|e| e.to_string())?;
+        draw_residual_panel(cell, panel, extended, floor, k == 0).map_err(|e| e.to_string())?;
     }
     Ok(())
 }
 
-/// The panel's half-height: the largest bin mean, or interval end within three times
-/// it (a bin with few lines has a wide interval that would flatten every mean).
-fn residual_span(panel: &ResidualPanel) -> f64 {
+fn largest_mean(panel: &ResidualPanel) -> f64 {
+    panel.models.values().flat_map(|m| m.1.iter().map(|b| b[1].abs())).filter(|v| v.is_finite()).fold(0.0f64, f64::max)
+}
+
+/// The panel's half-height: the largest bin mean (at least `floor`), or interval end
+/// within three times it (a bin with few lines has a wide interval that would flatten
+/// every mean).
+fn residual_span(panel: &ResidualPanel, floor: f64) -> f64 {
     let bins = || panel.models.values().flat_map(|m| m.1.iter());
-    let means = bins().map(|b| b[1].abs()).filter(|v| v.is_finite()).fold(0.0f64, f64::max).max(0.005);
+    let means = largest_mean(panel).max(floor).max(0.005);
     let ends = bins().flat_map(|b| [b[2].abs(), b[3].abs()]).filter(|v| v.is_finite() && *v <= 3.0 * means);
     ends.fold(means, f64::max) * 1.15
 }
@@ -178,9 +186,10 @@ fn draw_residual_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     panel: &ResidualPanel,
     extended: &str,
+    floor: f64,
     legend: bool,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let span = residual_span(panel);
+    let span = residual_span(panel, floor);
     let share = |m: &str| panel.models.get(m).map_or(f64::NAN, |v| v.0);
     let caption = if extended == LAG_MODEL {
         format!("{}: structure {:.0} %", panel.variable, 100.0 * share("baseline"))
@@ -431,15 +440,26 @@ impl StageKind for DiscoveryPowerFigure {
         &[]
     }
     fn arity(&self) -> Arity {
-        Arity::exactly(1)
+        Arity::at_least(1)
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let bases = read_power(&ctx.inputs[0].dir.join("power.parquet"))?;
+        let mut bases: Vec<PowerBase> = Vec::new();
+        for input in &ctx.inputs {
+            for b in read_power(&input.dir.join("power.parquet"))? {
+                match bases.iter_mut().find(|x| x.base == b.base) {
+                    Some(x) => {
+                        x.curves.extend(b.curves);
+                        x.null.extend(b.null);
+                    }
+                    None => bases.push(b),
+                }
+            }
+        }
         let stem = ctx.output_path("discovery_power")?;
         let title =
             "How strong a hidden effect must be before the engine names it (surrogate draws of the measured lines)";
-        draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, title, &bases), |a| draw_power(a, title, &bases))
+        draw_png_and_svg(&stem, (1500, 700), |a| draw_power(a, title, &bases), |a| draw_power(a, title, &bases))
     }
 }
 
@@ -447,15 +467,16 @@ impl StageKind for DiscoveryPowerFigure {
 struct PowerBase {
     base: String,
     own: String,
-    /// Per effect: `(strength, rate, lo, hi)`.
-    curves: BTreeMap<String, Vec<[f64; 4]>>,
-    /// Null draws: count, false-alarm rate and its upper bound.
-    null: Option<(i64, f64, f64)>,
+    /// Per (effect, noise): `(strength, rate, lo, hi)`.
+    curves: BTreeMap<(String, String), Vec<[f64; 4]>>,
+    /// Null draws per noise: noise, count, false-alarm rate and its upper bound.
+    null: Vec<(String, i64, f64, f64)>,
 }
 
 fn read_power(path: &Path) -> Result<Vec<PowerBase>, StageError> {
     let df = read_parquet(path)?;
     let (bases, own, effects) = (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
+    let noise = strs(&df, "noise", path)?;
     let (strength, rate) = (f64s(&df, "strength", path)?, f64s(&df, "correct_rate", path)?);
     let (lo, hi) = (f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
     let (fa, fa_hi, draws) =
@@ -463,13 +484,23 @@ fn read_power(path: &Path) -> Result<Vec<PowerBase>, StageError> {
     let mut out: Vec<PowerBase> = Vec::new();
     for i in 0..df.height() {
         if out.last().is_none_or(|b| b.base != bases[i]) {
-            out.push(PowerBase { base: bases[i].clone(), own: own[i].clone(), curves: BTreeMap::new(), null: None });
+            out.push(PowerBase {
+                base: bases[i].clone(),
+                own: own[i].clone(),
+                curves: BTreeMap::new(),
+                null: Vec::new(),
+            });
         }
         let b = out.last_mut().expect("pushed");
         if effects[i] == "none" {
-            b.null = Some((draws[i], fa[i], fa_hi[i]));
+            b.null.push((noise[i].clone(), draws[i], fa[i], fa_hi[i]));
         } else {
-            b.curves.entry(effects[i].clone()).or_default().push([strength[i], rate[i], lo[i], hi[i]]);
+            b.curves.entry((effects[i].clone(), noise[i].clone())).or_default().push([
+                strength[i],
+                rate[i],
+                lo[i],
+                hi[i],
+            ]);
         }
     }
     if out.is_empty() {
@@ -484,10 +515,65 @@ fn draw_power<DB: DrawingBackend>(
     bases: &[PowerBase],
 ) -> Result<(), String> {
     let area = area.margin(12, 6, 6, 14).titled(title, text(22.0)).map_err(|e| e.to_string())?;
-    let panels = area.split_evenly((1, bases.len().max(1)));
+    let (plots, key) = area.split_vertically(area.dim_in_pixel().1.saturating_sub(POWER_KEY_PX));
+    let panels = plots.split_evenly((1, bases.len().max(1)));
     let x_max = bases.iter().flat_map(|b| b.curves.values().flatten().map(|p| p[0])).fold(0.0f64, f64::max) * 1.05;
+    let effects: Vec<&String> = effect_names(bases);
     for (base, panel) in bases.iter().zip(&panels) {
-        draw_power_panel(panel, base, x_max.max(1e-3)).map_err(|e| e.to_string())?;
+        draw_power_panel(panel, base, &effects, x_max.max(1e-3)).map_err(|e| e.to_string())?;
+    }
+    draw_power_key(&key, &effects, bases).map_err(|e| e.to_string())
+}
+
+/// Height of the key below the panels (px).
+const POWER_KEY_PX: u32 = 110;
+
+/// The effects drawn, in colour order (sorted by name).
+fn effect_names(bases: &[PowerBase]) -> Vec<&String> {
+    let mut e: Vec<&String> = bases.iter().flat_map(|b| b.curves.keys().map(|k| &k.0)).collect();
+    e.sort();
+    e.dedup();
+    e
+}
+
+/// The colour of the `k`-th effect.
+fn effect_colour(k: usize) -> RGBColor {
+    PALETTE[(k + 2) % PALETTE.len()]
+}
+
+/// One key for every panel: the effects' colours, the marker of the draws with
+/// measurement noise only, the null draws' false-alarm bounds, and per base its null
+/// draws' false-alarm rates.
+fn draw_power_key<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    effects: &[&String],
+    bases: &[PowerBase],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let style = text(15.0);
+    let mut x = 60;
+    for (k, e) in effects.iter().enumerate() {
+        area.draw(&PathElement::new([(x, 18), (x + 30, 18)], effect_colour(k).stroke_width(3)))?;
+        area.draw(&Text::new(e.to_string(), (x + 38, 10), style.clone()))?;
+        x += 60 + 9 * e.len() as i32;
+    }
+    area.draw(&TriangleMarker::new((x + 10, 18), 6, BLACK.filled()))?;
+    area.draw(&Text::new("measurement noise only (dashed)", (x + 24, 10), style.clone()))?;
+    let y = 44;
+    area.draw(&PathElement::new([(60, y), (90, y)], BLACK.stroke_width(1)))?;
+    area.draw(&PathElement::new([(96, y), (126, y)], BLACK.mix(0.45).stroke_width(1)))?;
+    let bound = "upper 95 % bound of the null draws' false-alarm rate (grey: measurement noise only)";
+    area.draw(&Text::new(bound, (134, y - 8), style.clone()))?;
+    for (k, b) in bases.iter().enumerate() {
+        let nulls: Vec<String> = b
+            .null
+            .iter()
+            .map(|(noise, n, rate, upper)| {
+                let which = if noise == "white" { " with measurement noise only" } else { "" };
+                format!("{:.1} % of {n} null draws{which} (≤ {:.1} %)", 100.0 * rate, 100.0 * upper)
+            })
+            .collect();
+        let line = format!("{}: a cause beyond its own named in {}", b.base, nulls.join("; "));
+        area.draw(&Text::new(line, (60, y + 16 + 22 * k as i32), style.clone()))?;
     }
     Ok(())
 }
@@ -495,9 +581,14 @@ fn draw_power<DB: DrawingBackend>(
 fn draw_power_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     base: &PowerBase,
+    effects: &[&String],
     x_max: f64,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let caption = format!("base {}: engine starting from lag_model + its own causes ({})", base.base, base.own);
+    let caption = if base.own == "none" {
+        format!("{}, starting from lag_model (no cause of its own)", base.base)
+    } else {
+        format!("{}, starting from lag_model + {} (its own cause)", base.base, base.own)
+    };
     let mut chart = ChartBuilder::on(area)
         .caption(caption, text(17.0))
         .margin(10)
@@ -511,29 +602,33 @@ fn draw_power_panel<DB: DrawingBackend>(
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y:.1}"))
         .draw()?;
-    for (k, (effect, points)) in base.curves.iter().enumerate() {
-        let colour = PALETTE[(k + 2) % PALETTE.len()];
+    for ((effect, noise), points) in &base.curves {
+        let k = effects.iter().position(|e| **e == *effect).unwrap_or(0);
+        let colour = effect_colour(k);
         let style = colour.stroke_width(2);
+        // Draws with measurement noise only sit beside their effect's colour, shifted a
+        // little per effect so that coinciding rates stay visible.
+        let shift = if noise == "white" { 0.006 * x_max * 100.0 * (k as f64 + 1.0) } else { 0.0 };
         chart.draw_series(
-            points.iter().map(move |p| PathElement::new([(100.0 * p[0], p[2]), (100.0 * p[0], p[3])], style)),
+            points
+                .iter()
+                .map(move |p| PathElement::new([(100.0 * p[0] + shift, p[2]), (100.0 * p[0] + shift, p[3])], style)),
         )?;
-        chart
-            .draw_series(LineSeries::new(points.iter().map(|p| (100.0 * p[0], p[1])), style).point_size(4))?
-            .label(effect.clone())
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+        let curve = points.iter().map(move |p| (100.0 * p[0] + shift, p[1]));
+        if noise == "white" {
+            chart.draw_series(DashedLineSeries::new(curve, 6, 4, style))?;
+            chart.draw_series(
+                points.iter().map(move |p| TriangleMarker::new((100.0 * p[0] + shift, p[1]), 6, colour.filled())),
+            )?;
+        } else {
+            chart.draw_series(LineSeries::new(curve, style).point_size(4))?;
+        }
     }
-    if let Some((n, rate, upper)) = base.null {
-        let dashed = BLACK.stroke_width(1);
-        chart
-            .draw_series(DashedLineSeries::new([(0.0, upper), (x_max * 100.0, upper)], 6, 4, dashed))?
-            .label(format!(
-                "false alarms in {n} null draws: {:.1} % (upper 95 % bound {:.1} %)",
-                100.0 * rate,
-                100.0 * upper
-            ))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], dashed));
+    for (noise, _, _, upper) in &base.null {
+        let dashed = if noise == "white" { BLACK.mix(0.45).stroke_width(1) } else { BLACK.stroke_width(1) };
+        chart.draw_series(DashedLineSeries::new([(0.0, *upper), (x_max * 100.0, *upper)], 6, 4, dashed))?;
     }
-    draw_house_legend(&mut chart, SeriesLabelPosition::MiddleRight)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -622,7 +717,7 @@ mod tests {
             dir.path(),
             "power",
             df!(
-            "base" => ["taz5"; 4], "own_causes" => ["width_cap"; 4],
+            "base" => ["taz5"; 4], "noise" => ["measured", "measured", "measured", "white"], "own_causes" => ["width_cap"; 4],
             "effect" => ["none", "bed_tilt", "bed_tilt", "gear_eccentricity"], "strength" => [0.0, 0.02, 0.1, 0.05],
             "draws" => [100i64, 20, 20, 20], "correct_rate" => [0.0, 0.1, 0.9, 0.6],
             "correct_ci_lo" => [0.0, 0.01, 0.7, 0.4], "correct_ci_hi" => [0.04, 0.3, 0.99, 0.8],
@@ -653,7 +748,7 @@ mod tests {
         .unwrap();
         assert_drawn(&stem);
         let bases = read_power(&dir.path().join("power.parquet")).unwrap();
-        assert_eq!(bases[0].null, Some((100, 0.01, 0.05)));
+        assert_eq!(bases[0].null, vec![("measured".to_string(), 100, 0.01, 0.05)]);
         let stem = out.path().join("p");
         draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, "t", &bases), |a| draw_power(a, "t", &bases)).unwrap();
         assert_drawn(&stem);

@@ -3,7 +3,8 @@
 //! and how strong a hidden effect must be before the engine names it (DESIGN §7).
 //! Every number is read from the tables of `fdm.discrepancy` and `fdm.discovery_power`.
 //!
-//! Inputs: the `fdm.discrepancy` stage, then the `fdm.discovery_power` stage.
+//! Inputs: the `fdm.discrepancy` stage, then one or more `fdm.discovery_power` stages
+//! (measured noise, and optionally measurement noise only).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -35,7 +36,7 @@ impl StageKind for DiscrepancyFdmSection {
         &[]
     }
     fn arity(&self) -> Arity {
-        Arity::exactly(2)
+        Arity::at_least(2)
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
@@ -44,8 +45,12 @@ impl StageKind for DiscrepancyFdmSection {
         let params = Param::read(&dir.join("extension.parquet"))?;
         let gains = GainRow::read(&dir.join("gain.parquet"))?;
         let structure = Structure::read(&dir.join("residuals.parquet"))?;
-        let power = PowerRow::read(&ctx.inputs[1].dir.join("power.parquet"))?;
-        let (stage, power_stage) = (ctx.inputs[0].name.clone(), ctx.inputs[1].name.clone());
+        let mut power = Vec::new();
+        for input in &ctx.inputs[1..] {
+            power.extend(PowerRow::read(&input.dir.join("power.parquet"))?);
+        }
+        let stage = ctx.inputs[0].name.clone();
+        let power_stage = ctx.inputs[1..].iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", ");
         let mut html = String::from("<h3>What the lag model gets wrong, and why</h3>\n");
         html += &method(&causes);
         let mut rows = Vec::new();
@@ -214,6 +219,7 @@ impl Structure {
 /// A row of `power.parquet`.
 struct PowerRow {
     base: String,
+    noise: String,
     own: String,
     effect: String,
     strength: f64,
@@ -230,6 +236,7 @@ impl PowerRow {
         let df = read_parquet(path)?;
         let (base, own, effect) =
             (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
+        let noise = strs(&df, "noise", path)?;
         let strength = f64s(&df, "strength", path)?;
         let (draws, wrong, covered, with) = (
             ints(&df, "draws", path)?,
@@ -247,6 +254,7 @@ impl PowerRow {
         Ok((0..df.height())
             .map(|i| Self {
                 base: base[i].clone(),
+                noise: noise[i].clone(),
                 own: own[i].clone(),
                 effect: effect[i].clone(),
                 strength: strength[i],
@@ -448,6 +456,16 @@ fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
     html + "</table>\n"
 }
 
+/// A fraction as a percentage with at most one decimal (`0.05` → `5`, `0.025` → `2.5`).
+fn percent(x: f64) -> String {
+    let p = (1000.0 * x).round() / 10.0;
+    if p.fract() == 0.0 {
+        format!("{p:.0}")
+    } else {
+        format!("{p:.1}")
+    }
+}
+
 fn sig(x: f64) -> String {
     crate::html::format_sig(x)
 }
@@ -458,9 +476,11 @@ fn power_part(power: &[PowerRow], stage: &str, rows: &mut Vec<Row>) -> String {
 phase-randomised copy of each line's residual (the same power spectrum, so the same slow swells and the same scatter, in a new realisation), and hides one effect by its physics: \
 a bed tilt of the given relative width change from the start of the line to its end (sign drawn), a gear ripple of the given relative flow amplitude (period and each line's phase drawn \
 from the draw's seed), or a flow loss of the given size at the fastest line's cruise. The engine, starting from the lag model extended by the printer's own causes and not told \
-what was hidden, is correct when it names the hidden mechanism and nothing else; wrong when it names anything else.</p>\n",
+what was hidden, is correct when it names the hidden mechanism and nothing else; wrong when it names anything else. Draws marked <i>measurement noise only</i> carry, \
+instead of the residual's copy, independent noise of each line's sample-to-sample scatter: they show what the engine could find on lines the model describes up to their \
+measurement noise, and so what in the measured lines limits it.</p>\n",
     );
-    html += "<table><tr><th class=\"t\">base</th><th class=\"t\">its own causes</th><th class=\"t\">hidden effect</th><th>strength (%)</th><th>draws</th><th>named (%)</th><th>95 % interval (%)</th><th>wrong cause (%)</th><th>strength interval covers the truth</th></tr>\n";
+    html += "<table><tr><th class=\"t\">base</th><th class=\"t\">noise</th><th class=\"t\">its own causes</th><th class=\"t\">hidden effect</th><th>strength (%)</th><th>draws</th><th>named (%)</th><th>95 % interval (%)</th><th>wrong cause (%)</th><th>strength interval covers the truth</th></tr>\n";
     for r in power {
         let named = if r.effect == "none" { "—".to_string() } else { format!("{:.0}", 100.0 * r.correct.0) };
         let ci = if r.effect == "none" {
@@ -473,16 +493,20 @@ what was hidden, is correct when it names the hidden mechanism and nothing else;
             if r.with_interval > 0 { format!("{} of {}", r.covered, r.with_interval) } else { "—".to_string() };
         let _ = writeln!(
             html,
-            "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{named}</td><td>{ci}</td><td>{wrong}</td><td>{coverage}</td></tr>",
+            "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{named}</td><td>{ci}</td><td>{wrong}</td><td>{coverage}</td></tr>",
             escape(&r.base),
+            noise_label(&r.noise),
             escape(&r.own),
             escape(&r.effect),
-            sig(100.0 * r.strength),
+            percent(r.strength),
             r.draws
         );
-        let item = format!("{} {} {} correct rate", r.base, r.effect, r.strength);
+        let item = if r.effect == "none" {
+            format!("{} {} noise null false-alarm rate", r.base, r.noise)
+        } else {
+            format!("{} {} noise {} {} correct rate", r.base, r.noise, r.effect, r.strength)
+        };
         let value = if r.effect == "none" { r.false_alarm.0 } else { r.correct.0 };
-        let item = if r.effect == "none" { format!("{} null false-alarm rate", r.base) } else { item };
         rows.push(Row {
             section: "discrepancy_fdm",
             item,
@@ -502,18 +526,27 @@ Intervals of rates are Clopper–Pearson.</p>"
     html
 }
 
-/// Per base: the null false alarms and, per effect, the weakest strength named in at
-/// least 95 % of draws.
+fn noise_label(noise: &str) -> &'static str {
+    if noise == "white" {
+        "measurement noise only"
+    } else {
+        "measured"
+    }
+}
+
+/// Per base and noise: the null false alarms and, per effect, the weakest strength named
+/// in at least 95 % of draws.
 fn power_summary(power: &[PowerRow]) -> String {
-    let mut bases: Vec<&str> = power.iter().map(|r| r.base.as_str()).collect();
+    let mut bases: Vec<(&str, &str)> = power.iter().map(|r| (r.base.as_str(), r.noise.as_str())).collect();
     bases.dedup();
     let mut text = String::from("<p>");
-    for base in bases {
-        let mine: Vec<&PowerRow> = power.iter().filter(|r| r.base == base).collect();
+    for (base, noise) in bases {
+        let mine: Vec<&PowerRow> = power.iter().filter(|r| r.base == base && r.noise == noise).collect();
+        let _ = write!(text, "<b>{base}, {}</b>: ", noise_label(noise));
         if let Some(null) = mine.iter().find(|r| r.effect == "none") {
             let _ = write!(
                 text,
-                "On {base}, {} of {} null draws named a cause beyond the data's own ({:.1} %, at most {:.1} % at 95 % confidence). ",
+                "{} of {} null draws named a cause beyond the data's own ({:.1} %, at most {:.1} % at 95 % confidence). ",
                 null.wrong, null.draws, 100.0 * null.false_alarm.0, 100.0 * null.false_alarm.2
             );
         }
@@ -542,8 +575,64 @@ fn power_summary(power: &[PowerRow]) -> String {
             })
             .collect();
         if !parts.is_empty() {
-            let _ = write!(text, "It names, in at least 95 % of draws, {}. ", parts.join("; "));
+            let _ = write!(text, "It names, in at least 95 % of draws, {}.<br>", parts.join("; "));
         }
     }
     text + "</p>\n"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cause(round: i64, mechanism: &str, gain: f64, p_adjusted: f64, named: bool, verdict: &str) -> Cause {
+        Cause {
+            printer: "p".into(),
+            round,
+            base_model: "lag_model".into(),
+            mechanism: mechanism.into(),
+            before: 0.08,
+            after: 0.08 * (1.0 - gain / 100.0),
+            gain: (gain, gain - 5.0, gain + 5.0),
+            helped: 9,
+            groups: 9,
+            p: p_adjusted / 6.0,
+            p_adjusted,
+            alpha: 0.05,
+            named,
+            verdict: verdict.into(),
+        }
+    }
+
+    #[test]
+    fn the_finding_says_what_was_named_and_what_was_not_in_computed_numbers() {
+        let g = GainRow {
+            printer: "p".into(),
+            extended: "lag_model + width_cap".into(),
+            groups: 9,
+            before: 0.08,
+            after: 0.052,
+            gain: (35.0, 28.0, 41.0),
+        };
+        let causes = [
+            cause(1, "width_cap", 35.0, 0.0137, true, "named"),
+            cause(1, "bed_tilt", 4.0, 0.15, false, "named"),
+            cause(2, "bed_tilt", -1.0, 1.0, false, "none"),
+        ];
+        let refs: Vec<&Cause> = causes.iter().collect();
+        let text = finding(&g, &refs, &[]);
+        assert!(text.contains("In round 1, <b>width_cap</b>") && text.contains("+35.0 %"), "{text}");
+        assert!(text.contains("no further candidate is significant"), "{text}");
+        assert!(!text.contains("No significant discrepancy"), "{text}");
+        let none = [cause(1, "bed_tilt", 1.0, 0.5, false, "none")];
+        let refs: Vec<&Cause> = none.iter().collect();
+        let text = finding(&GainRow { extended: "lag_model".into(), ..g }, &refs, &[]);
+        assert!(text.contains("No significant discrepancy") && text.contains("no candidate is significant"), "{text}");
+        assert!(!text.contains("NaN"), "{text}");
+    }
+
+    #[test]
+    fn percentages_drop_needless_decimals() {
+        assert_eq!((percent(0.05), percent(0.025), percent(0.2)), ("5".into(), "2.5".into(), "20".into()));
+    }
 }

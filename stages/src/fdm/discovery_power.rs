@@ -12,7 +12,7 @@
 
 use discrepancy::stats::{clopper_pearson, mix_seed};
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
-use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Outcome, PowerDesign};
+use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Noise, Outcome, PowerDesign};
 use models::fdm::discrepancy::FdmModel;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
@@ -44,6 +44,12 @@ const PARAMS: &[ParamSpec] = &[
         ty: ParamType::Text,
         default: ParamDefault::Str("0.05, 0.1, 0.2, 0.4"),
         doc: "Strengths of flow_saturation (relative width loss at the fastest line's cruise), comma-separated.",
+    },
+    ParamSpec {
+        name: "noise",
+        ty: ParamType::Choice(&["measured", "white"]),
+        default: ParamDefault::Str("measured"),
+        doc: "A draw's noise around the own-cause model: `measured` (a phase-randomised copy of each line's residual, slow swells included) or `white` (independent noise of the lines' sample-to-sample scatter: measurement noise only).",
     },
     ParamSpec {
         name: "draws",
@@ -82,7 +88,7 @@ impl StageKind for DiscoveryPowerStage {
         "fdm.discovery_power"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "Power study of the discrepancy engine: effects hidden in surrogate draws of each measured base at a grid of strengths, plus null draws, scored against the injection → power.parquet, power_draws.parquet"
@@ -109,7 +115,7 @@ impl StageKind for DiscoveryPowerStage {
                 Base::new(printer.clone(), model, lines, &design.engine).map_err(|e| engine_failed(&printer, e))?;
             let base_design = PowerDesign { seed: mix_seed(design.seed, b as u64, 0), ..design.clone() };
             let results = run_draws(&base, &base_design).map_err(|e| engine_failed(&printer, e))?;
-            rows.add(&base, &results);
+            rows.add(&base, design.noise, &results);
             draws.add(&base.label, &results);
         }
         let mut power = rows.into_frame()?;
@@ -142,6 +148,7 @@ fn design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
         seed: ctx.seed,
         engine,
         inject: InjectSettings { smoothing_mm: p.f64("smoothing_mm"), gear_period_mm: None },
+        noise: if p.str("noise") == "white" { Noise::White } else { Noise::Measured },
     })
 }
 
@@ -170,6 +177,7 @@ fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError>
 /// Columns of `power.parquet`.
 #[derive(Default)]
 struct PowerRows {
+    noise: Vec<String>,
     base: Vec<String>,
     own: Vec<String>,
     effect: Vec<String>,
@@ -186,8 +194,9 @@ struct PowerRows {
 }
 
 impl PowerRows {
-    fn add(&mut self, base: &Base, results: &[DrawResult]) {
+    fn add(&mut self, base: &Base, noise: Noise, results: &[DrawResult]) {
         for row in summarize(results) {
+            self.noise.push(noise.name().into());
             self.base.push(base.label.clone());
             self.own.push(names(&base.own));
             self.effect.push(row.effect.name().into());
@@ -212,6 +221,7 @@ impl PowerRows {
         let [cov, cov_lo, cov_hi] = self.coverage;
         frame(vec![
             str_col("base", self.base),
+            str_col("noise", self.noise),
             str_col("own_causes", self.own),
             str_col("effect", self.effect),
             f64_col("strength", self.strength),

@@ -11,12 +11,17 @@
 //! the gear's period and phases drawn from the draw's seed). The engine is then run
 //! without being told what was injected and scored: *correct* when it names the
 //! injected mechanism and nothing else, *wrong* when it names anything else, *none*
-//! when it names nothing. Null draws inject `none`.
+//! when it names nothing. Null draws inject `none`. With [`Noise::White`] the residual is
+//! replaced by independent noise of the lines' sample-to-sample scatter instead, which
+//! separates what limits the engine from what limits the data.
 
 use rayon::prelude::*;
 
 use ::discrepancy::stats::{clopper_pearson, mix_seed};
 use ::discrepancy::{discover, discover_warm, EngineError, Model, Settings};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
 
 use super::inject::{inject, Effect, InjectError, InjectSettings};
 use super::mechanisms::{candidate_index, CANDIDATES};
@@ -38,6 +43,30 @@ pub struct PowerDesign {
     pub engine: Settings,
     /// How effects are injected.
     pub inject: InjectSettings,
+    /// What noise a draw carries.
+    pub noise: Noise,
+}
+
+/// The noise of a draw around the own-cause model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Noise {
+    /// A phase-randomised copy of each line's measured residual: the data's own noise,
+    /// slow swells included.
+    Measured,
+    /// Independent Gaussian noise with each line's sample-to-sample scatter
+    /// (`σ² = mean((r_{i+1} − r_i)²)/2`): measurement noise only, no slow swells — what
+    /// the engine could do on lines the model describes up to their measurement noise.
+    White,
+}
+
+impl Noise {
+    /// `measured` or `white`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Measured => "measured",
+            Self::White => "white",
+        }
+    }
 }
 
 /// A base data set with the engine's verdict on it.
@@ -159,7 +188,11 @@ fn one_draw(
         .enumerate()
         .map(|(i, (l, fitted))| {
             let residual: Vec<f64> = l.line.widths_mm.iter().zip(fitted).map(|(y, f)| y - f).collect();
-            let noise = surrogates.draw(&residual, mix_seed(seed, 1_000 + i as u64, 0));
+            let line_seed = mix_seed(seed, 1_000 + i as u64, 0);
+            let noise = match design.noise {
+                Noise::Measured => surrogates.draw(&residual, line_seed),
+                Noise::White => white_noise(&residual, line_seed),
+            };
             let widths = fitted.iter().zip(&noise).map(|(f, e)| (f + e).max(1e-3)).collect();
             crate::fdm::line::MeasuredLine { widths_mm: widths, ..l.line.clone() }
         })
@@ -186,6 +219,15 @@ fn one_draw(
         })
         .flatten();
     Ok(DrawResult { effect, strength, draw, seed, injected: record.strength, named: found.named, outcome, fitted })
+}
+
+/// Gaussian noise as long as `residual`, with its sample-to-sample scatter.
+fn white_noise(residual: &[f64], seed: u64) -> Vec<f64> {
+    let n = residual.len().max(2);
+    let scatter = residual.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>() / (2.0 * (n - 1) as f64);
+    let normal = Normal::new(0.0, scatter.sqrt()).unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("σ = 0 is valid"));
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    residual.iter().map(|_| normal.sample(&mut rng)).collect()
 }
 
 /// One row of the power table.
@@ -283,6 +325,7 @@ mod tests {
             seed: 11,
             engine,
             inject: InjectSettings::default(),
+            noise: Noise::Measured,
         };
         let rows = summarize(&run_draws(&base, &design).unwrap());
         for r in &rows {
