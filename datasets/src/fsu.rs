@@ -286,7 +286,7 @@ mod tests {
     use super::*;
 
     fn real_data() -> Option<PathBuf> {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/fsu-linewidth");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/fsu-linewidth");
         dir.is_dir().then_some(dir)
     }
 
@@ -309,7 +309,7 @@ mod tests {
     #[test]
     fn imports_the_real_release_with_checksums() {
         let Some(src) = real_data() else {
-            panic!("shared/data/fsu-linewidth is missing: {SOURCE_HINT}");
+            panic!("data/fsu-linewidth is missing: {SOURCE_HINT}");
         };
         let opts = ImportOptions { verify_sha256: true };
         let taz5 = read_printer(&src, FsuPrinter::Taz5, opts).unwrap();
@@ -323,7 +323,7 @@ mod tests {
     #[test]
     fn modified_file_fails_its_checksum() {
         let Some(src) = real_data() else {
-            panic!("shared/data/fsu-linewidth is missing: {SOURCE_HINT}");
+            panic!("data/fsu-linewidth is missing: {SOURCE_HINT}");
         };
         let dir = tempfile::tempdir().unwrap();
         let taz5 = dir.path().join("taz5");

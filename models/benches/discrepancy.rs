@@ -2,8 +2,8 @@
 //! whole engine on both printers (7 candidates, 9 lines each, up to 3 rounds; target
 //! ≤ 2 s on 2 cores), one power-study draw per effect on the Taz 5 (the study of
 //! `specs/discrepancy_fdm.toml` is about a thousand such draws; target ≤ 5 min), and one
-//! line through the forward model. The real data are read from `$AMREPRO_DATA` or
-//! `../shared/data`; without them the benchmarks run on lines drawn from the forward
+//! line through the forward model. The real data are read from `$AMREPRO_DATA` or the
+//! repository's `data/`; without them the benchmarks run on lines drawn from the forward
 //! model with pixel-like noise, and say so.
 
 use std::path::PathBuf;
@@ -21,7 +21,7 @@ use models::fdm::{LineKinematics, MeasuredLine};
 fn data_dir() -> PathBuf {
     std::env::var("AMREPRO_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"))
+        .unwrap_or_else(|_| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data"))
         .join("fsu-linewidth")
 }
 

@@ -7,7 +7,7 @@
 //! seed = 1
 //!
 //! [dataset.fsu_raw]
-//! path = "${AMREPRO_DATA:-../../shared/data}/fsu-linewidth"
+//! path = "${AMREPRO_DATA:-../data}/fsu-linewidth"
 //!
 //! [stage.import_taz5]
 //! kind = "fdm.import"

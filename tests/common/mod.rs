@@ -4,11 +4,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// The real FSU data folder (shared/ beside the clone, or `$AMREPRO_DATA`).
+/// The real FSU data folder (`data/` of the repository, or `$AMREPRO_DATA`).
 pub fn data_root() -> PathBuf {
     let root = std::env::var("AMREPRO_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("data"));
     let root = root.canonicalize().unwrap_or(root);
     assert!(
         root.join("fsu-linewidth/taz5").is_dir(),
@@ -99,7 +99,7 @@ pub const TEST_WHITE_STUDY: &str = "draws = 1, null_draws = 2";
 pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
     let file = format!("specs/{name}.toml");
     let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
-    let text = shipped.replace("${AMREPRO_DATA:-../../shared/data}/fsu-linewidth", &raw.display().to_string());
+    let text = shipped.replace("${AMREPRO_DATA:-../data}/fsu-linewidth", &raw.display().to_string());
     if text.contains("fdm.discovery_power") {
         assert!(
             text.contains(SHIPPED_POWER_STUDY),

@@ -1,6 +1,6 @@
 //! Test helpers for the paper-000 models: synthetic lines drawn from a known piecewise
 //! model (eq. 3) at the nine conditions of Table I, and a reader of the real Taz 5 /
-//! Taz 6 widths in `shared/data/fsu-linewidth` (test-only file I/O; the crate itself
+//! Taz 6 widths in the repository's `data/fsu-linewidth` (test-only file I/O; the crate itself
 //! does none).
 
 use std::path::PathBuf;
@@ -27,7 +27,7 @@ pub(crate) fn synthetic_lines(truth: &FittedPiecewise, step_mm: f64) -> Vec<Meas
 /// The real lines of one printer folder (`taz5` or `taz6`) in Table I order, or `None`
 /// (with a printed note) when the data folder is missing.
 pub(crate) fn real_lines(printer: &str) -> Option<Vec<MeasuredLine>> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/fsu-linewidth").join(printer);
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../data/fsu-linewidth").join(printer);
     if !dir.is_dir() {
         eprintln!("note: {} missing, real-data check skipped", dir.display());
         return None;

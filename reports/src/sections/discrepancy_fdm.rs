@@ -13,7 +13,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
 use super::{comparison_frame, Row};
-use crate::html::escape;
+use crate::html::{escape, format_sig};
 use crate::read::{bools, f64s, ints, read_parquet, strs};
 
 /// The `report.discrepancy_fdm` stage kind.
@@ -446,9 +446,9 @@ fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
             "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{}</td><td>{} to {}</td><td class=\"t\">{}</td><td class=\"t\">{}</td></tr>",
             escape(&p.mechanism),
             escape(&p.parameter),
-            sig(p.estimate),
-            sig(p.ci.0),
-            sig(p.ci.1),
+            format_sig(p.estimate),
+            format_sig(p.ci.0),
+            format_sig(p.ci.1),
             escape(&p.unit),
             escape(&p.meaning)
         );
@@ -464,10 +464,6 @@ fn percent(x: f64) -> String {
     } else {
         format!("{p:.1}")
     }
-}
-
-fn sig(x: f64) -> String {
-    crate::html::format_sig(x)
 }
 
 fn power_part(power: &[PowerRow], stage: &str, rows: &mut Vec<Row>) -> String {
@@ -560,14 +556,12 @@ fn power_summary(power: &[PowerRow]) -> String {
                     strengths.iter().filter(|r| r.correct.0 >= 0.95).min_by(|a, b| a.strength.total_cmp(&b.strength));
                 let strongest = strengths.iter().max_by(|a, b| a.strength.total_cmp(&b.strength));
                 match (weakest, strongest) {
-                    (Some(w), _) => format!(
-                        "{e} from {} % (named in {:.0} % of draws)",
-                        sig(100.0 * w.strength),
-                        100.0 * w.correct.0
-                    ),
+                    (Some(w), _) => {
+                        format!("{e} from {} % (named in {:.0} % of draws)", percent(w.strength), 100.0 * w.correct.0)
+                    }
                     (None, Some(s)) => format!(
                         "{e} at none of the strengths tried (at {} %: {:.0} % of draws)",
-                        sig(100.0 * s.strength),
+                        percent(s.strength),
                         100.0 * s.correct.0
                     ),
                     _ => String::new(),
