@@ -3,7 +3,7 @@
 use anyhow::{bail, Context, Result};
 
 use datasets::fsu::{self, FsuPrinter, ImportOptions};
-use pipeline::execute::{run_plan, RunOptions};
+use pipeline::execute::{open_out_dir, run_plan, run_plan_locked, RunOptions};
 use pipeline::graph::{render, GraphFormat};
 use pipeline::{Plan, Registry, StageKind};
 
@@ -12,11 +12,15 @@ use crate::cli::{
     InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
 };
 
-/// Every stage kind this binary knows: domain stages and figures.
+/// Every stage kind this binary knows: domain stages and figures (and, for the fault
+/// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`).
 pub fn registry() -> Registry {
     let mut registry = Registry::new();
     stages::register(&mut registry);
     reports::register(&mut registry);
+    if std::env::var_os(pipeline::testing::ENV_VAR).is_some_and(|v| v == "1") {
+        registry.register(Box::new(pipeline::testing::FaultKind));
+    }
     registry
 }
 
@@ -61,13 +65,21 @@ fn run(args: RunArgs) -> Result<()> {
             plan.stages.len()
         );
     }
-    let summary = run_plan(&plan, &registry, &opts, &log)
-        .with_context(|| format!("run of {} failed; earlier outputs are untouched", args.spec.display()))?;
+    let failed = || {
+        format!(
+            "run of {} failed; the published tables, the manifest and the report are as the last complete run left them \
+             (stages that finished are kept and reused by the next run)",
+            args.spec.display()
+        )
+    };
     if args.dry_run {
+        let summary = run_plan(&plan, &registry, &opts, &log).with_context(failed)?;
         println!("{} of {} stages would run", summary.executed(), summary.stages.len());
         return Ok(());
     }
-    let report = reports::html::write_report(&args.out).context("writing the report")?;
+    let lock = open_out_dir(&args.out, &format!("run {}", args.spec.display()))?;
+    let summary = run_plan_locked(&plan, &registry, &opts, &log, &lock).with_context(failed)?;
+    let report = write_report(&args.out)?;
     match summary.executed() {
         0 => println!("all {} stages up to date: nothing executed", summary.stages.len()),
         n => println!("executed {n} of {} stages", summary.stages.len()),
@@ -77,6 +89,16 @@ fn run(args: RunArgs) -> Result<()> {
     }
     println!("report:   {}", report.display());
     Ok(())
+}
+
+/// Rebuilds the report (the caller holds the out folder's lock); warns about runs
+/// left out because their manifest is unreadable.
+fn write_report(out: &std::path::Path) -> Result<std::path::PathBuf> {
+    let written = reports::html::write_report(out).context("writing the report")?;
+    for (_, why) in &written.skipped {
+        eprintln!("warning: the report leaves out a run: {why}");
+    }
+    Ok(written.path)
 }
 
 fn print_plan(plan: &Plan) {
@@ -219,7 +241,8 @@ fn inject(args: InjectArgs) -> Result<()> {
 }
 
 fn report(out: &std::path::Path) -> Result<()> {
-    let path = reports::html::write_report(out).context("writing the report")?;
+    let _lock = open_out_dir(out, "report")?;
+    let path = write_report(out)?;
     println!("report: {}", path.display());
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `amrepro`: the command line. Thin glue over the library crates: it parses
 //! arguments, assembles the stage registry, and turns typed library errors into
-//! messages with context and a non-zero exit code.
+//! messages with context and a non-zero exit code. A panic anywhere becomes such a
+//! message too (`pipeline::panic`), never a Rust panic report.
 
 mod cli;
 mod commands;
@@ -11,11 +12,51 @@ use clap::Parser;
 
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
-    match commands::dispatch(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("error: {err:#}");
+    match pipeline::panic::catch(|| commands::dispatch(args)) {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(err)) => {
+            eprintln!("error: {}", chain(&err));
             ExitCode::FAILURE
         }
+        Err(panic) => {
+            eprintln!(
+                "error: internal error, a bug in amrepro (please report it with the input that caused it): {panic}"
+            );
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes, `: `-separated, leaving out a cause whose text the
+/// message already holds (typed errors often print their source themselves).
+fn chain(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let part = cause.to_string();
+        if text.contains(&part) {
+            continue;
+        }
+        if !text.is_empty() {
+            text += ": ";
+        }
+        text += &part;
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("stage `a` failed: {source}")]
+    struct Outer {
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn a_cause_the_message_already_holds_is_said_once() {
+        let err = anyhow::Error::new(Outer { source: std::io::Error::other("disk full") }).context("run of x failed");
+        assert_eq!(chain(&err), "run of x failed: stage `a` failed: disk full");
     }
 }

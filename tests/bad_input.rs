@@ -37,7 +37,8 @@ fn fails_and_keeps_outputs(corrupt: impl Fn(&Path), expected: &[&str]) {
 
 /// Every output file under `dir` with its size, sorted. Stage records are left out:
 /// a sibling stage whose input folder changed may rightly rerun (same outputs, new
-/// record); any temp file left behind would show up here.
+/// record); so is `.pending/`, where such a sibling's finished work is kept for the
+/// next run. Any temp file left behind would show up here.
 fn listing(dir: &Path) -> Vec<(String, u64)> {
     let mut files = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
@@ -45,7 +46,9 @@ fn listing(dir: &Path) -> Vec<(String, u64)> {
         for entry in std::fs::read_dir(&d).unwrap() {
             let path = entry.unwrap().path();
             if path.is_dir() {
-                stack.push(path);
+                if !path.ends_with(".pending") {
+                    stack.push(path);
+                }
             } else if !path.ends_with(".stage.json") {
                 files.push((path.strip_prefix(dir).unwrap().display().to_string(), path.metadata().unwrap().len()));
             }

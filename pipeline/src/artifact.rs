@@ -1,6 +1,7 @@
 //! Artifacts on disk: atomic writes (temp file + rename, so a crash never leaves a
 //! half-written file), Parquet tables with key/value metadata, atomic replacement of
-//! a stage's whole output folder, and publishing to the stable analyst paths.
+//! a stage's whole output folder, and the synced copies the run's commit renames onto
+//! the stable analyst paths.
 //!
 //! This is the one place that calls polars' Parquet writer and reader: their API moves
 //! between releases, so it is wrapped here once.
@@ -79,34 +80,43 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut fs::File) -> Result<(), StageError>,
 ) -> Result<(), StageError> {
+    let tmp = temp_sibling(path);
+    write_synced(&tmp, fill)?;
+    fs::rename(&tmp, path).map_err(|e| {
+        let _ = fs::remove_file(&tmp);
+        StageError::io(path, e)
+    })
+}
+
+/// Creates `path` (and its folder), lets `fill` write it and syncs it to disk; on any
+/// error the file is removed. The first half of an atomic write, for callers that
+/// rename later (the run's commit).
+pub fn write_synced(path: &Path, fill: impl FnOnce(&mut fs::File) -> Result<(), StageError>) -> Result<(), StageError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     fs::create_dir_all(dir).map_err(|e| StageError::io(dir, e))?;
-    let tmp = temp_sibling(path);
-    let result = fs::File::create(&tmp)
-        .map_err(|e| StageError::io(&tmp, e))
-        .and_then(|mut file| {
-            fill(&mut file)?;
-            file.sync_all().map_err(|e| StageError::io(&tmp, e))
-        })
-        .and_then(|_| fs::rename(&tmp, path).map_err(|e| StageError::io(path, e)));
+    let result = fs::File::create(path).map_err(|e| StageError::io(path, e)).and_then(|mut file| {
+        fill(&mut file)?;
+        file.sync_all().map_err(|e| StageError::io(path, e))
+    });
     if result.is_err() {
-        let _ = fs::remove_file(&tmp);
+        let _ = fs::remove_file(path);
     }
     result
 }
 
-/// Copies `src` onto `dst` atomically (for publishing a stage output).
-pub fn copy_atomic(src: &Path, dst: &Path) -> Result<(), StageError> {
-    write_atomic_with(dst, |file| {
+/// Copies `src` to a new, synced file `tmp` (renamed onto its destination later, by
+/// the run's commit).
+pub fn copy_synced(src: &Path, tmp: &Path) -> Result<(), StageError> {
+    write_synced(tmp, |file| {
         let mut reader = fs::File::open(src).map_err(|e| StageError::io(src, e))?;
-        std::io::copy(&mut reader, file).map(|_| ()).map_err(|e| StageError::io(dst, e))
+        std::io::copy(&mut reader, file).map(|_| ()).map_err(|e| StageError::io(tmp, e))
     })
 }
 
 /// Replaces folder `dst` by the fully written folder `staged`: the old folder stays
 /// intact until the new one is complete, and is removed only after the swap.
 pub fn replace_dir(staged: &Path, dst: &Path) -> std::io::Result<()> {
-    let old = dst.with_extension(format!("old-{}", std::process::id()));
+    let old = temp_sibling_named(dst, "old");
     let had_old = dst.exists();
     if had_old {
         fs::rename(dst, &old)?;
@@ -133,9 +143,15 @@ pub fn staging_dir(dst: &Path) -> std::io::Result<PathBuf> {
     Ok(staged)
 }
 
-fn temp_sibling(path: &Path) -> PathBuf {
+/// `.NAME.tmp-PID` beside `path`: where an atomic write or a staging folder lives
+/// until it is renamed onto `path` (see [`crate::lock::is_temp_name`]).
+pub fn temp_sibling(path: &Path) -> PathBuf {
+    temp_sibling_named(path, "tmp")
+}
+
+fn temp_sibling_named(path: &Path, marker: &str) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+    path.with_file_name(format!(".{name}.{marker}-{}", std::process::id()))
 }
 
 #[cfg(test)]

@@ -64,6 +64,9 @@ pub enum StageError {
     /// An error from a domain library (dataset reader, model fit), with its message.
     #[error(transparent)]
     Domain(Box<dyn std::error::Error + Send + Sync>),
+    /// The stage's code panicked: a bug in amrepro, caught so the run ends cleanly.
+    #[error("internal error, a bug in amrepro (please report it with the input that caused it): {0}")]
+    Panic(String),
 }
 
 impl StageError {
@@ -81,7 +84,8 @@ impl StageError {
 /// An error of a whole run: which stage failed and why.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
-    /// A stage failed; its earlier outputs are untouched.
+    /// A stage failed; what readers see (stage folders, published copies, manifest) is
+    /// as the last complete run left it (see `commit`).
     #[error("stage `{stage}` ({kind}) failed: {source}")]
     Stage {
         /// The stage name in the spec.
@@ -98,6 +102,14 @@ pub enum RunError {
         path: PathBuf,
         /// The I/O error.
         source: std::io::Error,
+    },
+    /// Another process holds the out folder's lock.
+    #[error("out folder {} is in use by {holder}; wait for that run to finish (the lock frees itself when it ends)", out_dir.display())]
+    Locked {
+        /// The out folder.
+        out_dir: PathBuf,
+        /// Who holds it, as the lock file says.
+        holder: String,
     },
     /// `--only` named a stage that is not in the spec.
     #[error("{0}")]

@@ -1,7 +1,9 @@
-//! Executes a checked [`Plan`]: wave by wave, stages of a wave in parallel (rayon);
-//! each stage skipped when its cache key is unchanged, otherwise run into a staging
-//! folder that replaces its previous outputs only on success; published copies and
-//! the manifest written atomically, the manifest last.
+//! Executes a checked [`Plan`] in an out folder it holds the lock of ([`crate::lock`]):
+//! wave by wave, stages of a wave in parallel (rayon); each stage skipped when its
+//! cache key is unchanged, otherwise run into a staging folder that becomes its
+//! pending outputs when it succeeds (a panic is its error). Only when every stage has
+//! succeeded does the run commit ([`crate::commit`]): stage folders, published copies
+//! and the manifest change together, the manifest last.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -10,10 +12,12 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
-use crate::artifact::{copy_atomic, replace_dir, staging_dir, write_atomic};
+use crate::artifact::{copy_synced, replace_dir, staging_dir, temp_sibling, write_synced};
 use crate::cache::{decide, read_record, CacheKey, Decision, RECORD_FILE};
+use crate::commit::{commit, roll_forward, Move, PENDING_DIR};
 use crate::error::{RunError, StageError};
 use crate::hash::{dir_hash, file_sha256, sha256_hex};
+use crate::lock::{remove_stale_temps, OutLock};
 use crate::manifest::{Manifest, ManifestStage, OutputFile, StageRecord};
 use crate::plan::{InputRef, Plan, PlannedStage};
 use crate::stage::{InputArtifact, Registry, StageContext};
@@ -41,6 +45,9 @@ pub enum Status {
     Ran,
     /// Its outputs were up to date.
     Cached,
+    /// It had finished in an earlier run that then failed or was killed; its
+    /// outputs, unchanged since, are committed by this run.
+    Resumed,
     /// Dry run: it would run.
     WouldRun,
 }
@@ -74,7 +81,7 @@ pub struct RunSummary {
 impl RunSummary {
     /// How many stages ran (or would run, in a dry run).
     pub fn executed(&self) -> usize {
-        self.stages.iter().filter(|s| s.status != Status::Cached).count()
+        self.stages.iter().filter(|s| matches!(s.status, Status::Ran | Status::WouldRun)).count()
     }
 }
 
@@ -82,11 +89,58 @@ impl RunSummary {
 struct Outcome {
     line: StageLine,
     record: Option<StageRecord>,
-    published: BTreeMap<String, PathBuf>,
+    /// Where its outputs are now: its stage folder, or its pending folder.
+    dir: PathBuf,
 }
 
-/// Runs `plan`; `log` receives one line per stage event.
+/// Takes the lock of `out_dir` for `what` (`run specs/x.toml`), completes a commit a
+/// killed run left half done and removes the temp files killed runs left behind.
+/// Hold the returned lock while writing anything into the out folder.
+pub fn open_out_dir(out_dir: &Path, what: &str) -> Result<OutLock, RunError> {
+    let lock = OutLock::acquire(out_dir, what)?;
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| RunError::Io { path, source }
+    };
+    let runs = out_dir.join("runs");
+    if runs.is_dir() {
+        for entry in std::fs::read_dir(&runs).map_err(io(&runs))? {
+            roll_forward(&entry.map_err(io(&runs))?.path())?;
+        }
+    }
+    remove_stale_temps(out_dir).map_err(io(out_dir))?;
+    Ok(lock)
+}
+
+/// Runs `plan` under the lock of its out folder (a dry run takes none: it writes
+/// nothing); `log` receives one line per stage event.
 pub fn run_plan(
+    plan: &Plan,
+    registry: &Registry,
+    opts: &RunOptions,
+    log: &(dyn Fn(&str) + Sync),
+) -> Result<RunSummary, RunError> {
+    if opts.dry_run {
+        return execute_plan(plan, registry, opts, log);
+    }
+    let lock = open_out_dir(&opts.out_dir, &format!("run {}", plan.spec_file.display()))?;
+    run_plan_locked(plan, registry, opts, log, &lock)
+}
+
+/// [`run_plan`] for a caller that already holds the out folder's lock from
+/// [`open_out_dir`] (to build the report under the same lock, say).
+pub fn run_plan_locked(
+    plan: &Plan,
+    registry: &Registry,
+    opts: &RunOptions,
+    log: &(dyn Fn(&str) + Sync),
+    lock: &OutLock,
+) -> Result<RunSummary, RunError> {
+    debug_assert_eq!(lock.path().parent(), Some(opts.out_dir.as_path()), "the lock of another out folder");
+    execute_plan(plan, registry, opts, log)
+}
+
+fn execute_plan(
     plan: &Plan,
     registry: &Registry,
     opts: &RunOptions,
@@ -118,10 +172,9 @@ pub fn run_plan(
         keep_unselected(plan, &run_dir, &mut outcomes);
     }
     let outcomes: Vec<Outcome> = outcomes.into_iter().flatten().collect();
-    let manifest_path = if opts.dry_run {
-        None
-    } else {
-        Some(write_manifest(plan, &run_dir, &outcomes, started.elapsed().as_secs_f64())?)
+    let manifest_path = match opts.dry_run {
+        true => None,
+        false => Some(exec.commit(&outcomes, started.elapsed().as_secs_f64())?),
     };
     let stages = outcomes.into_iter().map(|o| o.line).collect();
     Ok(RunSummary { run_dir, manifest_path, stages })
@@ -131,10 +184,10 @@ pub fn run_plan(
 /// too, so the manifest (and the report drawn from it) always covers the whole spec.
 fn keep_unselected(plan: &Plan, run_dir: &Path, outcomes: &mut [Option<Outcome>]) {
     for (stage, slot) in plan.stages.iter().zip(outcomes.iter_mut()).filter(|(_, o)| o.is_none()) {
-        if let Some(record) = read_record(&run_dir.join(&stage.name)) {
-            let published = stage.publish.iter().cloned().collect();
+        let dir = run_dir.join(&stage.name);
+        if let Some(record) = read_record(&dir) {
             let line = line(stage, Status::Cached, "not selected by --only".into(), 0.0);
-            *slot = Some(Outcome { line, record: Some(record), published });
+            *slot = Some(Outcome { line, record: Some(record), dir });
         }
     }
 }
@@ -198,6 +251,7 @@ impl Executor<'_> {
     fn process(&self, i: usize, done: &[Option<Outcome>]) -> Result<Outcome, RunError> {
         let stage = &self.plan.stages[i];
         let stage_dir = self.run_dir.join(&stage.name);
+        let pending_dir = self.run_dir.join(PENDING_DIR).join(&stage.name);
         let seed = stage_seed(self.plan.seed, &stage.name);
         let inputs = match self.input_hashes(stage, done) {
             Ok(inputs) => inputs,
@@ -212,15 +266,34 @@ impl Executor<'_> {
             inputs: &inputs,
         };
         let key_hash = key.hash();
+        if self.forced(stage) {
+            return self.run_or_not(stage, done, seed, key_hash, inputs, vec!["--force".into()]);
+        }
         let previous = read_record(&stage_dir);
-        let decision = match self.forced(stage) {
-            true => Decision::Run(vec!["--force".into()]),
-            false => decide(&key, &key_hash, previous.as_ref(), &stage_dir),
+        let why = match decide(&key, &key_hash, previous.as_ref(), &stage_dir) {
+            Decision::Cached => return Ok(outcome(stage, Status::Cached, String::new(), previous, stage_dir)),
+            Decision::Run(why) => why,
         };
-        match (decision, self.opts.dry_run) {
-            (Decision::Cached, _) => self.cached(stage, previous.expect("cached implies a record")),
-            (Decision::Run(why), true) => Ok(self.would_run(stage, why)),
-            (Decision::Run(why), false) => self.execute(stage, &stage_dir, seed, key_hash, inputs, why.join("; ")),
+        let pending = read_record(&pending_dir);
+        if decide(&key, &key_hash, pending.as_ref(), &pending_dir) == Decision::Cached {
+            let why = "finished in an earlier run that did not complete".to_string();
+            return Ok(outcome(stage, Status::Resumed, why, pending, pending_dir));
+        }
+        self.run_or_not(stage, done, seed, key_hash, inputs, why)
+    }
+
+    fn run_or_not(
+        &self,
+        stage: &PlannedStage,
+        done: &[Option<Outcome>],
+        seed: u64,
+        key_hash: String,
+        inputs: BTreeMap<String, String>,
+        why: Vec<String>,
+    ) -> Result<Outcome, RunError> {
+        match self.opts.dry_run {
+            true => Ok(self.would_run(stage, why)),
+            false => self.execute(stage, done, seed, key_hash, inputs, why.join("; ")),
         }
     }
 
@@ -248,18 +321,15 @@ impl Executor<'_> {
     }
 
     fn would_run(&self, stage: &PlannedStage, why: Vec<String>) -> Outcome {
-        Outcome { line: line(stage, Status::WouldRun, why.join("; "), 0.0), record: None, published: BTreeMap::new() }
+        outcome(stage, Status::WouldRun, why.join("; "), None, PathBuf::new())
     }
 
-    fn cached(&self, stage: &PlannedStage, record: StageRecord) -> Result<Outcome, RunError> {
-        let published = if self.opts.dry_run { BTreeMap::new() } else { self.publish(stage, &record)? };
-        Ok(Outcome { line: line(stage, Status::Cached, String::new(), 0.0), record: Some(record), published })
-    }
-
+    /// Runs the stage into a staging folder that becomes its pending folder when it
+    /// succeeds; on failure the staging folder is removed and nothing else changes.
     fn execute(
         &self,
         stage: &PlannedStage,
-        stage_dir: &Path,
+        done: &[Option<Outcome>],
         seed: u64,
         key_hash: String,
         input_hashes: BTreeMap<String, String>,
@@ -271,11 +341,12 @@ impl Executor<'_> {
             let path = path.to_path_buf();
             move |source| RunError::Io { path, source }
         };
-        let staged = staging_dir(stage_dir).map_err(io(stage_dir))?;
+        let pending_dir = self.run_dir.join(PENDING_DIR).join(&stage.name);
+        let staged = staging_dir(&pending_dir).map_err(io(&pending_dir))?;
         let mut ctx = StageContext {
             stage: stage.name.clone(),
             params: stage.params.clone(),
-            inputs: self.input_artifacts(stage),
+            inputs: self.input_artifacts(stage, done),
             seed,
             stage_hash: key_hash.clone(),
             params_hash: sha256_hex(serde_json::to_string(&stage.params).expect("serialisable").as_bytes()),
@@ -284,49 +355,57 @@ impl Executor<'_> {
             progress: self.progress.clone(),
         };
         let started = Instant::now();
-        if let Err(e) = self.run_kind(stage, &mut ctx) {
+        let record = self.run_kind(stage, &mut ctx).map_err(fail).and_then(|()| {
+            let wall_time_s = started.elapsed().as_secs_f64();
+            let (output_hash, files) = dir_hash(&staged).map_err(io(&staged))?;
+            let record = StageRecord {
+                stage: stage.name.clone(),
+                kind: stage.kind.to_string(),
+                kind_version: stage.kind_version,
+                tool_version: TOOL_VERSION.to_string(),
+                key_hash,
+                params: stage.params.clone(),
+                seed,
+                input_hashes,
+                output_hash,
+                outputs: files.into_iter().map(|(path, sha256)| OutputFile { path, sha256 }).collect(),
+                rows: ctx.rows,
+                wall_time_s,
+            };
+            let json = serde_json::to_vec_pretty(&record).expect("serialisable");
+            crate::artifact::write_atomic(&staged.join(RECORD_FILE), &json).map_err(fail)?;
+            replace_dir(&staged, &pending_dir).map_err(io(&pending_dir))?;
+            Ok(record)
+        });
+        let record = record.inspect_err(|_| {
             let _ = std::fs::remove_dir_all(&staged);
-            return Err(fail(e));
-        }
-        let wall_time_s = started.elapsed().as_secs_f64();
-        let (output_hash, files) = dir_hash(&staged).map_err(io(&staged))?;
-        let record = StageRecord {
-            stage: stage.name.clone(),
-            kind: stage.kind.to_string(),
-            kind_version: stage.kind_version,
-            tool_version: TOOL_VERSION.to_string(),
-            key_hash,
-            params: stage.params.clone(),
-            seed,
-            input_hashes,
-            output_hash,
-            outputs: files.into_iter().map(|(path, sha256)| OutputFile { path, sha256 }).collect(),
-            rows: ctx.rows,
-            wall_time_s,
-        };
-        let json = serde_json::to_vec_pretty(&record).expect("serialisable");
-        write_atomic(&staged.join(RECORD_FILE), &json).map_err(fail)?;
-        replace_dir(&staged, stage_dir).map_err(io(stage_dir))?;
-        let published = self.publish(stage, &record)?;
-        Ok(Outcome { line: line(stage, Status::Ran, reason, wall_time_s), record: Some(record), published })
+        })?;
+        let wall_time_s = record.wall_time_s;
+        Ok(outcome(stage, Status::Ran, reason, Some(record), pending_dir).timed(wall_time_s))
     }
 
-    /// Runs the kind; a spinner appears if it is still running after a second.
+    /// Runs the kind, a panic becoming its error; a spinner appears if it is still
+    /// running after a second, and stops however the kind ends.
     fn run_kind(&self, stage: &PlannedStage, ctx: &mut StageContext) -> Result<(), StageError> {
         let kind = self.registry.get(stage.kind).expect("planned kinds are registered");
+        let run = |ctx: &mut StageContext| {
+            crate::panic::catch(|| kind.run(ctx)).unwrap_or_else(|m| Err(StageError::Panic(m)))
+        };
         let Some(multi) = &self.progress else {
-            return kind.run(ctx);
+            return run(ctx);
         };
         let (done_tx, done_rx) = mpsc::channel::<()>();
         std::thread::scope(|scope| {
             scope.spawn(|| spinner_after_a_second(multi, &stage.name, done_rx));
-            let result = kind.run(ctx);
-            let _ = done_tx.send(());
+            let result = run(ctx);
+            drop(done_tx);
             result
         })
     }
 
-    fn input_artifacts(&self, stage: &PlannedStage) -> Vec<InputArtifact> {
+    /// The input folders: datasets, and upstream outputs where they are in this run
+    /// (pending if the upstream ran or resumed).
+    fn input_artifacts(&self, stage: &PlannedStage, done: &[Option<Outcome>]) -> Vec<InputArtifact> {
         stage
             .inputs
             .iter()
@@ -334,45 +413,144 @@ impl Executor<'_> {
                 name: self.plan.input_name(*input).to_string(),
                 dir: match input {
                     InputRef::Dataset(d) => self.plan.datasets[*d].dir.clone(),
-                    InputRef::Stage(j) => self.run_dir.join(&self.plan.stages[*j].name),
+                    InputRef::Stage(j) => done[*j].as_ref().expect("upstream ran in an earlier wave").dir.clone(),
                 },
             })
             .collect()
     }
 
-    /// Copies the stage's published outputs to their stable paths, unless a copy with
-    /// the same content is already there.
-    fn publish(&self, stage: &PlannedStage, record: &StageRecord) -> Result<BTreeMap<String, PathBuf>, RunError> {
-        let stage_dir = self.run_dir.join(&stage.name);
+    /// Commits the run: pending stage folders into place, changed published copies
+    /// and the manifest, all written in full before the first rename.
+    fn commit(&self, outcomes: &[Outcome], wall_time_s: f64) -> Result<PathBuf, RunError> {
+        let mut moves: Vec<Move> = outcomes
+            .iter()
+            .filter(|o| matches!(o.line.status, Status::Ran | Status::Resumed))
+            .map(|o| Move { from: o.dir.clone(), to: self.run_dir.join(&o.line.stage), folder: true })
+            .collect();
+        let written = self.stage_new_files(outcomes, wall_time_s, &mut moves);
+        let manifest_path = written.inspect_err(|_| discard_files(&moves))?;
+        commit(&self.run_dir, &moves).inspect_err(|_| discard_files(&moves))?;
+        Ok(manifest_path)
+    }
+
+    /// Writes the changed published copies and the manifest as temp files, adding
+    /// their renames to `moves`; returns the manifest's final path.
+    fn stage_new_files(
+        &self,
+        outcomes: &[Outcome],
+        wall_time_s: f64,
+        moves: &mut Vec<Move>,
+    ) -> Result<PathBuf, RunError> {
+        let mut stages = Vec::with_capacity(outcomes.len());
+        for o in outcomes {
+            let record = o.record.clone().expect("non-dry runs record every stage");
+            let published = self.stage_published(o, &record, moves)?;
+            stages.push(ManifestStage {
+                record,
+                status: o.line.status.manifest_word().into(),
+                reason: o.line.reason.clone(),
+                this_run_wall_time_s: o.line.wall_time_s,
+                published,
+            });
+        }
+        let path = self.run_dir.join("manifest.json");
+        let json = serde_json::to_vec_pretty(&self.manifest(stages, wall_time_s)?).expect("serialisable");
+        let tmp = temp_sibling(&path);
+        write_synced(&tmp, |f| std::io::Write::write_all(f, &json).map_err(|e| StageError::io(&tmp, e)))
+            .map_err(|e| run_io(&tmp, e))?;
+        moves.push(Move { from: tmp, to: path.clone(), folder: false });
+        Ok(path)
+    }
+
+    /// Copies each published output whose copy differs to a temp file beside it.
+    fn stage_published(
+        &self,
+        o: &Outcome,
+        record: &StageRecord,
+        moves: &mut Vec<Move>,
+    ) -> Result<BTreeMap<String, PathBuf>, RunError> {
+        let stage = &self.plan.stages[self.plan.stage_index(&o.line.stage).expect("planned stage")];
+        let fail = |source| RunError::Stage { stage: stage.name.clone(), kind: stage.kind.to_string(), source };
         let mut published = BTreeMap::new();
         for (from, to) in &stage.publish {
-            let Some(output) = record.outputs.iter().find(|o| o.path == Path::new(from)) else {
+            let Some(output) = record.outputs.iter().find(|f| f.path == Path::new(from)) else {
                 let expected = format!("stage publishes `{from}` but did not write it");
-                let source = StageError::BadInput { file: stage_dir.join(from), location: None, expected };
-                return Err(RunError::Stage { stage: stage.name.clone(), kind: stage.kind.to_string(), source });
+                return Err(fail(StageError::BadInput { file: o.dir.join(from), location: None, expected }));
             };
             let dst = self.opts.out_dir.join(to);
             if file_sha256(&dst).ok().as_deref() != Some(output.sha256.as_str()) {
-                copy_atomic(&stage_dir.join(from), &dst).map_err(|source| RunError::Stage {
-                    stage: stage.name.clone(),
-                    kind: stage.kind.to_string(),
-                    source,
-                })?;
+                let tmp = temp_sibling(&dst);
+                copy_synced(&o.dir.join(from), &tmp).map_err(fail)?;
+                moves.push(Move { from: tmp, to: dst, folder: false });
             }
             published.insert(from.clone(), to.clone());
         }
         Ok(published)
     }
+
+    fn manifest(&self, stages: Vec<ManifestStage>, wall_time_s: f64) -> Result<Manifest, RunError> {
+        let spec_file = &self.plan.spec_file;
+        let spec_sha256 = file_sha256(spec_file).map_err(|source| RunError::Io { path: spec_file.clone(), source })?;
+        Ok(Manifest {
+            tool_version: TOOL_VERSION.to_string(),
+            run: self.plan.run_name.clone(),
+            title: self.plan.title.clone(),
+            spec_file: spec_file.clone(),
+            spec_sha256,
+            finished_unix_s: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+            wall_time_s,
+            stages,
+        })
+    }
+}
+
+/// Removes the temp files of a commit that will not happen.
+fn discard_files(moves: &[Move]) {
+    for mv in moves.iter().filter(|mv| !mv.folder) {
+        let _ = std::fs::remove_file(&mv.from);
+    }
+}
+
+fn run_io(path: &Path, e: StageError) -> RunError {
+    match e {
+        StageError::Io { path, source } => RunError::Io { path, source },
+        other => RunError::Io { path: path.to_path_buf(), source: std::io::Error::other(other.to_string()) },
+    }
+}
+
+fn outcome(stage: &PlannedStage, status: Status, reason: String, record: Option<StageRecord>, dir: PathBuf) -> Outcome {
+    Outcome { line: line(stage, status, reason, 0.0), record, dir }
+}
+
+impl Outcome {
+    fn timed(mut self, wall_time_s: f64) -> Self {
+        self.line.wall_time_s = wall_time_s;
+        self
+    }
+}
+
+impl Status {
+    /// The word for the manifest's `status`.
+    fn manifest_word(&self) -> &'static str {
+        match self {
+            Self::Ran => "run",
+            Self::Cached => "cached",
+            Self::Resumed => "resumed",
+            Self::WouldRun => "would run",
+        }
+    }
 }
 
 fn spinner_after_a_second(multi: &indicatif::MultiProgress, name: &str, done: mpsc::Receiver<()>) {
-    if done.recv_timeout(Duration::from_secs(1)).is_ok() {
+    if done.recv_timeout(Duration::from_secs(1)) != Err(mpsc::RecvTimeoutError::Timeout) {
         return;
     }
     let spinner = multi.add(indicatif::ProgressBar::new_spinner());
     spinner.set_style(indicatif::ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template"));
     spinner.set_message(format!("running {name}"));
-    while done.recv_timeout(Duration::from_millis(120)).is_err() {
+    while done.recv_timeout(Duration::from_millis(120)) == Err(mpsc::RecvTimeoutError::Timeout) {
         spinner.tick();
     }
     spinner.finish_and_clear();
@@ -395,38 +573,7 @@ fn format_line(line: &StageLine) -> String {
             format!("  ran      {:<24} {:<26} {:>7.2} s  ({})", line.stage, line.kind, line.wall_time_s, line.reason)
         }
         Status::Cached => format!("  cached   {:<24} {}", line.stage, line.kind),
+        Status::Resumed => format!("  resumed  {:<24} {:<26} ({})", line.stage, line.kind, line.reason),
         Status::WouldRun => format!("  would run {:<23} {:<26} because {}", line.stage, line.kind, line.reason),
     }
-}
-
-fn write_manifest(plan: &Plan, run_dir: &Path, outcomes: &[Outcome], wall_time_s: f64) -> Result<PathBuf, RunError> {
-    let spec_sha256 =
-        file_sha256(&plan.spec_file).map_err(|source| RunError::Io { path: plan.spec_file.clone(), source })?;
-    let stages = outcomes
-        .iter()
-        .map(|o| ManifestStage {
-            record: o.record.clone().expect("non-dry runs record every stage"),
-            status: if o.line.status == Status::Ran { "run" } else { "cached" }.into(),
-            reason: o.line.reason.clone(),
-            this_run_wall_time_s: o.line.wall_time_s,
-            published: o.published.clone(),
-        })
-        .collect();
-    let manifest = Manifest {
-        tool_version: TOOL_VERSION.to_string(),
-        run: plan.run_name.clone(),
-        title: plan.title.clone(),
-        spec_file: plan.spec_file.clone(),
-        spec_sha256,
-        finished_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs()),
-        wall_time_s,
-        stages,
-    };
-    let path = run_dir.join("manifest.json");
-    let json = serde_json::to_vec_pretty(&manifest).expect("serialisable");
-    write_atomic(&path, &json).map_err(|e| match e {
-        StageError::Io { path, source } => RunError::Io { path, source },
-        other => RunError::Io { path: path.clone(), source: std::io::Error::other(other.to_string()) },
-    })?;
-    Ok(path)
 }

@@ -5,23 +5,30 @@
 //! (names, inputs, cycles, parameter types and ranges), and executes the plan
 //! ([`execute`]): independent stages in parallel with rayon, each cached by a content
 //! hash of (kind, kind version, parameters, seed, input hashes), every artifact
-//! written atomically, and a run manifest written last (DESIGN §3).
+//! written atomically, one run per out folder at a time ([`lock`]), and what readers
+//! see changed only when the whole run succeeded ([`commit`]), the manifest last
+//! (DESIGN §3).
 #![deny(missing_docs)]
 
 pub mod artifact;
 pub mod cache;
+pub mod commit;
 pub mod error;
 pub mod execute;
 pub mod graph;
 pub mod hash;
+pub mod lock;
 pub mod manifest;
+pub mod panic;
 pub mod params;
 pub mod plan;
 pub mod spec;
 pub mod stage;
+pub mod testing;
 
 pub use error::{SpecError, StageError};
-pub use execute::{run_plan, RunOptions, RunSummary};
+pub use execute::{open_out_dir, run_plan, run_plan_locked, RunOptions, RunSummary};
+pub use lock::OutLock;
 pub use manifest::{Manifest, StageRecord};
 pub use params::{ParamSpec, ParamType, ParamValue, Params};
 pub use plan::Plan;

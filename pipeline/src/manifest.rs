@@ -83,27 +83,63 @@ pub struct Manifest {
     pub stages: Vec<ManifestStage>,
 }
 
+/// The manifests under an out folder: those that could be read, and those that
+/// could not (a corrupt file must not stop the report of every other run).
+#[derive(Debug, Default)]
+pub struct Manifests {
+    /// Readable manifests, sorted by run name.
+    pub runs: Vec<Manifest>,
+    /// `(file, why)` of each manifest that could not be read.
+    pub unreadable: Vec<(PathBuf, String)>,
+}
+
 impl Manifest {
-    /// Reads a manifest file.
+    /// Reads a manifest file; the error names the file and, for bad JSON, the line
+    /// and column.
     pub fn read(path: &Path) -> std::io::Result<Self> {
-        let text = std::fs::read_to_string(path)?;
-        serde_json::from_str(&text).map_err(std::io::Error::other)
+        let named = |what: String| std::io::Error::other(format!("{}: {what}", path.display()));
+        let text = std::fs::read_to_string(path).map_err(|e| named(e.to_string()))?;
+        serde_json::from_str(&text).map_err(|e| named(format!("not a readable run manifest ({e})")))
     }
 
-    /// Every `runs/*/manifest.json` under the out folder, sorted by run name.
-    pub fn read_all(out_dir: &Path) -> std::io::Result<Vec<Self>> {
+    /// Every `runs/*/manifest.json` under the out folder, sorted by run name, and
+    /// those that could not be read.
+    pub fn read_all(out_dir: &Path) -> std::io::Result<Manifests> {
         let runs = out_dir.join("runs");
+        let mut found = Manifests::default();
         if !runs.exists() {
-            return Ok(Vec::new());
+            return Ok(found);
         }
-        let mut manifests = Vec::new();
         for entry in std::fs::read_dir(&runs)? {
             let path = entry?.path().join("manifest.json");
-            if path.exists() {
-                manifests.push(Self::read(&path)?);
+            if !path.exists() {
+                continue;
+            }
+            match Self::read(&path) {
+                Ok(manifest) => found.runs.push(manifest),
+                Err(e) => found.unreadable.push((path, e.to_string())),
             }
         }
-        manifests.sort_by(|a, b| a.run.cmp(&b.run));
-        Ok(manifests)
+        found.runs.sort_by(|a, b| a.run.cmp(&b.run));
+        found.unreadable.sort();
+        Ok(found)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_corrupt_manifest_is_named_and_set_aside() {
+        let dir = tempfile::tempdir().unwrap();
+        let bad = dir.path().join("runs/broken/manifest.json");
+        std::fs::create_dir_all(bad.parent().unwrap()).unwrap();
+        std::fs::write(&bad, "{\n  \"tool_version\": ").unwrap();
+        let found = Manifest::read_all(dir.path()).unwrap();
+        assert!(found.runs.is_empty());
+        let (path, why) = &found.unreadable[0];
+        assert_eq!(path, &bad);
+        assert!(why.contains(&bad.display().to_string()) && why.contains("line 2"), "{why}");
     }
 }

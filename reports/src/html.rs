@@ -24,19 +24,33 @@ table{border-collapse:collapse;margin:1em 0;font-size:13px}td,th{border:1px soli
 th{background:#f2f6fa}td.t,th.t{text-align:left}figure{margin:1.5em 0}img{max-width:100%;border:1px solid #eee}\
 figcaption{font-size:13px;color:#555}.run{color:#666;font-size:13px}.cached{color:#888}code{background:#f5f5f5;padding:0 3px}";
 
-/// Writes `out_dir/report/index.html` from all manifests; returns its path.
-pub fn write_report(out_dir: &Path) -> Result<PathBuf, StageError> {
-    let manifests = Manifest::read_all(out_dir).map_err(|e| StageError::io(out_dir.join("runs"), e))?;
+/// The report written, and the manifests it had to leave out.
+#[derive(Debug)]
+pub struct WrittenReport {
+    /// `out/report/index.html`.
+    pub path: PathBuf,
+    /// `(manifest file, why)` of each run left out because its manifest is unreadable.
+    pub skipped: Vec<(PathBuf, String)>,
+}
+
+/// Writes `out_dir/report/index.html` from all readable manifests; a run whose
+/// manifest cannot be read is left out and named, in the report and the result.
+pub fn write_report(out_dir: &Path) -> Result<WrittenReport, StageError> {
+    let found = Manifest::read_all(out_dir).map_err(|e| StageError::io(out_dir.join("runs"), e))?;
+    let manifests = &found.runs;
     let mut html = format!("<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>amrepro report</title><style>{CSS}</style></head><body>\n<h1>amrepro report</h1>\n");
     let _ = writeln!(html, "<p>Runs found under <code>{}</code>: {}. Every number below names the run and stage it comes from; the published tables are the Parquet files listed (see docs/OUTPUTS.md).</p>", escape(&out_dir.display().to_string()), manifests.len());
-    html += &contents(&manifests);
-    for manifest in &manifests {
+    for (_, why) in &found.unreadable {
+        let _ = writeln!(html, "<p><strong>Left out:</strong> {} (rerun that spec to rewrite it).</p>", escape(why));
+    }
+    html += &contents(manifests);
+    for manifest in manifests {
         html += &run_section(out_dir, manifest)?;
     }
     html += "</body></html>\n";
     let path = out_dir.join("report").join("index.html");
     write_atomic(&path, html.as_bytes())?;
-    Ok(path)
+    Ok(WrittenReport { path, skipped: found.unreadable })
 }
 
 fn contents(manifests: &[Manifest]) -> String {

@@ -14,7 +14,7 @@
 //! `detections_example.parquet`, `frame_example_meta.parquet`, `mosaic.parquet`) and,
 //! optionally, a stage holding the CAD polygon `path.parquet` (`thermal.reprint`).
 
-use std::collections::HashSet;
+use std::collections::BTreeSet;
 use std::path::Path;
 
 use polars::prelude::DataFrame;
@@ -194,10 +194,11 @@ pub fn load(dir: &Path, band_c: (f64, f64)) -> Result<FrameData, StageError> {
 
 /// The pixel edges that bound the set of pixels whose temperature lies in `band_c`:
 /// each edge between a band pixel and a non-band (or absent) neighbour, as two end
-/// points in (u, v) pixel coordinates. Together they outline the band.
+/// points in (u, v) pixel coordinates. Together they outline the band, in an order that
+/// depends only on the set of band pixels (so the SVG is byte-reproducible).
 pub fn band_outline(frame: &[Cell], band_c: (f64, f64)) -> Vec<[(f64, f64); 2]> {
     let key = |c: &Cell| (c.x.round() as i64, c.y.round() as i64);
-    let inside: HashSet<(i64, i64)> =
+    let inside: BTreeSet<(i64, i64)> =
         frame.iter().filter(|c| c.temp_c >= band_c.0 && c.temp_c <= band_c.1).map(key).collect();
     let mut edges = Vec::new();
     for &(u, v) in &inside {
@@ -210,7 +211,10 @@ pub fn band_outline(frame: &[Cell], band_c: (f64, f64)) -> Vec<[(f64, f64); 2]> 
         ];
         edges.extend(sides.iter().filter(|(n, _)| !inside.contains(n)).map(|(_, e)| *e));
     }
-    edges.sort_by(|a, b| a[0].1.total_cmp(&b[0].1).then(a[0].0.total_cmp(&b[0].0)));
+    let row_major = |e: &[(f64, f64); 2]| [e[0].1, e[0].0, e[1].1, e[1].0];
+    edges.sort_by(|a, b| {
+        row_major(a).iter().zip(row_major(b).iter()).fold(std::cmp::Ordering::Equal, |o, (x, y)| o.then(x.total_cmp(y)))
+    });
     edges
 }
 
@@ -343,6 +347,22 @@ mod tests {
         let length: f64 = edges.iter().map(|e| (e[1].0 - e[0].0).hypot(e[1].1 - e[0].1)).sum();
         assert!((length - 10.0).abs() < 1e-12);
         assert!(band_outline(&frame, (0.0, 10.0)).is_empty());
+    }
+
+    #[test]
+    fn band_outline_order_depends_only_on_the_band() {
+        // A checkerboard: diagonal band pixels share corners, so edges tie on their start.
+        let frame: Vec<Cell> = (0..12)
+            .flat_map(|v| (0..12).map(move |u| (u, v)))
+            .map(|(u, v)| Cell { x: u as f64, y: v as f64, temp_c: if (u + v) % 2 == 0 { 145.0 } else { 200.0 } })
+            .collect();
+        let edges = band_outline(&frame, (140.0, 150.0));
+        assert_eq!(edges.len(), 72 * 4);
+        let mut reversed = frame.clone();
+        reversed.reverse();
+        for _ in 0..8 {
+            assert!(band_outline(&reversed, (140.0, 150.0)) == edges, "the same edges in the same order");
+        }
     }
 
     #[test]
