@@ -162,12 +162,11 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
         })
         .collect();
     let shot_of: BTreeMap<(usize, usize), &Shot> = jobs.iter().map(|(l, f)| (*l, f.frame)).zip(&shots).collect();
-    let staged = out_dir;
     let nozzle_px = camera::project_px(&true_mount.pose([0.0, 0.0]), &intrinsics, &distortion, [0.0, 0.0])
         .expect("the nozzle is in front of the camera");
-    write_description(&staged, config, &setup, &trajectory, &intrinsics, &distortion, nozzle_px)?;
-    let (frames, corners) = write_frames(&staged, &schedules, &shot_of)?;
-    write_truth(&staged, &setup, &trajectory, &deposits, &heats, &true_mount, &config.effects, &schedules, &shot_of)?;
+    write_description(out_dir, config, &setup, &trajectory, &intrinsics, &distortion, nozzle_px)?;
+    let (frames, corners) = write_frames(out_dir, &schedules, &shot_of)?;
+    write_truth(out_dir, &setup, &trajectory, &deposits, &heats, &true_mount, &config.effects, &schedules, &shot_of)?;
     let repeated_frames = schedules.iter().flatten().filter(|f| f.source != f.frame).count();
     Ok(GenerateSummary {
         layers,
