@@ -44,7 +44,7 @@ FUZZ_SECONDS ?= 180
 FUZZ_TARGETS := fdm_widths inkjet_scans thermal_sequence thermal_truth fsu_raw png_frame
 fuzz:
 	cd fuzz && for t in $(FUZZ_TARGETS); do \
-		cargo +nightly fuzz run $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) || exit 1; done
+		cargo +nightly fuzz run -O $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) || exit 1; done
 
 ## docs: regenerate docs/STAGES.md from the registry
 docs: build

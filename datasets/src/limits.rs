@@ -23,6 +23,11 @@ pub const GRID_SIDE_CELLS: RangeInclusive<usize> = 1..=2048;
 /// layers; the monitor walks every layer the frames name.
 pub const THERMAL_LAYERS: RangeInclusive<usize> = 1..=10_000;
 
+/// Open-loop layers of a generated `inkjet-scans` print (`--layers`). At most 1000:
+/// 250 × the cuboid of Sec. V-D-1 (4 layers); the pipe junction's 100 × 100 grid then
+/// keeps its scans, truth and patterns in about 250 MB.
+pub const INKJET_LAYERS: RangeInclusive<usize> = 1..=1000;
+
 /// Largest distance of a `thermal-sequence` position (`path.csv`, `trajectory.csv`)
 /// from the origin along x or y (mm): a 1 m bed centred on the origin. It bounds the
 /// grids the analysis lays over the part (the monitor's mosaic at 0.1 mm).
@@ -54,6 +59,18 @@ pub fn check_size(file: &Path, field: &str, value: usize, range: &RangeInclusive
 /// `truth/deposit_L*.png`. At most 8192 (164 mm, 4 × the paper's corner test part):
 /// the printer keeps about 16 bytes per cell, 1 GB at this size.
 pub const DEPOSIT_SIDE_CELLS: RangeInclusive<usize> = 1..=8192;
+
+/// An error unless the command-line option `name` (`--layers`) lies in `range`.
+pub fn check_option(name: &str, value: usize, range: &RangeInclusive<usize>) -> Result<(), DatasetError> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    Err(DatasetError::Malformed {
+        file: name.into(),
+        location: None,
+        expected: format!("expected {} to {}, got {value}", range.start(), range.end()),
+    })
+}
 
 /// What a number read from a TOML file must be (TOML also spells `nan` and `inf`).
 #[derive(Debug, Clone, Copy, PartialEq)]

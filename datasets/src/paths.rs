@@ -24,9 +24,10 @@ pub fn check_dataset_folder(dir: &Path) -> Result<(), DatasetError> {
             location: None,
             expected: "is a file, expected a dataset folder".into(),
         }),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            Err(DatasetError::Missing { file: dir.to_path_buf(), hint: Some("expected a dataset folder".into()) })
-        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(DatasetError::Missing {
+            file: dir.to_path_buf(),
+            hint: Some("expected a dataset folder holding a dataset.toml (docs/DATASETS.md)".into()),
+        }),
         Err(e) => Err(DatasetError::io(dir, e)),
     }
 }

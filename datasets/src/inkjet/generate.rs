@@ -14,6 +14,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::format::{GridToml, InkjetScans, ProfilerToml, FORMAT_VERSION, KIND, READABLE_VERSIONS};
 use crate::error::DatasetError;
+use crate::limits::{check_option, INKJET_LAYERS};
 use crate::manifest::{DatasetManifest, Provenance};
 use crate::output::{OutputDir, Ownership};
 
@@ -107,6 +108,7 @@ pub fn generate(opts: &GenerateOptions) -> Result<(InkjetScans, Vec<Vec<f64>>), 
         Scenario::PipeJunction => pipe_junction(p),
     };
     if let Some(layers) = opts.open_loop_layers {
+        check_option("--layers", layers.max(1), &INKJET_LAYERS)?;
         scenario.open_loop_layers = layers.max(1);
     }
     scenario.truth.effects = opts.effects;
@@ -269,6 +271,14 @@ mod tests {
         assert!(err.to_string().contains("refusing"), "{err}");
         assert!(dir.path().join("precious.txt").is_file());
         assert!(matches!(Scenario::parse("sphere"), Err(GenerateError::UnknownScenario(_))));
+    }
+
+    #[test]
+    fn a_layer_count_beyond_the_bound_is_refused_before_printing() {
+        let opts =
+            GenerateOptions { open_loop_layers: Some(usize::MAX), ..options(ControlLaw::OpenLoop, Effects::none()) };
+        let err = generate(&opts).unwrap_err().to_string();
+        assert_eq!(err, format!("--layers: expected 1 to 1000, got {}", usize::MAX));
     }
 
     #[test]

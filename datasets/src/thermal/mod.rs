@@ -34,7 +34,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::error::DatasetError;
-use crate::limits::{check_size, THERMAL_LAYERS};
+use crate::limits::{check_option, THERMAL_LAYERS};
 use crate::manifest::{DatasetManifest, Provenance, MANIFEST_FILE};
 use crate::output::{write_file, OutputDir, Ownership};
 use camera::{Distortion, FrameCapture, Intrinsics, Mount, Pose, HEIGHT_PX, WIDTH_PX};
@@ -118,7 +118,7 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
         expected: format!("virtual printer: {e}"),
     };
     let layers = config.layers.max(1);
-    check_size(Path::new("--layers"), "layers", layers, &THERMAL_LAYERS)?;
+    check_option("--layers", layers, &THERMAL_LAYERS)?;
     let setup = PrintSetup::paper_defaults();
     let trajectory = Trajectory::corner_test(&setup).map_err(model_error)?;
     let v_e = conventional_command(&setup, &trajectory);
@@ -568,6 +568,14 @@ mod tests {
         let mean_abs = temps_c.iter().zip(&noisy).map(|(a, b)| (a - b).abs()).sum::<f64>() / temps_c.len() as f64;
         assert!((mean_abs - 0.05 * (2.0 / std::f64::consts::PI).sqrt()).abs() < 0.005, "{mean_abs}");
         assert!(temps_c.iter().cloned().fold(0.0, f64::max) > 200.0, "fresh material is in view");
+    }
+
+    #[test]
+    fn a_layer_count_beyond_the_bound_is_refused_before_printing() {
+        let out = tempfile::tempdir().unwrap();
+        let config = GenerateConfig { layers: 1_000_000_000, ..GenerateConfig::default() };
+        let err = generate_into(&config, out.path()).unwrap_err().to_string();
+        assert_eq!(err, "--layers: expected 1 to 10000, got 1000000000");
     }
 
     #[test]
