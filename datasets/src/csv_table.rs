@@ -149,6 +149,16 @@ mod tests {
     }
 
     #[test]
+    fn a_column_named_twice_or_unnamed_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "t.csv", "id,x,id\na,1,b\n");
+        let err = CsvTable::read(&path).unwrap_err().to_string();
+        assert!(err.contains("t.csv:line 1: expected unique column names, got `id` twice"), "{err}");
+        let path = write(dir.path(), "u.csv", "id,,x\na,1,2\n");
+        assert!(CsvTable::read(&path).unwrap_err().to_string().contains("an empty column name"));
+    }
+
+    #[test]
     fn a_byte_order_mark_before_the_header_is_not_part_of_the_first_column() {
         // Spreadsheet exports start with U+FEFF; it used to become part of the first
         // column's name, so `expected a column `id` in the header (id,…)` looked contradictory.

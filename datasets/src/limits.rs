@@ -29,9 +29,10 @@ pub const THERMAL_LAYERS: RangeInclusive<usize> = 1..=10_000;
 pub const INKJET_LAYERS: RangeInclusive<usize> = 1..=1000;
 
 /// Largest distance of a `thermal-sequence` position (`path.csv`, `trajectory.csv`)
-/// from the origin along x or y (mm): a 1 m bed centred on the origin. It bounds the
-/// grids the analysis lays over the part (the monitor's mosaic at 0.1 mm).
-pub const MAX_COORDINATE_MM: f64 = 500.0;
+/// from the origin along x or y (mm): a 300 mm bed with the origin at its centre or a
+/// corner (the paper's part spans 40 mm). It bounds the grids the analysis lays over
+/// the part: the monitor's 0.1 mm mosaic stays under 40 M cells (300 MB).
+pub const MAX_COORDINATE_MM: f64 = 300.0;
 
 /// Longest time a camera may film after the trajectory's last sample and still belong
 /// to the layer (s): the layer change (travel and z move; 1 s on the virtual printer)

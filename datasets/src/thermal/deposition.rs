@@ -674,6 +674,19 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_part_too_large_for_the_deposit_grid_is_refused_before_the_grid_is_allocated() {
+        // 300 mm at 0.02 mm cells is 15 300 cells per side (about 4 GB of state).
+        let setup = PrintSetup::paper_defaults();
+        let t: Vec<f64> = (0..100).map(|k| k as f64 * setup.sample_period_s).collect();
+        let x: Vec<f64> = (0..100).map(|k| k as f64 * 3.0).collect();
+        let trajectory = Trajectory::from_samples(&t, &x, &vec![0.0; 100]).unwrap();
+        let v_e = conventional_command(&setup, &trajectory);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let err = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap_err().to_string();
+        assert!(err.contains("the virtual printer prints parts up to 8192 cells per side"), "{err}");
+    }
+
+    #[test]
     fn straight_edge_has_the_nominal_width() {
         // Mid left side (x = 0, after a gentle corner taken at full speed) the flow has
         // settled and eq. 3 gives the bead width w = E/(h|v|) = bead_width × flow factor.

@@ -676,7 +676,7 @@ mod tests {
                 "0.005,0.2",
                 "trajectory.csv:line 3, field t_s: expected the step of sample_period_s = 0.01 s",
             ),
-            ("path.csv", "1,4,0", "1,4e6,0", "path.csv:line 3, field x_mm: expected a position within ±500 mm"),
+            ("path.csv", "1,4,0", "1,4e6,0", "path.csv:line 3, field x_mm: expected a position within ±300 mm"),
         ];
         for (file, from, to, expected) in cases {
             let err = open_error(&[(file, from, to)]);
