@@ -11,7 +11,7 @@ OUT ?= out
 BIN := $(CARGO_TARGET_DIR)/release/amrepro
 SPECS := $(sort $(wildcard specs/*.toml))
 
-.PHONY: run build test check lint bench docs clean
+.PHONY: run build test check lint bench docs fuzz clean
 
 ## run: build, run every shipped spec into $(OUT)/, print where the report is
 run: build
@@ -38,6 +38,13 @@ $(VENV)/.installed: requirements-test.txt
 ## bench: criterion benchmarks of the hot paths
 bench:
 	cargo bench --workspace
+
+## fuzz: every cargo-fuzz target for FUZZ_SECONDS each (nightly + cargo-fuzz; fuzz/README.md)
+FUZZ_SECONDS ?= 180
+FUZZ_TARGETS := fdm_widths inkjet_scans thermal_sequence thermal_truth fsu_raw png_frame
+fuzz:
+	cd fuzz && for t in $(FUZZ_TARGETS); do \
+		cargo +nightly fuzz run -O $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) || exit 1; done
 
 ## docs: regenerate docs/STAGES.md from the registry
 docs: build

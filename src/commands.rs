@@ -168,6 +168,9 @@ fn import_fsu(args: FsuImportArgs) -> Result<()> {
         Some(name) => vec![FsuPrinter::parse(name).expect("clap checked the value")],
         None => FsuPrinter::ALL.to_vec(),
     };
+    if args.src.is_file() {
+        bail!("{}: is a file, expected the folder holding taz5/ and taz6/. {}", args.src.display(), fsu::SOURCE_HINT);
+    }
     if !args.src.is_dir() {
         bail!("{}: no such folder. {}", args.src.display(), fsu::SOURCE_HINT);
     }

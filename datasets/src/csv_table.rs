@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::DatasetError;
+use crate::text::read_text;
 
 /// A parsed table: header and rows of raw fields, with their 1-based line numbers.
 #[derive(Debug, Clone)]
@@ -27,6 +28,7 @@ impl CsvTable {
         let (_, header_line) =
             lines.next().ok_or_else(|| DatasetError::at_line(file, 1, "expected a header row, the file is empty"))?;
         let header: Vec<String> = header_line.split(',').map(|h| h.trim().to_string()).collect();
+        check_header(file, &header)?;
         let mut rows = Vec::new();
         for (n, line) in lines {
             let fields: Vec<String> = line.split(',').map(|f| f.trim().to_string()).collect();
@@ -70,23 +72,32 @@ impl CsvTable {
     }
 }
 
-/// Reads a headerless two-column numeric file (`x,y` per line) into two vectors;
-/// `what` names the columns in errors (`"position_mm,width_mm"`).
-pub fn read_xy(file: &Path, what: &str) -> Result<(Vec<f64>, Vec<f64>), DatasetError> {
+/// Reads a headerless two-column numeric file (`x,y` per line) into `(line, x, y)`
+/// rows (1-based line numbers); `what` names the columns in errors (`"position_mm,width_mm"`).
+pub fn read_xy(file: &Path, what: &str) -> Result<Vec<(usize, f64, f64)>, DatasetError> {
     let text = read_text(file)?;
-    let mut xs = Vec::new();
-    let mut ys = Vec::new();
-    for (n, line) in numbered_lines(&text) {
-        let (x, y) = parse_pair(line).ok_or_else(|| {
-            DatasetError::at_line(file, n, format!("expected two numbers `{what}`, got `{}`", line.trim()))
-        })?;
-        xs.push(x);
-        ys.push(y);
-    }
-    if xs.is_empty() {
+    let rows: Vec<(usize, f64, f64)> = numbered_lines(&text)
+        .map(|(n, line)| {
+            parse_pair(line).map(|(x, y)| (n, x, y)).ok_or_else(|| {
+                DatasetError::at_line(file, n, format!("expected two numbers `{what}`, got `{}`", line.trim()))
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    if rows.is_empty() {
         return Err(DatasetError::at_line(file, 1, format!("expected rows of `{what}`, the file is empty")));
     }
-    Ok((xs, ys))
+    Ok(rows)
+}
+
+/// Column names are non-empty and unique (columns are found by name).
+fn check_header(file: &Path, header: &[String]) -> Result<(), DatasetError> {
+    for (i, name) in header.iter().enumerate() {
+        if name.is_empty() || header[..i].contains(name) {
+            let what = if name.is_empty() { "an empty column name".to_string() } else { format!("`{name}` twice") };
+            return Err(DatasetError::at_line(file, 1, format!("expected unique column names, got {what}")));
+        }
+    }
+    Ok(())
 }
 
 fn parse_pair(line: &str) -> Option<(f64, f64)> {
@@ -94,13 +105,6 @@ fn parse_pair(line: &str) -> Option<(f64, f64)> {
     let x = parts.next()?.trim().parse::<f64>().ok()?;
     let y = parts.next()?.trim().parse::<f64>().ok()?;
     (parts.next().is_none() && x.is_finite() && y.is_finite()).then_some((x, y))
-}
-
-fn read_text(file: &Path) -> Result<String, DatasetError> {
-    std::fs::read_to_string(file).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.to_path_buf(), hint: None },
-        _ => DatasetError::io(file, e),
-    })
 }
 
 /// Non-blank lines with their 1-based numbers.
@@ -142,5 +146,26 @@ mod tests {
         let err = table.number(&table.rows[1], col).unwrap_err().to_string();
         assert!(err.contains("t.csv:line 3, field feed_mm_s: expected a finite number, got `fast`"), "{err}");
         assert!(table.column("accel").is_err());
+    }
+
+    #[test]
+    fn a_column_named_twice_or_unnamed_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "t.csv", "id,x,id\na,1,b\n");
+        let err = CsvTable::read(&path).unwrap_err().to_string();
+        assert!(err.contains("t.csv:line 1: expected unique column names, got `id` twice"), "{err}");
+        let path = write(dir.path(), "u.csv", "id,,x\na,1,2\n");
+        assert!(CsvTable::read(&path).unwrap_err().to_string().contains("an empty column name"));
+    }
+
+    #[test]
+    fn a_byte_order_mark_before_the_header_is_not_part_of_the_first_column() {
+        // Spreadsheet exports start with U+FEFF; it used to become part of the first
+        // column's name, so `expected a column `id` in the header (id,…)` looked contradictory.
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "t.csv", "\u{feff}id,feed_mm_s\na,50\n");
+        assert_eq!(CsvTable::read(&path).unwrap().column("id").unwrap(), 0);
+        let path = write(dir.path(), "xy.csv", "\u{feff}0,1.0\n");
+        assert_eq!(read_xy(&path, "x,y").unwrap(), vec![(1, 0.0, 1.0)]);
     }
 }

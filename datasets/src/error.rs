@@ -34,6 +34,14 @@ pub enum DatasetError {
         /// Actual hex SHA-256.
         actual: String,
     },
+    /// An output folder that is not ours to replace, or no folder name.
+    #[error("{}: {reason}", path.display())]
+    Output {
+        /// The destination.
+        path: PathBuf,
+        /// Why it is refused.
+        reason: String,
+    },
     /// An I/O error.
     #[error("{}: {source}", path.display())]
     Io {

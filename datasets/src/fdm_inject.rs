@@ -21,13 +21,22 @@ use models::fdm::{LineKinematics, MeasuredLine};
 use serde::{Deserialize, Serialize};
 
 use crate::error::DatasetError;
-use crate::fdm_widths::{FdmWidthsDataset, WidthLine};
-use crate::manifest::{DatasetManifest, Provenance};
+use crate::fdm_widths::{FdmWidthsDataset, WidthLine, KIND, READABLE_VERSIONS};
+use crate::manifest::Provenance;
+use crate::output::{write_file, OutputDir, Ownership};
+use crate::text::read_toml;
 
 /// The generator name written into the copy's provenance.
 pub const GENERATOR: &str = "amrepro datasets inject";
 /// The truth file, relative to the dataset folder.
 pub const TRUTH_FILE: &str = "truth/effect.toml";
+/// The folders `inject` may replace: absent, empty, or an earlier output of it.
+pub const OUTPUT: Ownership = Ownership {
+    kind: KIND,
+    versions: READABLE_VERSIONS,
+    writer: "datasets inject",
+    written_by_us: |p| matches!(p, Provenance::Virtual { generator, .. } if generator == GENERATOR),
+};
 
 /// `truth/effect.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -89,13 +98,11 @@ pub enum InjectDatasetError {
         /// What is wrong.
         reason: String,
     },
-    /// The destination exists and is not ours to replace.
-    #[error("{}: {reason}", path.display())]
-    Output {
+    /// The destination is the source itself.
+    #[error("{}: is the source dataset itself; choose a new folder", path.display())]
+    SameAsSource {
         /// The destination.
         path: PathBuf,
-        /// Why it is refused.
-        reason: String,
     },
 }
 
@@ -110,13 +117,20 @@ pub fn inject_dataset(
     settings: &InjectSettings,
 ) -> Result<EffectTruth, InjectDatasetError> {
     let effect = Effect::parse(effect_name).ok_or_else(|| InjectDatasetError::Effect(effect_name.into()))?;
-    check_destination(src, dest)?;
+    if let (Ok(a), Ok(b)) = (src.canonicalize(), dest.canonicalize()) {
+        if a == b {
+            return Err(InjectDatasetError::SameAsSource { path: dest.to_path_buf() });
+        }
+    }
+    let output = OutputDir::begin(dest, &OUTPUT)?;
     let dataset = FdmWidthsDataset::read(src)?;
     let lines = measured_lines(src, &dataset)?;
     let (injected, record) = inject(&lines, effect, strength, seed, settings)?;
     let copy = injected_copy(src, &dataset, &injected, &record);
     let truth = truth_of(src, &dataset, &record);
-    write_atomically(dest, &copy, &truth)?;
+    copy.write(output.path())?;
+    write_file(output.path(), TRUTH_FILE, toml::to_string_pretty(&truth).expect("truth serialises").as_bytes())?;
+    output.commit()?;
     Ok(truth)
 }
 
@@ -189,76 +203,16 @@ fn truth_of(src: &Path, dataset: &FdmWidthsDataset, record: &Injection) -> Effec
     }
 }
 
-/// `dest` may be absent, an empty folder or an earlier output of this command, and it
-/// is not `src` itself.
-fn check_destination(src: &Path, dest: &Path) -> Result<(), InjectDatasetError> {
-    let refuse = |reason: &str| InjectDatasetError::Output { path: dest.to_path_buf(), reason: reason.into() };
-    if !dest.exists() {
-        return Ok(());
-    }
-    if !dest.is_dir() {
-        return Err(refuse("exists and is not a folder; refusing to replace it"));
-    }
-    if let (Ok(a), Ok(b)) = (src.canonicalize(), dest.canonicalize()) {
-        if a == b {
-            return Err(refuse("is the source dataset itself; choose a new folder"));
-        }
-    }
-    let empty = std::fs::read_dir(dest).map(|mut d| d.next().is_none()).unwrap_or(false);
-    let ours = DatasetManifest::read(dest, crate::fdm_widths::KIND)
-        .is_ok_and(|m| matches!(&m.provenance, Provenance::Virtual { generator, .. } if generator == GENERATOR));
-    if empty || ours {
-        Ok(())
-    } else {
-        Err(refuse("exists and is not an earlier output of `datasets inject`; refusing to replace it"))
-    }
-}
-
-fn write_atomically(dest: &Path, copy: &FdmWidthsDataset, truth: &EffectTruth) -> Result<(), DatasetError> {
-    let name = dest.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_else(|| "dataset".into());
-    let parent = dest.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).map_err(|e| DatasetError::io(parent, e))?;
-    let staging = parent.join(format!(".{name}.staging-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&staging);
-    let written = (|| {
-        copy.write(&staging)?;
-        let truth_file = staging.join(TRUTH_FILE);
-        let truth_dir = truth_file.parent().expect("truth/ has a parent");
-        std::fs::create_dir_all(truth_dir).map_err(|e| DatasetError::io(truth_dir, e))?;
-        let text = toml::to_string_pretty(truth).expect("truth serialises");
-        std::fs::write(&truth_file, text).map_err(|e| DatasetError::io(&truth_file, e))
-    })();
-    if let Err(e) = written {
-        let _ = std::fs::remove_dir_all(&staging);
-        return Err(e);
-    }
-    let old = parent.join(format!(".{name}.old-{}", std::process::id()));
-    if dest.exists() {
-        std::fs::rename(dest, &old).map_err(|e| DatasetError::io(dest, e))?;
-    }
-    std::fs::rename(&staging, dest).map_err(|e| DatasetError::io(dest, e))?;
-    let _ = std::fs::remove_dir_all(&old);
-    Ok(())
-}
-
 /// Reads `truth/effect.toml` of an injected dataset (for evaluation).
 pub fn read_truth(dir: &Path) -> Result<EffectTruth, DatasetError> {
-    let file = dir.join(TRUTH_FILE);
-    let text = std::fs::read_to_string(&file).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.clone(), hint: None },
-        _ => DatasetError::io(&file, e),
-    })?;
-    toml::from_str(&text).map_err(|e| DatasetError::Malformed {
-        file,
-        location: None,
-        expected: e.to_string().trim().replace('\n', " "),
-    })
+    read_toml(&dir.join(TRUTH_FILE))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fdm_widths::{LineMotion, FORMAT_VERSION, KIND};
+    use crate::fdm_widths::{LineMotion, FORMAT_VERSION};
+    use crate::manifest::DatasetManifest;
 
     fn source(dir: &Path) {
         let manifest = DatasetManifest {
@@ -299,7 +253,7 @@ mod tests {
         assert_eq!(FdmWidthsDataset::read(&dest).unwrap().lines[0].widths_mm, vec![0.8; 101]);
         assert!(matches!(
             inject_dataset(&src, &src, "none", 0.0, 1, &settings),
-            Err(InjectDatasetError::Output { .. })
+            Err(InjectDatasetError::SameAsSource { .. })
         ));
         let foreign = tmp.path().join("foreign");
         std::fs::create_dir_all(&foreign).unwrap();
@@ -310,5 +264,21 @@ mod tests {
         let err = inject_dataset(&src, &tmp.path().join("x"), "wobble", 0.1, 1, &settings).unwrap_err().to_string();
         assert!(err.contains("unknown effect `wobble`"), "{err}");
         assert!(!tmp.path().join("x").exists());
+    }
+
+    #[test]
+    fn a_source_that_fails_leaves_no_staging_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let (src, dest) = (tmp.path().join("src"), tmp.path().join("dest"));
+        source(&src);
+        std::fs::write(src.join("widths/a.csv"), "position_mm,width_mm\n0,0.8\n1,0.8\n").unwrap();
+        let err = inject_dataset(&src, &dest, "none", 0.0, 1, &InjectSettings::default()).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!("{}: line_id a: measured line: fewer than 10 samples", src.join("lines.csv").display())
+        );
+        let mut left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        left.sort();
+        assert_eq!(left, ["src"], "no staging folder left");
     }
 }

@@ -15,11 +15,14 @@ use std::path::Path;
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
 use crate::manifest::{DatasetManifest, MANIFEST_FILE};
+use crate::paths::{file_in, referenced_file};
 
 /// The kind string in `dataset.toml`.
 pub const KIND: &str = "fdm-widths";
 /// Current folder layout version.
 pub const FORMAT_VERSION: u32 = 1;
+/// The folder layout versions this build reads.
+pub const READABLE_VERSIONS: &[u32] = &[FORMAT_VERSION];
 /// Columns of `lines.csv`, in order.
 pub const LINE_COLUMNS: [&str; 7] =
     ["line_id", "condition", "accel_mm_s2", "feed_mm_s", "jerk_mm_s", "length_mm", "widths_file"];
@@ -64,10 +67,22 @@ pub struct FdmWidthsDataset {
 impl FdmWidthsDataset {
     /// Reads and checks a dataset folder.
     pub fn read(dir: &Path) -> Result<Self, DatasetError> {
-        let manifest = DatasetManifest::read(dir, KIND)?;
-        let table = CsvTable::read(&dir.join("lines.csv"))?;
+        let manifest = DatasetManifest::read(dir, KIND, READABLE_VERSIONS)?;
+        let table = CsvTable::read(&file_in(dir, "lines.csv")?)?;
         let cols: Vec<usize> = LINE_COLUMNS.iter().map(|c| table.column(c)).collect::<Result<_, _>>()?;
-        let lines = table.rows.iter().map(|row| read_line(dir, &table, row, &cols)).collect::<Result<_, _>>()?;
+        let mut lines: Vec<WidthLine> = Vec::with_capacity(table.rows.len());
+        for row in &table.rows {
+            let line = read_line(dir, &table, row, &cols)?;
+            if let Some(k) = lines.iter().position(|l| l.line_id == line.line_id) {
+                let first = table.rows[k].0;
+                return Err(table.field_error(
+                    row.0,
+                    cols[0],
+                    format!("expected a unique id, `{}` is also on line {first}", line.line_id),
+                ));
+            }
+            lines.push(line);
+        }
         Ok(Self { manifest, lines })
     }
 
@@ -128,30 +143,47 @@ fn read_line(
     if line_id.is_empty() || !line_id.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
         return Err(table.field_error(row.0, cols[0], "expected a non-empty id of letters, digits, `_`, `-`"));
     }
-    let widths_file = dir.join(&row.1[cols[6]]);
+    let widths_file = referenced_file(dir, &row.1[cols[6]]).map_err(|rule| table.field_error(row.0, cols[6], rule))?;
     let (positions_mm, widths_mm) = read_widths(&widths_file, motion.length_mm)?;
     Ok(WidthLine { line_id, condition: row.1[cols[1]].clone(), motion, positions_mm, widths_mm })
 }
 
-/// Reads a `position_mm,width_mm` file and checks positions increase within the line
-/// and widths are positive.
+/// What is wrong with one measurement of a widths profile.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SampleProblem {
+    /// The position is outside the line or not after the previous one.
+    Position(String),
+    /// The width is not positive.
+    Width(String),
+}
+
+/// Checks one `(position, width)` measurement of a line of `length_mm`, `previous_mm`
+/// the position before it: positions strictly increase within `[0, length_mm]`
+/// (0.1 % slack at the end), widths are positive. Shared by the reader and the importer.
+pub fn check_sample(previous_mm: Option<f64>, x_mm: f64, w_mm: f64, length_mm: f64) -> Result<(), SampleProblem> {
+    if previous_mm.is_some_and(|prev| x_mm <= prev) || x_mm < 0.0 || x_mm > length_mm * 1.001 {
+        return Err(SampleProblem::Position(format!(
+            "expected increasing positions within [0, {length_mm}] mm, got {x_mm}"
+        )));
+    }
+    if w_mm <= 0.0 {
+        return Err(SampleProblem::Width(format!("expected a positive width, got {w_mm}")));
+    }
+    Ok(())
+}
+
+/// Reads a `position_mm,width_mm` file and checks every measurement ([`check_sample`]).
 fn read_widths(file: &Path, length_mm: f64) -> Result<(Vec<f64>, Vec<f64>), DatasetError> {
     let table = CsvTable::read(file)?;
     let (xc, wc) = (table.column("position_mm")?, table.column("width_mm")?);
-    let mut positions = Vec::with_capacity(table.rows.len());
+    let mut positions: Vec<f64> = Vec::with_capacity(table.rows.len());
     let mut widths = Vec::with_capacity(table.rows.len());
     for row in &table.rows {
         let (x, w) = (table.number(row, xc)?, table.number(row, wc)?);
-        if positions.last().is_some_and(|&prev| x <= prev) || x < 0.0 || x > length_mm * 1.001 {
-            return Err(table.field_error(
-                row.0,
-                xc,
-                format!("expected increasing positions within [0, {length_mm}] mm, got {x}"),
-            ));
-        }
-        if w <= 0.0 {
-            return Err(table.field_error(row.0, wc, format!("expected a positive width, got {w}")));
-        }
+        check_sample(positions.last().copied(), x, w, length_mm).map_err(|problem| match problem {
+            SampleProblem::Position(e) => table.field_error(row.0, xc, e),
+            SampleProblem::Width(e) => table.field_error(row.0, wc, e),
+        })?;
         positions.push(x);
         widths.push(w);
     }
@@ -202,6 +234,72 @@ mod tests {
         std::fs::write(&lines, text).unwrap();
         let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
         assert!(err.contains("lines.csv:line 2, field feed_mm_s: expected a positive number, got -50"), "{err}");
+    }
+
+    /// `example()` written into a fresh folder, with `edit(lines.csv text)` applied.
+    fn edited(edit: impl Fn(String) -> String) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        example().write(dir.path()).unwrap();
+        let lines = dir.path().join("lines.csv");
+        std::fs::write(&lines, edit(std::fs::read_to_string(&lines).unwrap())).unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_line_id_given_twice_is_refused() {
+        let dir = edited(|text| {
+            let row = text.lines().nth(1).unwrap().to_string();
+            format!("{text}{row}\n")
+        });
+        let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("lines.csv:line 3, field line_id: expected a unique id, `S400F3000` is also on line 2"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn widths_files_outside_the_folder_are_refused_before_they_are_read() {
+        let outside = tempfile::tempdir().unwrap();
+        let secret = outside.path().join("secret.csv");
+        std::fs::write(&secret, "position_mm,width_mm\nTOP SECRET,1\n").unwrap();
+        for path in [secret.display().to_string(), "../secret.csv".to_string(), "widths/../../secret.csv".into()] {
+            let dir = edited(|text| text.replace("widths/S400F3000.csv", &path));
+            let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
+            assert!(
+                err.contains("lines.csv:line 2, field widths_file: expected a path relative to the dataset folder"),
+                "{err}"
+            );
+            assert!(!err.contains("TOP SECRET"), "{err}");
+        }
+    }
+
+    #[test]
+    fn an_unknown_format_version_names_the_versions_this_build_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        example().write(dir.path()).unwrap();
+        let toml = dir.path().join(MANIFEST_FILE);
+        let text = std::fs::read_to_string(&toml).unwrap().replace("format_version = 1", "format_version = 7");
+        std::fs::write(&toml, text).unwrap();
+        let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains(
+                "dataset.toml:format_version: this build of amrepro reads `fdm-widths` format_version 1, got 7"
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn files_with_a_byte_order_mark_read() {
+        let dir = tempfile::tempdir().unwrap();
+        example().write(dir.path()).unwrap();
+        for name in [MANIFEST_FILE, "lines.csv", "widths/S400F3000.csv"] {
+            let file = dir.path().join(name);
+            let text = std::fs::read_to_string(&file).unwrap();
+            std::fs::write(&file, format!("\u{feff}{text}")).unwrap();
+        }
+        assert_eq!(FdmWidthsDataset::read(dir.path()).unwrap(), example());
     }
 
     #[test]

@@ -14,8 +14,11 @@ use sha2::{Digest, Sha256};
 
 use crate::csv_table::read_xy;
 use crate::error::DatasetError;
-use crate::fdm_widths::{FdmWidthsDataset, LineMotion, WidthLine, FORMAT_VERSION, KIND};
+use crate::fdm_widths::{
+    check_sample, FdmWidthsDataset, LineMotion, SampleProblem, WidthLine, FORMAT_VERSION, KIND, READABLE_VERSIONS,
+};
 use crate::manifest::{DatasetManifest, Provenance};
+use crate::output::{OutputDir, Ownership};
 
 /// Where to get the data when it is missing.
 pub const SOURCE_HINT: &str = "Get the FSU line-width data (paper 000, Table I lines): unzip `Linewidth_Data.zip` of the public repository FAMU-FSU-IME/IISE-Co-learning (Apache-2.0) so that taz5/ and taz6/ sit in this folder, or set AMREPRO_DATA to a folder holding fsu-linewidth/";
@@ -144,49 +147,38 @@ pub fn read_printer(
     Ok(FdmWidthsDataset { manifest: manifest(printer), lines })
 }
 
+/// The folders `import` may replace: absent, empty, or an `fdm-widths` dataset this
+/// importer wrote.
+pub const OUTPUT: Ownership = Ownership {
+    kind: KIND,
+    versions: READABLE_VERSIONS,
+    writer: "datasets import fsu-linewidth",
+    written_by_us: |p| matches!(p, Provenance::Measured { imported_by, .. } if imported_by.starts_with("amrepro ")),
+};
+
 /// Imports the given printers into `out_dir/<printer>/`, each folder written whole
-/// (staged, then renamed) so a failure leaves no partial dataset.
+/// ([`OutputDir`]: every destination checked first, staged, then swapped in), so a
+/// failure leaves no partial dataset and nothing that is not ours is replaced.
 pub fn import(
     src_root: &Path,
     out_dir: &Path,
     printers: &[FsuPrinter],
     opts: ImportOptions,
 ) -> Result<Vec<PathBuf>, DatasetError> {
-    let datasets: Vec<(FsuPrinter, FdmWidthsDataset)> =
-        printers.iter().map(|p| read_printer(src_root, *p, opts).map(|d| (*p, d))).collect::<Result<_, _>>()?;
-    datasets
-        .iter()
-        .map(|(printer, dataset)| {
-            let dst = out_dir.join(printer.name());
-            write_whole(&dst, dataset)?;
-            Ok(dst)
-        })
-        .collect()
-}
-
-fn write_whole(dst: &Path, dataset: &FdmWidthsDataset) -> Result<(), DatasetError> {
-    let staged = dst.with_file_name(format!(
-        ".{}.tmp-{}",
-        dst.file_name().unwrap_or_default().to_string_lossy(),
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&staged);
-    let result = dataset.write(&staged).and_then(|_| {
-        if dst.exists() {
-            std::fs::remove_dir_all(dst).map_err(|e| DatasetError::io(dst, e))?;
-        }
-        std::fs::rename(&staged, dst).map_err(|e| DatasetError::io(dst, e))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_dir_all(&staged);
+    let datasets: Vec<FdmWidthsDataset> =
+        printers.iter().map(|p| read_printer(src_root, *p, opts)).collect::<Result<_, _>>()?;
+    let outputs: Vec<OutputDir> =
+        printers.iter().map(|p| OutputDir::begin(&out_dir.join(p.name()), &OUTPUT)).collect::<Result<_, _>>()?;
+    for (output, dataset) in outputs.iter().zip(&datasets) {
+        dataset.write(output.path())?;
     }
-    result
+    outputs.into_iter().map(OutputDir::commit).collect()
 }
 
 /// The CSV files of a printer folder with their decoded conditions, sorted by
 /// acceleration then feed.
 fn source_files(folder: &Path, printer: FsuPrinter) -> Result<Vec<(PathBuf, FileCondition)>, DatasetError> {
-    let mut files = Vec::new();
+    let mut files: Vec<(PathBuf, FileCondition)> = Vec::new();
     for entry in std::fs::read_dir(folder).map_err(|e| DatasetError::io(folder, e))? {
         let path = entry.map_err(|e| DatasetError::io(folder, e))?.path();
         let name = path.file_name().unwrap_or_default().to_string_lossy().to_string();
@@ -198,6 +190,13 @@ fn source_files(folder: &Path, printer: FsuPrinter) -> Result<Vec<(PathBuf, File
             location: Some("file name".into()),
             expected,
         })?;
+        if let Some((other, _)) = files.iter().find(|(_, c)| c.label() == cond.label()) {
+            return Err(DatasetError::Malformed {
+                file: path.clone(),
+                location: Some("file name".into()),
+                expected: format!("expected one file per condition, {} is {} again", other.display(), cond.label()),
+            });
+        }
         files.push((path, cond));
     }
     if files.is_empty() {
@@ -231,7 +230,7 @@ fn read_line(
     if opts.verify_sha256 {
         verify_checksum(src_root, path)?;
     }
-    let (positions_mm, widths_mm) = read_xy(path, "position_mm,width_mm")?;
+    let (positions_mm, widths_mm) = read_widths(path)?;
     let motion = LineMotion {
         accel_mm_s2: f64::from(cond.accel_mm_s2),
         feed_mm_s: f64::from(cond.feed_mm_min) / 60.0,
@@ -239,6 +238,30 @@ fn read_line(
         length_mm: LINE_LENGTH_MM,
     };
     Ok(WidthLine { line_id: cond.label(), condition: cond.label(), motion, positions_mm, widths_mm })
+}
+
+/// The `position_mm,width_mm` rows of a raw file, each checked as the `fdm-widths`
+/// reader checks it, so a bad row is named in the raw file, not in the converted copy.
+fn read_widths(path: &Path) -> Result<(Vec<f64>, Vec<f64>), DatasetError> {
+    let rows = read_xy(path, "position_mm,width_mm")?;
+    let mut positions: Vec<f64> = Vec::with_capacity(rows.len());
+    let mut widths = Vec::with_capacity(rows.len());
+    for (line, x, w) in rows {
+        check_sample(positions.last().copied(), x, w, LINE_LENGTH_MM).map_err(|problem| {
+            let (column, e) = match problem {
+                SampleProblem::Position(e) => ("position_mm", e),
+                SampleProblem::Width(e) => ("width_mm", e),
+            };
+            DatasetError::Malformed {
+                file: path.to_path_buf(),
+                location: Some(format!("line {line}, field {column}")),
+                expected: e,
+            }
+        })?;
+        positions.push(x);
+        widths.push(w);
+    }
+    Ok((positions, widths))
 }
 
 fn verify_checksum(src_root: &Path, path: &Path) -> Result<(), DatasetError> {
@@ -337,6 +360,58 @@ mod tests {
         let err = read_printer(dir.path(), FsuPrinter::Taz5, ImportOptions { verify_sha256: true }).unwrap_err();
         assert!(matches!(err, DatasetError::Checksum { .. }), "{err}");
         assert!(read_printer(dir.path(), FsuPrinter::Taz5, ImportOptions { verify_sha256: false }).is_ok());
+    }
+
+    /// A taz5 folder of our own (no checksums) with one file `name` holding `text`.
+    fn own_folder(name: &str, text: &str) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("taz5")).unwrap();
+        std::fs::write(dir.path().join("taz5").join(name), text).unwrap();
+        dir
+    }
+
+    #[test]
+    fn unverified_files_are_checked_at_import_and_named_in_the_raw_file() {
+        let opts = ImportOptions { verify_sha256: false };
+        let cases = [
+            (
+                "0,0.5\n1,0.6\n0.5,0.7\n",
+                "S400F3000_xiao120.csv:line 3, field position_mm: expected increasing positions",
+            ),
+            ("0,0.5\n1,-0.6\n", "S400F3000_xiao120.csv:line 2, field width_mm: expected a positive width, got -0.6"),
+            (
+                "0,0.5\n130,0.6\n",
+                "S400F3000_xiao120.csv:line 2, field position_mm: expected increasing positions within [0, 120] mm",
+            ),
+        ];
+        for (text, expected) in cases {
+            let src = own_folder("S400F3000_xiao120.csv", text);
+            let out = tempfile::tempdir().unwrap();
+            let err = import(src.path(), out.path(), &[FsuPrinter::Taz5], opts).unwrap_err().to_string();
+            assert!(err.contains(expected), "{err}");
+            assert!(std::fs::read_dir(out.path()).unwrap().next().is_none(), "nothing written");
+        }
+        let src = own_folder("S400F3000_xiao120.csv", "0,0.5\n1,0.6\n");
+        std::fs::write(src.path().join("taz5/S0400F3000_xiao120.csv"), "0,0.5\n").unwrap();
+        let err = read_printer(src.path(), FsuPrinter::Taz5, opts).unwrap_err().to_string();
+        assert!(err.contains("expected one file per condition") && err.contains("S400F3000 again"), "{err}");
+    }
+
+    #[test]
+    fn import_replaces_its_own_output_and_refuses_a_foreign_folder() {
+        let opts = ImportOptions { verify_sha256: false };
+        let src = own_folder("S400F3000_xiao120.csv", "0,0.5\n1,0.6\n");
+        let out = tempfile::tempdir().unwrap();
+        import(src.path(), out.path(), &[FsuPrinter::Taz5], opts).unwrap();
+        import(src.path(), out.path(), &[FsuPrinter::Taz5], opts).unwrap();
+        std::fs::remove_dir_all(out.path().join("taz5")).unwrap();
+        std::fs::create_dir_all(out.path().join("taz5")).unwrap();
+        std::fs::write(out.path().join("taz5/thesis.tex"), "years of work").unwrap();
+        let err = import(src.path(), out.path(), &[FsuPrinter::Taz5], opts).unwrap_err().to_string();
+        assert!(err.contains("refusing to replace it"), "{err}");
+        assert_eq!(std::fs::read_to_string(out.path().join("taz5/thesis.tex")).unwrap(), "years of work");
+        let listing: Vec<_> = std::fs::read_dir(out.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(listing, ["taz5"], "no staging folder left");
     }
 
     #[test]

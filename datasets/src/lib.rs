@@ -13,7 +13,11 @@ pub mod fdm_inject;
 pub mod fdm_widths;
 pub mod fsu;
 pub mod inkjet;
+pub mod limits;
 pub mod manifest;
+pub mod output;
+pub mod paths;
+pub mod text;
 pub mod thermal;
 
 pub use error::DatasetError;

@@ -8,6 +8,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::DatasetError;
+use crate::paths::{check_dataset_folder, file_in};
+use crate::text::read_toml;
 
 /// File name of the dataset manifest inside a dataset folder.
 pub const MANIFEST_FILE: &str = "dataset.toml";
@@ -59,27 +61,36 @@ pub enum Provenance {
 }
 
 impl DatasetManifest {
-    /// Reads `dir/dataset.toml` and checks its kind is `expected_kind`.
-    pub fn read(dir: &Path, expected_kind: &str) -> Result<Self, DatasetError> {
-        let file = dir.join(MANIFEST_FILE);
-        let text = std::fs::read_to_string(&file).map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => DatasetError::Missing {
-                file: file.clone(),
+    /// Reads `dir/dataset.toml` and checks its kind is `expected_kind` and its
+    /// `format_version` one of `readable_versions` (the versions this build reads).
+    pub fn read(dir: &Path, expected_kind: &str, readable_versions: &[u32]) -> Result<Self, DatasetError> {
+        check_dataset_folder(dir)?;
+        let file = file_in(dir, MANIFEST_FILE)?;
+        let manifest: Self = read_toml(&file).map_err(|e| match e {
+            DatasetError::Missing { file, .. } => DatasetError::Missing {
+                file,
                 hint: Some("every dataset folder needs a dataset.toml (docs/DATASETS.md)".into()),
             },
-            _ => DatasetError::io(&file, e),
+            other => other,
         })?;
-        let manifest: Self = toml::from_str(&text).map_err(|e| DatasetError::Malformed {
+        let bad = |key: &str, expected: String| DatasetError::Malformed {
             file: file.clone(),
-            location: None,
-            expected: e.to_string().trim().replace('\n', " "),
-        })?;
+            location: Some(key.into()),
+            expected,
+        };
         if manifest.kind != expected_kind {
-            return Err(DatasetError::Malformed {
-                file,
-                location: Some("kind".into()),
-                expected: format!("expected kind `{expected_kind}`, got `{}`", manifest.kind),
-            });
+            return Err(bad("kind", format!("expected kind `{expected_kind}`, got `{}`", manifest.kind)));
+        }
+        if !readable_versions.contains(&manifest.format_version) {
+            let known: Vec<String> = readable_versions.iter().map(u32::to_string).collect();
+            return Err(bad(
+                "format_version",
+                format!(
+                    "this build of amrepro reads `{expected_kind}` format_version {}, got {}; a newer amrepro may read it",
+                    known.join(", "),
+                    manifest.format_version
+                ),
+            ));
         }
         Ok(manifest)
     }

@@ -36,7 +36,15 @@ fn walk(root: &Path, rel: &Path, files: &mut Vec<PathBuf>) -> io::Result<()> {
             continue;
         }
         let rel_path = rel.join(&name);
-        if entry.file_type()?.is_dir() {
+        let file_type = entry.file_type()?;
+        if file_type.is_symlink() && fs::metadata(root.join(&rel_path)).is_ok_and(|m| m.is_dir()) {
+            let message = format!(
+                "{}: a symbolic link to a folder; a dataset folder holds its own files, which the cache hashes one by one (docs/DATASETS.md): copy the folder in instead",
+                rel_path.display()
+            );
+            return Err(io::Error::new(io::ErrorKind::InvalidInput, message));
+        }
+        if file_type.is_dir() {
             walk(root, &rel_path, files)?;
         } else {
             files.push(rel_path);
@@ -74,6 +82,17 @@ mod tests {
     fn known_sha256_of_abc() {
         // FIPS 180-2, appendix B.1.
         assert_eq!(sha256_hex(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_linked_folder_is_named_not_read_as_a_file() {
+        // It used to fail with `Is a directory (os error 21)` and no name.
+        let (dir, elsewhere) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        fs::write(elsewhere.path().join("f.png"), b"x").unwrap();
+        std::os::unix::fs::symlink(elsewhere.path(), dir.path().join("frames")).unwrap();
+        let err = dir_hash(dir.path()).unwrap_err().to_string();
+        assert!(err.starts_with("frames: a symbolic link to a folder"), "{err}");
     }
 
     #[test]

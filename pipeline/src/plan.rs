@@ -144,6 +144,12 @@ fn plan_datasets(
                 return Err((format!("dataset.{name}"), "a stage has the same name".into()));
             }
             let dir = expand_path(&ds.path, base, env).map_err(|m| (format!("dataset.{name}.path"), m))?;
+            if dir.is_file() {
+                return Err((
+                    format!("dataset.{name}.path"),
+                    format!("{} is a file, expected a dataset folder", dir.display()),
+                ));
+            }
             Ok(PlannedDataset { name: name.clone(), dir, source: ds.source.clone() })
         })
         .collect()
@@ -372,6 +378,18 @@ mod tests {
         assert_eq!(err.location, "stage.a.publish.\"t.parquet\"");
         let two = format!("{base}publish = {{ \"t.parquet\" = \"x/t.parquet\" }}\n[stage.b]\nkind = \"test.noop\"\npublish = {{ \"u.parquet\" = \"x/t.parquet\" }}\n");
         assert!(plan(&two).unwrap_err().message.contains("also published by stage `a`"));
+    }
+
+    #[test]
+    fn a_dataset_path_that_is_a_file_is_named_so() {
+        // It used to pass the plan and fail the run with "folder … does not exist".
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("lines.csv");
+        std::fs::write(&file, "x").unwrap();
+        let text = format!("[run]\nname = \"d\"\n[dataset.raw]\npath = \"{}\"\n", file.display());
+        let err = plan(&text).unwrap_err();
+        assert_eq!(err.location, "dataset.raw.path");
+        assert!(err.message.ends_with("lines.csv is a file, expected a dataset folder"), "{}", err.message);
     }
 
     #[test]

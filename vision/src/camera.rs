@@ -187,6 +187,14 @@ impl CameraModel {
 /// Why an [`Undistorter`] could not be built or applied.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CameraError {
+    /// The image is too small to interpolate in.
+    #[error("image size {width}×{height} px: the undistortion needs at least {MIN_SIDE_PX} px along each axis")]
+    TooSmall {
+        /// Width (px).
+        width: usize,
+        /// Height (px).
+        height: usize,
+    },
     /// kornia could not build the correction map.
     #[error("correction map: {0}")]
     CorrectionMap(String),
@@ -203,6 +211,10 @@ pub enum CameraError {
         found_height: usize,
     },
 }
+
+/// Fewest pixels along each axis of an image the undistorter takes: bilinear sampling
+/// interpolates between two neighbouring pixel centres.
+pub const MIN_SIDE_PX: usize = 2;
 
 /// Four bilinear taps into the raw frame for one undistorted pixel.
 #[derive(Debug, Clone, Copy)]
@@ -224,6 +236,10 @@ pub struct Undistorter {
 impl Undistorter {
     /// Precomputes the correction map for `camera`.
     pub fn new(camera: &CameraModel) -> Result<Self, CameraError> {
+        let (width, height) = (camera.width_px, camera.height_px);
+        if width < MIN_SIDE_PX || height < MIN_SIDE_PX {
+            return Err(CameraError::TooSmall { width, height });
+        }
         let size = ImageSize { width: camera.width_px, height: camera.height_px };
         let identity =
             CameraExtrinsic { rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], translation: [0.0; 3] };
@@ -323,6 +339,16 @@ mod tests {
 
     fn camera() -> CameraModel {
         CameraModel::lepton35(Distortion { k1: -0.12, k2: 0.03, p1: 0.001, p2: -0.0015 })
+    }
+
+    #[test]
+    fn images_too_small_to_interpolate_are_an_error_not_a_panic() {
+        // A 0 × 0 camera used to panic inside kornia; 1 px wide indexed past the frame.
+        for (width, height) in [(0, 0), (0, 120), (1, 120), (160, 1)] {
+            let err = Undistorter::new(&CameraModel { width_px: width, height_px: height, ..camera() }).unwrap_err();
+            assert_eq!(err, CameraError::TooSmall { width, height });
+        }
+        assert!(Undistorter::new(&CameraModel { width_px: 2, height_px: 2, ..camera() }).is_ok());
     }
 
     #[test]

@@ -9,12 +9,17 @@ use serde::{Deserialize, Serialize};
 
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
+use crate::limits::{check_numbers, check_size, NumberRule::*, GRID_SIDE_CELLS};
 use crate::manifest::{DatasetManifest, MANIFEST_FILE};
+use crate::paths::file_in;
+use crate::text::read_toml;
 
 /// The kind string in `dataset.toml`.
 pub const KIND: &str = "inkjet-scans";
 /// Current folder layout version.
 pub const FORMAT_VERSION: u32 = 1;
+/// The folder layout versions this build reads.
+pub const READABLE_VERSIONS: &[u32] = &[FORMAT_VERSION];
 
 /// Droplet coefficients as written in `grid.toml`, µm.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -102,17 +107,26 @@ impl InkjetScans {
 
     /// Reads and checks a dataset folder (not its `truth/`).
     pub fn read(dir: &Path) -> Result<Self, DatasetError> {
-        let manifest = DatasetManifest::read(dir, KIND)?;
-        let grid = read_grid(&dir.join("grid.toml"))?;
-        let target = read_target(&dir.join("target.csv"), &grid)?;
-        let scans = read_layers(&dir.join("scans.csv"), &grid)?;
-        let patterns = read_patterns(&dir.join("patterns.csv"), &grid, scans.len() - 1)?;
+        let manifest = DatasetManifest::read(dir, KIND, READABLE_VERSIONS)?;
+        let grid = read_grid(&file_in(dir, "grid.toml")?)?;
+        let target = read_target(&file_in(dir, "target.csv")?, &grid)?;
+        let scans_file = file_in(dir, "scans.csv")?;
+        let scans = read_layers(&scans_file, &grid)?;
+        if scans.len() < 2 {
+            let expected = "expected the substrate (layer 0) and at least one printed layer, got layer 0 only";
+            return Err(DatasetError::Malformed {
+                file: scans_file,
+                location: Some("layer".into()),
+                expected: expected.into(),
+            });
+        }
+        let patterns = read_patterns(&file_in(dir, "patterns.csv")?, &grid, scans.len() - 1)?;
         Ok(Self { manifest, grid, target, scans, patterns })
     }
 
     /// Reads `truth/heights.csv` of a virtual dataset (evaluation stages only).
     pub fn read_truth(dir: &Path, grid: &GridToml) -> Result<Vec<Vec<f64>>, DatasetError> {
-        read_layers(&dir.join("truth").join("heights.csv"), grid)
+        read_layers(&file_in(dir, "truth/heights.csv")?, grid)
     }
 
     /// Writes the dataset into `dir` (a fresh staging folder), with `truth` (same
@@ -172,29 +186,28 @@ fn write_file(path: &Path, text: &str) -> Result<(), DatasetError> {
 }
 
 fn read_grid(file: &Path) -> Result<GridToml, DatasetError> {
-    let text = std::fs::read_to_string(file).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.to_path_buf(), hint: None },
-        _ => DatasetError::io(file, e),
-    })?;
-    let grid: GridToml = toml::from_str(&text).map_err(|e| DatasetError::Malformed {
-        file: file.to_path_buf(),
-        location: None,
-        expected: e.to_string().trim().replace('\n', " "),
-    })?;
-    let bad = |field: &str, expected: &str| DatasetError::Malformed {
+    let grid: GridToml = read_toml(file)?;
+    check_size(file, "m_x", grid.m_x, &GRID_SIDE_CELLS)?;
+    check_size(file, "m_y", grid.m_y, &GRID_SIDE_CELLS)?;
+    let p = &grid.profiler;
+    check_numbers(
+        file,
+        &[
+            ("spacing_um", grid.spacing_um, Positive),
+            ("desired_height_um", grid.desired_height_um, NonNegative),
+            ("variation_pct", grid.variation_pct, Within(0.0, 100.0)),
+            ("profiler.noise_um", p.noise_um, NonNegative),
+            ("profiler.spot_sigma_um", p.spot_sigma_um, NonNegative),
+        ],
+    )?;
+    let bad = |field: &str, expected: String| DatasetError::Malformed {
         file: file.to_path_buf(),
         location: Some(field.into()),
-        expected: expected.into(),
+        expected,
     };
-    if grid.m_x == 0 || grid.m_y == 0 {
-        return Err(bad("m_x", "expected at least one cell along x and y"));
-    }
-    if !(grid.spacing_um.is_finite() && grid.spacing_um > 0.0) {
-        return Err(bad("spacing_um", "expected a positive spacing"));
-    }
     for (name, c) in [("part", Some(grid.part)), ("support", grid.support)] {
         if let Some(c) = c {
-            DropletCoeffs::from(c).check().map_err(|e| bad(name, &e.to_string()))?;
+            DropletCoeffs::from(c).check().map_err(|e| bad(name, e.to_string()))?;
         }
     }
     Ok(grid)
@@ -340,5 +353,55 @@ mod tests {
         assert_eq!(scans.scans[1][4], 6.0);
         assert_eq!(scans.patterns[0][1], Some(Material::Part));
         assert_eq!(scans.patterns[0][0], None);
+    }
+
+    /// The worked example with `from` replaced by `to` in `file`; the read error.
+    fn read_error(file: &str, from: &str, to: &str) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        worked_example(dir.path());
+        let path = dir.path().join(file);
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(text.contains(from), "{file} has no `{from}`");
+        std::fs::write(&path, text.replacen(from, to, 1)).unwrap();
+        InkjetScans::read(dir.path()).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn grid_sizes_outside_the_bounds_are_refused_before_anything_is_allocated() {
+        // m_x = m_y = 10⁹ used to allocate 10¹⁸ cells for target.csv (SIGABRT).
+        let err = read_error("grid.toml", "m_x = 3", "m_x = 1000000000");
+        assert!(err.contains("grid.toml:m_x: expected 1 to 2048, got 1000000000"), "{err}");
+        let err = read_error("grid.toml", "m_y = 2", "m_y = 0");
+        assert!(err.contains("grid.toml:m_y: expected 1 to 2048, got 0"), "{err}");
+        let err = read_error("grid.toml", "noise_um = 1.0", "noise_um = nan");
+        assert!(err.contains("grid.toml:profiler.noise_um: expected a finite number ≥ 0, got NaN"), "{err}");
+        let err = read_error("dataset.toml", "format_version = 1", "format_version = 3");
+        assert!(err.contains("this build of amrepro reads `inkjet-scans` format_version 1, got 3"), "{err}");
+    }
+
+    #[test]
+    fn scans_without_a_printed_layer_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        worked_example(dir.path());
+        let scans = dir.path().join("scans.csv");
+        let text: String = std::fs::read_to_string(&scans).unwrap().lines().take(7).map(|l| format!("{l}\n")).collect();
+        std::fs::write(&scans, text).unwrap();
+        let err = InkjetScans::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("scans.csv:layer: expected the substrate (layer 0) and at least one printed layer"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn files_with_a_byte_order_mark_read() {
+        let dir = tempfile::tempdir().unwrap();
+        worked_example(dir.path());
+        for name in ["dataset.toml", "grid.toml", "target.csv", "scans.csv", "patterns.csv"] {
+            let file = dir.path().join(name);
+            let text = std::fs::read_to_string(&file).unwrap();
+            std::fs::write(&file, format!("\u{feff}{text}")).unwrap();
+        }
+        assert_eq!(InkjetScans::read(dir.path()).unwrap().layers(), 1);
     }
 }

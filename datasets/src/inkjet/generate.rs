@@ -12,12 +12,21 @@ use models::inkjet::InkjetError;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::format::{GridToml, InkjetScans, ProfilerToml, FORMAT_VERSION, KIND};
+use super::format::{GridToml, InkjetScans, ProfilerToml, FORMAT_VERSION, KIND, READABLE_VERSIONS};
 use crate::error::DatasetError;
+use crate::limits::{check_option, INKJET_LAYERS};
 use crate::manifest::{DatasetManifest, Provenance};
+use crate::output::{OutputDir, Ownership};
 
 /// Generator name recorded in `dataset.toml`.
 pub const GENERATOR: &str = "amrepro-inkjet-virtual";
+/// The folders the generator may replace: absent, empty, or a dataset it wrote.
+pub const OUTPUT: Ownership = Ownership {
+    kind: KIND,
+    versions: READABLE_VERSIONS,
+    writer: "datasets generate inkjet",
+    written_by_us: |p| matches!(p, Provenance::Virtual { generator, .. } if generator == GENERATOR),
+};
 
 /// Why a dataset could not be generated.
 #[derive(Debug, thiserror::Error)]
@@ -28,17 +37,9 @@ pub enum GenerateError {
     /// An unknown scenario name.
     #[error("unknown scenario `{0}` (known: cylinder, cuboid, pipe_junction)")]
     UnknownScenario(String),
-    /// Writing the dataset failed.
+    /// Writing the dataset failed, or its folder is not ours to replace.
     #[error("{0}")]
     Dataset(#[from] DatasetError),
-    /// The output folder cannot be replaced.
-    #[error("{}: {reason}", path.display())]
-    Output {
-        /// The folder.
-        path: PathBuf,
-        /// What went wrong.
-        reason: String,
-    },
 }
 
 /// The paper-002 parts the generator can print.
@@ -107,6 +108,7 @@ pub fn generate(opts: &GenerateOptions) -> Result<(InkjetScans, Vec<Vec<f64>>), 
         Scenario::PipeJunction => pipe_junction(p),
     };
     if let Some(layers) = opts.open_loop_layers {
+        check_option("--layers", layers.max(1), &INKJET_LAYERS)?;
         scenario.open_loop_layers = layers.max(1);
     }
     scenario.truth.effects = opts.effects;
@@ -181,35 +183,13 @@ fn manifest(opts: &GenerateOptions) -> DatasetManifest {
     }
 }
 
-/// Generates and writes the dataset to `out` atomically: into a sibling staging folder
-/// first, which then replaces `out` (an existing `out` must be an `inkjet-scans` dataset
-/// or empty, so nothing else is overwritten).
+/// Generates and writes the dataset to `out` atomically ([`OutputDir`]: an existing
+/// `out` must be empty or a dataset this generator wrote, so nothing else is replaced).
 pub fn write_dataset(opts: &GenerateOptions, out: &Path) -> Result<PathBuf, GenerateError> {
+    let output = OutputDir::begin(out, &OUTPUT)?;
     let (dataset, truth) = generate(opts)?;
-    let name = out
-        .file_name()
-        .ok_or_else(|| GenerateError::Output { path: out.to_path_buf(), reason: "expected a folder name".into() })?;
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).map_err(|e| DatasetError::io(parent, e))?;
-    if out.exists() {
-        let empty = std::fs::read_dir(out).map(|mut d| d.next().is_none()).unwrap_or(false);
-        if !empty && DatasetManifest::read(out, KIND).is_err() {
-            return Err(GenerateError::Output {
-                path: out.to_path_buf(),
-                reason: "exists and is not an inkjet-scans dataset; refusing to replace it".into(),
-            });
-        }
-    }
-    let staging = parent.join(format!(".{}.staging-{}", name.to_string_lossy(), std::process::id()));
-    let _ = std::fs::remove_dir_all(&staging);
-    dataset.write(&staging, Some(&truth))?;
-    let old = parent.join(format!(".{}.old-{}", name.to_string_lossy(), std::process::id()));
-    if out.exists() {
-        std::fs::rename(out, &old).map_err(|e| DatasetError::io(out, e))?;
-    }
-    std::fs::rename(&staging, out).map_err(|e| DatasetError::io(out, e))?;
-    let _ = std::fs::remove_dir_all(&old);
-    Ok(out.to_path_buf())
+    dataset.write(output.path(), Some(&truth))?;
+    Ok(output.commit()?)
 }
 
 #[cfg(test)]
@@ -291,5 +271,29 @@ mod tests {
         assert!(err.to_string().contains("refusing"), "{err}");
         assert!(dir.path().join("precious.txt").is_file());
         assert!(matches!(Scenario::parse("sphere"), Err(GenerateError::UnknownScenario(_))));
+    }
+
+    #[test]
+    fn a_layer_count_beyond_the_bound_is_refused_before_printing() {
+        let opts =
+            GenerateOptions { open_loop_layers: Some(usize::MAX), ..options(ControlLaw::OpenLoop, Effects::none()) };
+        let err = generate(&opts).unwrap_err().to_string();
+        assert_eq!(err, format!("--layers: expected 1 to 1000, got {}", usize::MAX));
+    }
+
+    #[test]
+    fn refuses_to_replace_measured_scans_and_leaves_no_staging_folder() {
+        // A hand-written inkjet-scans dataset is somebody's measurement, not ours to replace.
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("mine");
+        let mut scans = generate(&options(ControlLaw::OpenLoop, Effects::none())).unwrap().0;
+        scans.manifest.provenance =
+            Provenance::Measured { source: "lab".into(), license: "CC0".into(), imported_by: "hand".into() };
+        scans.write(&out, None).unwrap();
+        let err = write_dataset(&options(ControlLaw::OpenLoop, Effects::none()), &out).unwrap_err().to_string();
+        assert!(err.contains("refusing to replace it"), "{err}");
+        assert!(matches!(InkjetScans::read(&out).unwrap().manifest.provenance, Provenance::Measured { .. }));
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, ["mine"]);
     }
 }

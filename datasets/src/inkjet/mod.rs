@@ -23,7 +23,7 @@
 mod format;
 mod generate;
 
-pub use format::{CoeffsToml, GridToml, InkjetScans, ProfilerToml, FORMAT_VERSION, KIND};
-pub use generate::{generate, write_dataset, GenerateError, GenerateOptions, Scenario, GENERATOR};
+pub use format::{CoeffsToml, GridToml, InkjetScans, ProfilerToml, FORMAT_VERSION, KIND, READABLE_VERSIONS};
+pub use generate::{generate, write_dataset, GenerateError, GenerateOptions, Scenario, GENERATOR, OUTPUT};
 pub use models::inkjet::experiments::ControlLaw;
 pub use models::inkjet::printer::{Effect, Effects};

@@ -73,6 +73,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::capillary::{cells_near, disc_offsets, LayerFill, MAX_COLLAPSE_MM, THIN_FEATURE_RADIUS_MM};
 use super::effects::Effects;
+use crate::limits::DEPOSIT_SIDE_CELLS;
 
 /// Edge of a deposit cell (mm): a tenth of the nominal half-width, 1/20 of the nozzle.
 pub const CELL_MM: f64 = 0.02;
@@ -140,6 +141,7 @@ pub fn print_part<R: Rng>(
     nominal_flow.iter_mut().for_each(|e| *e = e.max(0.0));
     let normal = Normal::new(1.0, FLOW_FACTOR_SD).expect("valid normal");
     let factors: Vec<f64> = (0..layers).map(|_| normal.sample(rng).clamp(0.97, 1.03)).collect();
+    check_grid_size(trajectory)?;
     let printer = LayerPrinter::new(trajectory, &setup, effects.melt_squeeze_out);
     let mut stack = PartStack::new(grid_for(trajectory), setup.nozzle_mm / 2.0);
     let mut printed = Vec::with_capacity(layers);
@@ -222,6 +224,12 @@ pub fn conventional_command(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<
 
 /// An empty deposit grid covering the trajectory with [`MARGIN_MM`] around it.
 pub fn grid_for(trajectory: &Trajectory) -> DepositGrid {
+    let (origin, max) = grid_corners_mm(trajectory);
+    DepositGrid::covering(origin, max, CELL_MM)
+}
+
+/// The lower-left and upper-right corners of [`grid_for`]'s grid (mm).
+fn grid_corners_mm(trajectory: &Trajectory) -> ([f64; 2], [f64; 2]) {
     let fold = |v: &[f64], f: fn(f64, f64) -> f64, init: f64| v.iter().copied().fold(init, f);
     let min = [fold(&trajectory.x_mm, f64::min, f64::INFINITY), fold(&trajectory.y_mm, f64::min, f64::INFINITY)];
     let max =
@@ -229,7 +237,23 @@ pub fn grid_for(trajectory: &Trajectory) -> DepositGrid {
     // Snap the origin to the cell lattice so that grids of the same path coincide.
     let origin =
         [((min[0] - MARGIN_MM) / CELL_MM).floor() * CELL_MM, ((min[1] - MARGIN_MM) / CELL_MM).floor() * CELL_MM];
-    DepositGrid::covering(origin, [max[0] + MARGIN_MM, max[1] + MARGIN_MM], CELL_MM)
+    (origin, [max[0] + MARGIN_MM, max[1] + MARGIN_MM])
+}
+
+/// Refuses a trajectory whose grid would exceed [`DEPOSIT_SIDE_CELLS`], before it is allocated.
+fn check_grid_size(trajectory: &Trajectory) -> Result<(), ThermalError> {
+    let (origin, max) = grid_corners_mm(trajectory);
+    let cells = |axis: usize| ((max[axis] - origin[axis]) / CELL_MM).ceil();
+    let limit = *DEPOSIT_SIDE_CELLS.end() as f64;
+    if cells(0) <= limit && cells(1) <= limit {
+        return Ok(());
+    }
+    let message = format!(
+        "the part needs a deposit grid of {}×{} cells of {CELL_MM} mm; the virtual printer prints parts up to {limit} cells per side",
+        cells(0),
+        cells(1)
+    );
+    Err(ThermalError::BadTrajectory { message })
 }
 
 /// Cell offsets within `radius_mm`, nearest first (ties broken by angle so that the
@@ -647,6 +671,19 @@ pub(crate) mod tests {
         assert_eq!(layer.fill[layer.grid.index(9, 10)], 1.0);
         assert!((layer.fill.iter().sum::<f64>() - 3.0).abs() < 1e-12);
         assert!(layer.fill.iter().all(|f| *f <= 1.0));
+    }
+
+    #[test]
+    fn a_part_too_large_for_the_deposit_grid_is_refused_before_the_grid_is_allocated() {
+        // 300 mm at 0.02 mm cells is 15 300 cells per side (about 4 GB of state).
+        let setup = PrintSetup::paper_defaults();
+        let t: Vec<f64> = (0..100).map(|k| k as f64 * setup.sample_period_s).collect();
+        let x: Vec<f64> = (0..100).map(|k| k as f64 * 3.0).collect();
+        let trajectory = Trajectory::from_samples(&t, &x, &vec![0.0; 100]).unwrap();
+        let v_e = conventional_command(&setup, &trajectory);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let err = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap_err().to_string();
+        assert!(err.contains("the virtual printer prints parts up to 8192 cells per side"), "{err}");
     }
 
     #[test]

@@ -34,11 +34,13 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::error::DatasetError;
+use crate::limits::{check_option, THERMAL_LAYERS};
 use crate::manifest::{DatasetManifest, Provenance, MANIFEST_FILE};
+use crate::output::{write_file, OutputDir, Ownership};
 use camera::{Distortion, FrameCapture, Intrinsics, Mount, Pose, HEIGHT_PX, WIDTH_PX};
 use deposition::{conventional_command, LayerDeposit};
 use heat::{HeatParams, LayerHeat};
-use sequence::{CameraFile, ProcessFile, StagedDir, TruthFile};
+use sequence::{CameraFile, ProcessFile, TruthFile};
 
 /// Generator name recorded in the provenance.
 pub const GENERATOR: &str = "amrepro-thermal";
@@ -88,16 +90,35 @@ struct Shot {
     corners: Vec<(usize, [f64; 2], f64, f64)>,
 }
 
+/// The folders [`generate`] may replace: absent, empty, or a dataset it wrote.
+pub const OUTPUT: Ownership = Ownership {
+    kind: sequence::KIND,
+    versions: sequence::READABLE_VERSIONS,
+    writer: "datasets generate thermal",
+    written_by_us: |p| matches!(p, Provenance::Virtual { generator, .. } if generator == GENERATOR),
+};
+
 /// Prints the corner test part (paper Fig. 7, Table 1) conventionally (v_e = |v|),
-/// films it and writes a `thermal-sequence` dataset into `out_dir` atomically.
+/// films it and writes a `thermal-sequence` dataset as `out` atomically ([`OutputDir`]:
+/// `out` must be absent, empty or an earlier output of this generator).
 /// The output is byte-identical for the same config whatever the thread count.
-pub fn generate(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSummary, DatasetError> {
+pub fn generate(config: &GenerateConfig, out: &Path) -> Result<GenerateSummary, DatasetError> {
+    let output = OutputDir::begin(out, &OUTPUT)?;
+    let summary = generate_into(config, output.path())?;
+    output.commit()?;
+    Ok(summary)
+}
+
+/// [`generate`] into the empty folder `out_dir` (a stage's output folder, which the
+/// engine swaps in).
+pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSummary, DatasetError> {
     let model_error = |e: models::thermal::ThermalError| DatasetError::Malformed {
         file: out_dir.to_path_buf(),
         location: None,
         expected: format!("virtual printer: {e}"),
     };
     let layers = config.layers.max(1);
+    check_option("--layers", layers, &THERMAL_LAYERS)?;
     let setup = PrintSetup::paper_defaults();
     let trajectory = Trajectory::corner_test(&setup).map_err(model_error)?;
     let v_e = conventional_command(&setup, &trajectory);
@@ -141,13 +162,11 @@ pub fn generate(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSumma
         })
         .collect();
     let shot_of: BTreeMap<(usize, usize), &Shot> = jobs.iter().map(|(l, f)| (*l, f.frame)).zip(&shots).collect();
-    let staged = StagedDir::new(out_dir)?;
     let nozzle_px = camera::project_px(&true_mount.pose([0.0, 0.0]), &intrinsics, &distortion, [0.0, 0.0])
         .expect("the nozzle is in front of the camera");
-    write_description(&staged, config, &setup, &trajectory, &intrinsics, &distortion, nozzle_px)?;
-    let (frames, corners) = write_frames(&staged, &schedules, &shot_of)?;
-    write_truth(&staged, &setup, &trajectory, &deposits, &heats, &true_mount, &config.effects, &schedules, &shot_of)?;
-    staged.commit()?;
+    write_description(out_dir, config, &setup, &trajectory, &intrinsics, &distortion, nozzle_px)?;
+    let (frames, corners) = write_frames(out_dir, &schedules, &shot_of)?;
+    write_truth(out_dir, &setup, &trajectory, &deposits, &heats, &true_mount, &config.effects, &schedules, &shot_of)?;
     let repeated_frames = schedules.iter().flatten().filter(|f| f.source != f.frame).count();
     Ok(GenerateSummary {
         layers,
@@ -229,7 +248,7 @@ fn shoot<R: Rng>(
 /// `dataset.toml`, `camera.toml`, `process.toml`, `path.csv`, `trajectory.csv`.
 #[allow(clippy::too_many_arguments)]
 fn write_description(
-    staged: &StagedDir,
+    staged: &Path,
     config: &GenerateConfig,
     setup: &PrintSetup,
     trajectory: &Trajectory,
@@ -280,7 +299,7 @@ fn write_description(
             effects: config.effects.to_map(),
         },
     };
-    staged.write(MANIFEST_FILE, manifest.to_toml().as_bytes())?;
+    write_file(staged, MANIFEST_FILE, manifest.to_toml().as_bytes())?;
     let camera = CameraFile {
         width_px: WIDTH_PX,
         height_px: HEIGHT_PX,
@@ -290,13 +309,13 @@ fn write_description(
         mount: Mount::nominal(),
         nozzle_px,
     };
-    staged.write("camera.toml", sequence::to_toml(&camera).as_bytes())?;
-    staged.write("process.toml", sequence::to_toml(&process_file(setup, config.layers.max(1))).as_bytes())?;
+    write_file(staged, "camera.toml", sequence::to_toml(&camera).as_bytes())?;
+    write_file(staged, "process.toml", sequence::to_toml(&process_file(setup, config.layers.max(1))).as_bytes())?;
     let mut path = String::from("vertex,x_mm,y_mm\n");
     for (i, v) in corner_test_path().iter().enumerate() {
         let _ = writeln!(path, "{i},{},{}", v[0], v[1]);
     }
-    staged.write("path.csv", path.as_bytes())?;
+    write_file(staged, "path.csv", path.as_bytes())?;
     let mut table = String::from("t_s,x_mm,y_mm,e_mm3_s\n");
     let speeds = trajectory.speed_mm_s();
     for k in 0..trajectory.len() {
@@ -304,7 +323,7 @@ fn write_description(
         let _ =
             writeln!(table, "{:.3},{:.6},{:.6},{:.6}", trajectory.t_s[k], trajectory.x_mm[k], trajectory.y_mm[k], e);
     }
-    staged.write("trajectory.csv", table.as_bytes())
+    write_file(staged, "trajectory.csv", table.as_bytes())
 }
 
 fn process_file(setup: &PrintSetup, layers: usize) -> ProcessFile {
@@ -326,7 +345,7 @@ fn process_file(setup: &PrintSetup, layers: usize) -> ProcessFile {
 
 /// `frames.csv` and the PNGs; returns (frames written, corner rows).
 fn write_frames(
-    staged: &StagedDir,
+    staged: &Path,
     schedules: &[Vec<FrameCapture>],
     shots: &BTreeMap<(usize, usize), &Shot>,
 ) -> Result<(usize, usize), DatasetError> {
@@ -336,13 +355,13 @@ fn write_frames(
         for f in schedule {
             let file = sequence::frame_file_name(layer, f.frame);
             let shot = shots[&(layer, f.source)];
-            staged.write(&file, &shot.png)?;
+            write_file(staged, &file, &shot.png)?;
             let _ = writeln!(table, "{layer},{},{:.6},{}", f.frame, f.recorded_time_s, file.display());
             frames += 1;
             corners += shot.corners.len();
         }
     }
-    staged.write("frames.csv", table.as_bytes())?;
+    write_file(staged, "frames.csv", table.as_bytes())?;
     Ok((frames, corners))
 }
 
@@ -356,7 +375,7 @@ fn encode_fill(fill: f32) -> u16 {
 /// Everything under `truth/`.
 #[allow(clippy::too_many_arguments)]
 fn write_truth(
-    staged: &StagedDir,
+    staged: &Path,
     setup: &PrintSetup,
     trajectory: &Trajectory,
     deposits: &[LayerDeposit],
@@ -378,7 +397,7 @@ fn write_truth(
         flow_factor: deposits.iter().map(|d| d.flow_factor).collect(),
     };
     let dir = Path::new(sequence::TRUTH_DIR);
-    staged.write(dir.join("truth.toml"), sequence::to_toml(&truth).as_bytes())?;
+    write_file(staged, dir.join("truth.toml"), sequence::to_toml(&truth).as_bytes())?;
     let mut frames = String::from("layer,frame,capture_time_s,nozzle_x_mm,nozzle_y_mm\n");
     let mut corners = String::from("layer,frame,vertex,u_px,v_px,temp_c,age_s\n");
     for (layer, schedule) in schedules.iter().enumerate() {
@@ -392,8 +411,8 @@ fn write_truth(
             }
         }
     }
-    staged.write(dir.join("frames.csv"), frames.as_bytes())?;
-    staged.write(dir.join("corners.csv"), corners.as_bytes())?;
+    write_file(staged, dir.join("frames.csv"), frames.as_bytes())?;
+    write_file(staged, dir.join("corners.csv"), corners.as_bytes())?;
     let pieces: Vec<(Vec<u8>, String)> = deposits
         .par_iter()
         .map(|d| {
@@ -408,10 +427,10 @@ fn write_truth(
         .collect();
     let mut widths = String::from("layer,sample,t_s,w_left_mm,w_right_mm\n");
     for (d, (png, rows)) in deposits.iter().zip(&pieces) {
-        staged.write(dir.join(sequence::deposit_file_name(d.layer)), png)?;
+        write_file(staged, dir.join(sequence::deposit_file_name(d.layer)), png)?;
         widths.push_str(rows);
     }
-    staged.write(dir.join("widths.csv"), widths.as_bytes())
+    write_file(staged, dir.join("widths.csv"), widths.as_bytes())
 }
 
 #[cfg(test)]
@@ -503,7 +522,7 @@ mod tests {
         let mut distances = Vec::new();
         for c in truth.corners.iter().filter(|c| sharp.contains(&c.vertex) && c.age_s > 0.1 && c.age_s < 0.8) {
             let entry = seq.frames.iter().find(|f| f.layer == c.layer && f.frame == c.frame).unwrap();
-            let (w, h, pixels) = sequence::read_png16(&seq.frame_path(entry)).unwrap();
+            let (w, h, pixels) = sequence::read_png16(&seq.frame_path(entry), WIDTH_PX, HEIGHT_PX).unwrap();
             distances.push(distance_to_local_max(&pixels, w, h, c.pixel, 6));
         }
         distances.sort_by(f64::total_cmp);
@@ -539,7 +558,7 @@ mod tests {
             let png = sequence::encode_png16(WIDTH_PX, HEIGHT_PX, pixels);
             let dir = tempfile::tempdir().unwrap();
             std::fs::write(dir.path().join("f.png"), png).unwrap();
-            let (_, _, back) = sequence::read_png16(&dir.path().join("f.png")).unwrap();
+            let (_, _, back) = sequence::read_png16(&dir.path().join("f.png"), WIDTH_PX, HEIGHT_PX).unwrap();
             back.iter().map(|v| f64::from(*v) / 100.0 - camera::KELVIN_AT_ZERO_C).collect::<Vec<f64>>()
         };
         let exact: Vec<u16> = temps_c.iter().map(|t| camera::to_centikelvin(*t)).collect();
@@ -549,6 +568,14 @@ mod tests {
         let mean_abs = temps_c.iter().zip(&noisy).map(|(a, b)| (a - b).abs()).sum::<f64>() / temps_c.len() as f64;
         assert!((mean_abs - 0.05 * (2.0 / std::f64::consts::PI).sqrt()).abs() < 0.005, "{mean_abs}");
         assert!(temps_c.iter().cloned().fold(0.0, f64::max) > 200.0, "fresh material is in view");
+    }
+
+    #[test]
+    fn a_layer_count_beyond_the_bound_is_refused_before_printing() {
+        let out = tempfile::tempdir().unwrap();
+        let config = GenerateConfig { layers: 1_000_000_000, ..GenerateConfig::default() };
+        let err = generate_into(&config, out.path()).unwrap_err().to_string();
+        assert_eq!(err, "--layers: expected 1 to 10000, got 1000000000");
     }
 
     #[test]

@@ -20,18 +20,26 @@
 use std::io::{BufReader, BufWriter};
 use std::path::{Path, PathBuf};
 
-use serde::{de::DeserializeOwned, Deserialize, Serialize};
+use serde::{Deserialize, Serialize};
 
 use super::camera::{Distortion, Intrinsics, Mount};
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
+use crate::limits::{
+    check_numbers, check_size, NumberRule::*, DEPOSIT_SIDE_CELLS, IMAGE_SIDE_PX, MAX_COORDINATE_MM,
+    MAX_FILMED_AFTER_END_S, SAMPLE_PERIOD_TOLERANCE, THERMAL_LAYERS,
+};
 use crate::manifest::DatasetManifest;
+use crate::paths::{file_in, referenced_file};
+use crate::text::read_toml;
 use models::thermal::DepositGrid;
 
 /// The kind string in `dataset.toml`.
 pub const KIND: &str = "thermal-sequence";
 /// Current folder layout version.
 pub const FORMAT_VERSION: u32 = 1;
+/// The folder layout versions this build reads.
+pub const READABLE_VERSIONS: &[u32] = &[FORMAT_VERSION];
 /// Name of the ground-truth subfolder.
 pub const TRUTH_DIR: &str = "truth";
 /// Fill fraction stored as 65535 in `truth/deposit_L*.png`: a layer is at most three
@@ -239,21 +247,13 @@ pub struct ThermalTruth {
 impl ThermalSequence {
     /// Reads and checks a `thermal-sequence` folder (not the PNGs, not `truth/`).
     pub fn open(dir: &Path) -> Result<Self, DatasetError> {
-        let manifest = DatasetManifest::read(dir, KIND)?;
-        let camera: CameraFile = read_toml(&dir.join("camera.toml"))?;
-        let process: ProcessFile = read_toml(&dir.join("process.toml"))?;
-        let path = CsvTable::read(&dir.join("path.csv"))?;
-        let path_mm = columns(&path, &["x_mm", "y_mm"])?.into_iter().map(|r| [r[0], r[1]]).collect();
-        let table = CsvTable::read(&dir.join("trajectory.csv"))?;
-        let rows = columns(&table, &["t_s", "x_mm", "y_mm", "e_mm3_s"])?;
-        let mut trajectory = TrajectoryTable::default();
-        for r in rows {
-            trajectory.t_s.push(r[0]);
-            trajectory.x_mm.push(r[1]);
-            trajectory.y_mm.push(r[2]);
-            trajectory.e_mm3_s.push(r[3]);
-        }
-        let frames = read_frames(dir)?;
+        let manifest = DatasetManifest::read(dir, KIND, READABLE_VERSIONS)?;
+        let camera = read_camera(&file_in(dir, "camera.toml")?)?;
+        let process = read_process(&file_in(dir, "process.toml")?)?;
+        let path = CsvTable::read(&file_in(dir, "path.csv")?)?;
+        let path_mm = positions(&path, &columns(&path, &["x_mm", "y_mm"])?)?;
+        let trajectory = read_trajectory(&file_in(dir, "trajectory.csv")?, process.sample_period_s)?;
+        let frames = read_frames(dir, &process, &camera, &trajectory)?;
         Ok(Self { dir: dir.to_path_buf(), manifest, camera, process, path_mm, trajectory, frames })
     }
 
@@ -266,14 +266,13 @@ impl ThermalSequence {
 impl ThermalTruth {
     /// Reads `dir/truth/`.
     pub fn open(dir: &Path) -> Result<Self, DatasetError> {
-        let truth_dir = dir.join(TRUTH_DIR);
-        let truth: TruthFile = read_toml(&truth_dir.join("truth.toml"))?;
-        let table = CsvTable::read(&truth_dir.join("frames.csv"))?;
+        let truth = read_truth_file(&file_in(dir, "truth/truth.toml")?)?;
+        let table = CsvTable::read(&file_in(dir, "truth/frames.csv")?)?;
         let frames = integer_led(&table, &["layer", "frame"], &["capture_time_s", "nozzle_x_mm", "nozzle_y_mm"])?
             .into_iter()
             .map(|(i, r)| TruthFrame { layer: i[0], frame: i[1], capture_time_s: r[0], nozzle_mm: [r[1], r[2]] })
             .collect();
-        let table = CsvTable::read(&truth_dir.join("corners.csv"))?;
+        let table = CsvTable::read(&file_in(dir, "truth/corners.csv")?)?;
         let corners = integer_led(&table, &["layer", "frame", "vertex"], &["u_px", "v_px", "temp_c", "age_s"])?
             .into_iter()
             .map(|(i, r)| TruthCorner {
@@ -285,7 +284,7 @@ impl ThermalTruth {
                 age_s: r[3],
             })
             .collect();
-        let table = CsvTable::read(&truth_dir.join("widths.csv"))?;
+        let table = CsvTable::read(&file_in(dir, "truth/widths.csv")?)?;
         let widths = integer_led(&table, &["layer", "sample"], &["t_s", "w_left_mm", "w_right_mm"])?
             .into_iter()
             .map(|(i, r)| TruthWidth { layer: i[0], sample: i[1], t_s: r[0], w_left_mm: r[1], w_right_mm: r[2] })
@@ -295,13 +294,9 @@ impl ThermalTruth {
 
     /// The true deposit of `layer`, decoded from `truth/deposit_L{layer:02}.png`.
     pub fn deposit(&self, layer: usize) -> Result<DepositGrid, DatasetError> {
-        let file = self.dir.join(TRUTH_DIR).join(deposit_file_name(layer));
-        let (w, h, data) = read_png16(&file)?;
+        let file = file_in(&self.dir, &format!("{TRUTH_DIR}/{}", deposit_file_name(layer)))?;
         let t = &self.truth;
-        if (w, h) != (t.deposit_nx, t.deposit_ny) {
-            let expected = format!("expected {}×{} px (truth.toml), got {w}×{h}", t.deposit_nx, t.deposit_ny);
-            return Err(DatasetError::Malformed { file, location: None, expected });
-        }
+        let (w, h, data) = read_png16(&file, t.deposit_nx, t.deposit_ny)?;
         let fill = data.iter().map(|v| (f64::from(*v) / 65535.0 * DEPOSIT_PNG_FULL_FILL) as f32).collect();
         Ok(DepositGrid { origin_mm: t.deposit_origin_mm, cell_mm: t.deposit_cell_mm, nx: w, ny: h, fill })
     }
@@ -332,15 +327,23 @@ pub fn encode_png16(width: usize, height: usize, data: &[u16]) -> Vec<u8> {
     out
 }
 
-/// Decodes a 16-bit grayscale PNG into `(width, height, values)`.
-pub fn read_png16(file: &Path) -> Result<(usize, usize, Vec<u16>), DatasetError> {
+/// Decodes a 16-bit grayscale PNG that must be `width` × `height` into
+/// `(width, height, values)`; the header's size is checked before anything is allocated.
+pub fn read_png16(file: &Path, width: usize, height: usize) -> Result<(usize, usize, Vec<u16>), DatasetError> {
     let bad = |e: String| DatasetError::Malformed { file: file.to_path_buf(), location: None, expected: e };
     let handle = std::fs::File::open(file).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.to_path_buf(), hint: None },
         _ => DatasetError::io(file, e),
     })?;
-    let mut reader =
-        png::Decoder::new(BufReader::new(handle)).read_info().map_err(|e| bad(format!("not a PNG: {e}")))?;
+    // Room for the image and the decoder's row buffers; more is a lie in the header.
+    let limits = png::Limits { bytes: 4 * width * height + (1 << 16) };
+    let mut reader = png::Decoder::new_with_limits(BufReader::new(handle), limits)
+        .read_info()
+        .map_err(|e| bad(format!("not a PNG: {e}")))?;
+    let (w, h) = (reader.info().width as usize, reader.info().height as usize);
+    if (w, h) != (width, height) {
+        return Err(bad(format!("expected {width}×{height} px, the PNG header says {w}×{h}")));
+    }
     let size = reader.output_buffer_size().ok_or_else(|| bad("PNG too large".into()))?;
     let mut buf = vec![0; size];
     let info = reader.next_frame(&mut buf).map_err(|e| bad(format!("corrupt PNG: {e}")))?;
@@ -348,55 +351,7 @@ pub fn read_png16(file: &Path) -> Result<(usize, usize, Vec<u16>), DatasetError>
         return Err(bad(format!("expected 16-bit grayscale, got {:?} {:?}", info.color_type, info.bit_depth)));
     }
     let values = buf[..info.buffer_size()].chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
-    Ok((info.width as usize, info.height as usize, values))
-}
-
-/// Writes a dataset into a staging folder beside `out_dir` and swaps it into place.
-#[derive(Debug)]
-pub struct StagedDir {
-    staging: PathBuf,
-    target: PathBuf,
-}
-
-impl StagedDir {
-    /// A fresh staging folder `.{name}.staging` next to `out_dir`.
-    pub fn new(out_dir: &Path) -> Result<Self, DatasetError> {
-        let name = out_dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "dataset".into());
-        let staging = out_dir.with_file_name(format!(".{name}.staging"));
-        if staging.exists() {
-            std::fs::remove_dir_all(&staging).map_err(|e| DatasetError::io(&staging, e))?;
-        }
-        std::fs::create_dir_all(&staging).map_err(|e| DatasetError::io(&staging, e))?;
-        Ok(Self { staging, target: out_dir.to_path_buf() })
-    }
-
-    /// Writes `bytes` to `relative` inside the staging folder (creating subfolders).
-    pub fn write(&self, relative: impl AsRef<Path>, bytes: &[u8]) -> Result<(), DatasetError> {
-        let file = self.staging.join(relative);
-        if let Some(parent) = file.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| DatasetError::io(parent, e))?;
-        }
-        std::fs::write(&file, bytes).map_err(|e| DatasetError::io(&file, e))
-    }
-
-    /// Replaces `out_dir` by the staging folder (an existing `out_dir` is removed last).
-    pub fn commit(self) -> Result<(), DatasetError> {
-        let old = self.target.with_file_name(format!(
-            ".{}.old",
-            self.target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
-        ));
-        if self.target.exists() {
-            if old.exists() {
-                std::fs::remove_dir_all(&old).map_err(|e| DatasetError::io(&old, e))?;
-            }
-            std::fs::rename(&self.target, &old).map_err(|e| DatasetError::io(&self.target, e))?;
-        }
-        std::fs::rename(&self.staging, &self.target).map_err(|e| DatasetError::io(&self.target, e))?;
-        if old.exists() {
-            std::fs::remove_dir_all(&old).map_err(|e| DatasetError::io(&old, e))?;
-        }
-        Ok(())
-    }
+    Ok((w, h, values))
 }
 
 /// Serialises a TOML file's contents.
@@ -404,16 +359,111 @@ pub fn to_toml<T: Serialize>(value: &T) -> String {
     toml::to_string_pretty(value).expect("plain structs serialise to TOML")
 }
 
-fn read_toml<T: DeserializeOwned>(file: &Path) -> Result<T, DatasetError> {
-    let text = std::fs::read_to_string(file).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => DatasetError::Missing { file: file.to_path_buf(), hint: None },
-        _ => DatasetError::io(file, e),
-    })?;
-    toml::from_str(&text).map_err(|e| DatasetError::Malformed {
-        file: file.to_path_buf(),
-        location: None,
-        expected: e.to_string().trim().replace('\n', " "),
-    })
+/// `camera.toml`, every size within [`IMAGE_SIDE_PX`] and every number finite.
+fn read_camera(file: &Path) -> Result<CameraFile, DatasetError> {
+    let c: CameraFile = read_toml(file)?;
+    check_size(file, "width_px", c.width_px, &IMAGE_SIDE_PX)?;
+    check_size(file, "height_px", c.height_px, &IMAGE_SIDE_PX)?;
+    let (i, d, m) = (&c.intrinsics, &c.distortion, &c.mount);
+    check_numbers(
+        file,
+        &[
+            ("frame_period_s", c.frame_period_s, Positive),
+            ("intrinsics.fx_px", i.fx_px, Positive),
+            ("intrinsics.fy_px", i.fy_px, Positive),
+            ("intrinsics.cx_px", i.cx_px, Finite),
+            ("intrinsics.cy_px", i.cy_px, Finite),
+            ("distortion.k1", d.k1, Finite),
+            ("distortion.k2", d.k2, Finite),
+            ("distortion.p1", d.p1, Finite),
+            ("distortion.p2", d.p2, Finite),
+            ("mount.height_mm", m.height_mm, Positive),
+            ("mount.tilt_deg", m.tilt_deg, Below(0.0, 90.0)),
+            ("mount.look_at_mm", m.look_at_mm[0], Finite),
+            ("mount.look_at_mm", m.look_at_mm[1], Finite),
+            ("mount.roll_deg", m.roll_deg, Finite),
+            ("nozzle_px", c.nozzle_px[0], Finite),
+            ("nozzle_px", c.nozzle_px[1], Finite),
+        ],
+    )?;
+    Ok(c)
+}
+
+/// `process.toml`: physical quantities positive, `layers_printed` within [`THERMAL_LAYERS`].
+fn read_process(file: &Path) -> Result<ProcessFile, DatasetError> {
+    let p: ProcessFile = read_toml(file)?;
+    check_size(file, "layers_printed", p.layers_printed, &THERMAL_LAYERS)?;
+    check_numbers(
+        file,
+        &[
+            ("feed_mm_s", p.feed_mm_s, Positive),
+            ("accel_mm_s2", p.accel_mm_s2, Positive),
+            ("blend_tol_mm", p.blend_tol_mm, NonNegative),
+            ("layer_height_mm", p.layer_height_mm, Positive),
+            ("nozzle_mm", p.nozzle_mm, Positive),
+            ("bead_width_mm", p.bead_width_mm, Positive),
+            ("tau_s", p.tau_s, NonNegative),
+            ("bed_temp_c", p.bed_temp_c, Finite),
+            ("nozzle_temp_c", p.nozzle_temp_c, Within(p.bed_temp_c + 1.0, f64::MAX)),
+            ("filament_diameter_mm", p.filament_diameter_mm, Positive),
+            ("sample_period_s", p.sample_period_s, Positive),
+        ],
+    )?;
+    Ok(p)
+}
+
+/// `truth/truth.toml`, the deposit grid within [`DEPOSIT_SIDE_CELLS`].
+fn read_truth_file(file: &Path) -> Result<TruthFile, DatasetError> {
+    let t: TruthFile = read_toml(file)?;
+    check_size(file, "deposit_nx", t.deposit_nx, &DEPOSIT_SIDE_CELLS)?;
+    check_size(file, "deposit_ny", t.deposit_ny, &DEPOSIT_SIDE_CELLS)?;
+    check_numbers(file, &[("deposit_cell_mm", t.deposit_cell_mm, Positive)])?;
+    Ok(t)
+}
+
+/// `trajectory.csv`: times strictly increasing at `sample_period_s` (first step within
+/// [`SAMPLE_PERIOD_TOLERANCE`]), positions within [`MAX_COORDINATE_MM`].
+fn read_trajectory(file: &Path, sample_period_s: f64) -> Result<TrajectoryTable, DatasetError> {
+    let table = CsvTable::read(file)?;
+    let rows = columns(&table, &["t_s", "x_mm", "y_mm", "e_mm3_s"])?;
+    let xy: Vec<Vec<f64>> = rows.iter().map(|r| r[1..3].to_vec()).collect();
+    positions(&table, &xy)?;
+    let t_col = table.column("t_s")?;
+    for (k, pair) in rows.windows(2).enumerate() {
+        let (line, step_s) = (table.rows[k + 1].0, pair[1][0] - pair[0][0]);
+        if step_s <= 0.0 {
+            return Err(table.field_error(
+                line,
+                t_col,
+                format!("expected times increasing, got {} after {}", pair[1][0], pair[0][0]),
+            ));
+        }
+        if k == 0 && (step_s - sample_period_s).abs() > SAMPLE_PERIOD_TOLERANCE * sample_period_s {
+            let expected =
+                format!("expected the step of sample_period_s = {sample_period_s} s (process.toml), got {step_s} s");
+            return Err(table.field_error(line, t_col, expected));
+        }
+    }
+    let mut trajectory = TrajectoryTable::default();
+    for r in rows {
+        trajectory.t_s.push(r[0]);
+        trajectory.x_mm.push(r[1]);
+        trajectory.y_mm.push(r[2]);
+        trajectory.e_mm3_s.push(r[3]);
+    }
+    Ok(trajectory)
+}
+
+/// Rows of `(x_mm, y_mm)` as points, each coordinate within ±[`MAX_COORDINATE_MM`].
+fn positions(table: &CsvTable, rows: &[Vec<f64>]) -> Result<Vec<[f64; 2]>, DatasetError> {
+    let cols = [table.column("x_mm")?, table.column("y_mm")?];
+    for (row, r) in table.rows.iter().zip(rows) {
+        if let Some(axis) = (0..2).find(|&a| r[a].abs() > MAX_COORDINATE_MM) {
+            let expected = format!("expected a position within ±{MAX_COORDINATE_MM} mm of the origin, got {}", r[axis]);
+            return Err(table.field_error(row.0, cols[axis], expected));
+        }
+    }
+    Ok(rows.iter().map(|r| [r[0], r[1]]).collect())
 }
 
 /// The named numeric columns of every row.
@@ -446,27 +496,67 @@ fn index_field(table: &CsvTable, row: &(usize, Vec<String>), col: usize) -> Resu
         .map_err(|_| table.field_error(row.0, col, format!("expected a non-negative integer, got `{}`", row.1[col])))
 }
 
-fn read_frames(dir: &Path) -> Result<Vec<FrameEntry>, DatasetError> {
-    let table = CsvTable::read(&dir.join("frames.csv"))?;
+/// `frames.csv`: each file inside the folder, each `(layer, frame)` once, layers the
+/// dataset has, recorded times the trajectory covers (see [`recorded_time`]).
+fn read_frames(
+    dir: &Path,
+    process: &ProcessFile,
+    camera: &CameraFile,
+    trajectory: &TrajectoryTable,
+) -> Result<Vec<FrameEntry>, DatasetError> {
+    let table = CsvTable::read(&file_in(dir, "frames.csv")?)?;
     let file_col = table.column("file")?;
-    let time_col = table.column("recorded_time_s")?;
     let (layer_col, frame_col) = (table.column("layer")?, table.column("frame")?);
-    table
-        .rows
-        .iter()
-        .map(|row| {
-            let file = PathBuf::from(&row.1[file_col]);
-            if file.is_absolute() || file.components().any(|c| matches!(c, std::path::Component::ParentDir)) {
-                return Err(table.field_error(row.0, file_col, "expected a path inside the dataset folder"));
-            }
-            Ok(FrameEntry {
-                layer: index_field(&table, row, layer_col)?,
-                frame: index_field(&table, row, frame_col)?,
-                recorded_time_s: table.number(row, time_col)?,
-                file,
-            })
-        })
-        .collect()
+    let mut seen: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+    let mut frames = Vec::with_capacity(table.rows.len());
+    for row in &table.rows {
+        let file = referenced_file(dir, &row.1[file_col]).map_err(|rule| table.field_error(row.0, file_col, rule))?;
+        let layer = index_field(&table, row, layer_col)?;
+        if layer >= process.layers_printed {
+            let expected = format!(
+                "expected a layer below layers_printed = {} (process.toml), got {layer}",
+                process.layers_printed
+            );
+            return Err(table.field_error(row.0, layer_col, expected));
+        }
+        let frame = index_field(&table, row, frame_col)?;
+        if let Some(first) = seen.insert((layer, frame), row.0) {
+            return Err(table.field_error(
+                row.0,
+                frame_col,
+                format!("expected each frame once, layer {layer} frame {frame} is also on line {first}"),
+            ));
+        }
+        let recorded_time_s = recorded_time(&table, row, camera, trajectory)?;
+        let file = file.strip_prefix(dir).map(Path::to_path_buf).unwrap_or(file);
+        frames.push(FrameEntry { layer, frame, recorded_time_s, file });
+    }
+    Ok(frames)
+}
+
+/// A frame's `recorded_time_s`: from one frame period before the trajectory's first
+/// sample to [`MAX_FILMED_AFTER_END_S`] after its last, else the trajectory does not
+/// cover the frames (a truncated `trajectory.csv`, or another clock).
+fn recorded_time(
+    table: &CsvTable,
+    row: &(usize, Vec<String>),
+    camera: &CameraFile,
+    trajectory: &TrajectoryTable,
+) -> Result<f64, DatasetError> {
+    let col = table.column("recorded_time_s")?;
+    let t_s = table.number(row, col)?;
+    let (first, last) = (trajectory.t_s[0], trajectory.t_s[trajectory.t_s.len() - 1]);
+    let (lo, hi) = (first - camera.frame_period_s, last + MAX_FILMED_AFTER_END_S);
+    if (lo..=hi).contains(&t_s) {
+        return Ok(t_s);
+    }
+    Err(table.field_error(
+        row.0,
+        col,
+        format!(
+            "expected a time the trajectory covers: trajectory.csv runs from {first} s to {last} s, so frames from {lo} s to {hi} s ({MAX_FILMED_AFTER_END_S} s of layer change after its end), got {t_s} s"
+        ),
+    ))
 }
 
 #[cfg(test)]
@@ -479,31 +569,180 @@ mod tests {
         let data: Vec<u16> = (0..12u16).map(|i| i * 5000 + 7).collect();
         let file = dir.path().join("a.png");
         std::fs::write(&file, encode_png16(4, 3, &data)).unwrap();
-        assert_eq!(read_png16(&file).unwrap(), (4, 3, data));
+        assert_eq!(read_png16(&file, 4, 3).unwrap(), (4, 3, data));
         std::fs::write(&file, b"not a png").unwrap();
-        assert!(read_png16(&file).unwrap_err().to_string().contains("not a PNG"));
+        assert!(read_png16(&file, 4, 3).unwrap_err().to_string().contains("not a PNG"));
+    }
+
+    /// The seed sequence of the fuzz tests (`tests/seeds/thermal-sequence`), copied,
+    /// with each `(file, from, to)` replacement applied.
+    fn seed(edits: &[(&str, &str, &str)]) -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        copy_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/seeds/thermal-sequence"), dir.path());
+        for (name, from, to) in edits {
+            let file = dir.path().join(name);
+            let text = std::fs::read_to_string(&file).unwrap();
+            assert!(text.contains(from), "{name} has no `{from}`");
+            std::fs::write(&file, text.replacen(from, to, 1)).unwrap();
+        }
+        dir
+    }
+
+    fn copy_dir(src: &Path, dst: &Path) {
+        std::fs::create_dir_all(dst).unwrap();
+        for entry in std::fs::read_dir(src).unwrap() {
+            let path = entry.unwrap().path();
+            let to = dst.join(path.file_name().unwrap());
+            if path.is_dir() {
+                copy_dir(&path, &to);
+            } else {
+                std::fs::copy(&path, &to).unwrap();
+            }
+        }
+    }
+
+    /// The error of opening the seed with `edits`.
+    fn open_error(edits: &[(&str, &str, &str)]) -> String {
+        ThermalSequence::open(seed(edits).path()).unwrap_err().to_string()
     }
 
     #[test]
-    fn frames_csv_errors_name_line_and_field() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("frames.csv"), "layer,frame,recorded_time_s,file\n0,x,0.0,frames/a.png\n")
-            .unwrap();
-        let err = read_frames(dir.path()).unwrap_err().to_string();
-        assert!(err.contains("frames.csv:line 2, field frame: expected a non-negative integer"), "{err}");
+    fn the_seed_sequence_and_its_truth_read() {
+        let dir = seed(&[]);
+        let seq = ThermalSequence::open(dir.path()).unwrap();
+        assert_eq!((seq.frames.len(), seq.trajectory.t_s.len(), seq.path_mm.len()), (3, 21, 4));
+        assert_eq!(seq.frames[1].file, Path::new("frames/L00_F0001.png"));
+        let truth = ThermalTruth::open(dir.path()).unwrap();
+        assert_eq!((truth.deposit(0).unwrap().nx, truth.frames.len()), (4, 2));
     }
 
     #[test]
-    fn staged_dir_replaces_the_target_atomically() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("ds");
-        std::fs::create_dir_all(&out).unwrap();
-        std::fs::write(out.join("old.txt"), b"old").unwrap();
-        let staged = StagedDir::new(&out).unwrap();
-        staged.write("sub/new.txt", b"new").unwrap();
-        assert!(out.join("old.txt").exists(), "nothing changes before commit");
-        staged.commit().unwrap();
-        assert!(!out.join("old.txt").exists() && out.join("sub/new.txt").exists());
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no staging leftovers");
+    fn image_sizes_outside_the_bounds_are_refused_before_anything_is_allocated() {
+        // 10⁹ × 10⁹ px used to reach the undistortion's correction map (SIGABRT); 0 px
+        // panicked inside kornia.
+        for (from, to, field) in
+            [("width_px = 160", "width_px = 1000000000", "width_px"), ("height_px = 120", "height_px = 0", "height_px")]
+        {
+            let err = open_error(&[("camera.toml", from, to)]);
+            assert!(err.contains(&format!("camera.toml:{field}: expected 2 to 2048, got")), "{err}");
+        }
+        let err = open_error(&[("process.toml", "layers_printed = 1", "layers_printed = 0")]);
+        assert!(err.contains("process.toml:layers_printed: expected 1 to 10000, got 0"), "{err}");
+        let truth = seed(&[("truth/truth.toml", "deposit_nx = 4", "deposit_nx = 4000000000")]);
+        let err = ThermalTruth::open(truth.path()).unwrap_err().to_string();
+        assert!(err.contains("truth.toml:deposit_nx: expected 1 to 8192"), "{err}");
+        let truth = seed(&[("truth/truth.toml", "deposit_nx = 4", "deposit_nx = 5")]);
+        let err = ThermalTruth::open(truth.path()).unwrap().deposit(0).unwrap_err().to_string();
+        assert!(err.contains("deposit_L00.png: expected 5×3 px, the PNG header says 4×3"), "{err}");
+    }
+
+    #[test]
+    fn periods_and_camera_numbers_must_be_physical() {
+        let cases = [
+            (
+                "process.toml",
+                "sample_period_s = 0.01",
+                "sample_period_s = 0.0",
+                "process.toml:sample_period_s: expected a finite number > 0, got 0",
+            ),
+            (
+                "camera.toml",
+                "frame_period_s = 0.125",
+                "frame_period_s = -0.125",
+                "camera.toml:frame_period_s: expected a finite number > 0",
+            ),
+            (
+                "camera.toml",
+                "fx_px = 147.34",
+                "fx_px = nan",
+                "camera.toml:intrinsics.fx_px: expected a finite number > 0, got NaN",
+            ),
+            ("camera.toml", "k1 = -0.12", "k1 = inf", "camera.toml:distortion.k1: expected a finite number, got inf"),
+            (
+                "process.toml",
+                "nozzle_temp_c = 230.0",
+                "nozzle_temp_c = 50.0",
+                "process.toml:nozzle_temp_c: expected a number in [61",
+            ),
+            (
+                "trajectory.csv",
+                "0.010,0.2",
+                "0.000,0.2",
+                "trajectory.csv:line 3, field t_s: expected times increasing, got 0 after 0",
+            ),
+            (
+                "trajectory.csv",
+                "0.010,0.2",
+                "0.005,0.2",
+                "trajectory.csv:line 3, field t_s: expected the step of sample_period_s = 0.01 s",
+            ),
+            ("path.csv", "1,4,0", "1,4e6,0", "path.csv:line 3, field x_mm: expected a position within ±300 mm"),
+        ];
+        for (file, from, to, expected) in cases {
+            let err = open_error(&[(file, from, to)]);
+            assert!(err.contains(expected), "{to}: {err}");
+        }
+    }
+
+    #[test]
+    fn frames_must_be_unique_of_known_layers_and_covered_by_the_trajectory() {
+        let err = open_error(&[("frames.csv", "0,2,0.250000", "0,1,0.250000")]);
+        assert!(
+            err.contains("frames.csv:line 4, field frame: expected each frame once, layer 0 frame 1 is also on line 3"),
+            "{err}"
+        );
+        let err = open_error(&[("frames.csv", "0,2,0.250000", "3,2,0.250000")]);
+        assert!(
+            err.contains(
+                "frames.csv:line 4, field layer: expected a layer below layers_printed = 1 (process.toml), got 3"
+            ),
+            "{err}"
+        );
+        // A truncated trajectory (0.2 s here) does not cover a frame recorded at 2.5 s:
+        // it used to run with nearly every frame parked and exit 0.
+        let err = open_error(&[("frames.csv", "0,2,0.250000", "0,2,2.500000")]);
+        assert!(err.contains("frames.csv:line 4, field recorded_time_s: expected a time the trajectory covers: trajectory.csv runs from 0 s to 0.2 s"), "{err}");
+    }
+
+    #[test]
+    fn frame_files_stay_inside_the_folder() {
+        for path in ["/etc/passwd", "../frames/L00_F0000.png", "frames/../../x.png", ""] {
+            let err = open_error(&[("frames.csv", "frames/L00_F0002.png", path)]);
+            assert!(
+                err.contains("frames.csv:line 4, field file: expected a path relative to the dataset folder"),
+                "{path}: {err}"
+            );
+        }
+        #[cfg(unix)]
+        {
+            // A frames/ folder that is a link to another place is refused, by name.
+            let (dir, elsewhere) = (seed(&[]), tempfile::tempdir().unwrap());
+            std::fs::rename(dir.path().join("frames"), elsewhere.path().join("frames")).unwrap();
+            std::os::unix::fs::symlink(elsewhere.path().join("frames"), dir.path().join("frames")).unwrap();
+            let err = ThermalSequence::open(dir.path()).unwrap_err().to_string();
+            assert!(err.contains("frames.csv:line 2, field file: resolves through a symbolic link"), "{err}");
+        }
+    }
+
+    #[test]
+    fn toml_files_with_a_byte_order_mark_read() {
+        let dir = seed(&[]);
+        for name in ["dataset.toml", "camera.toml", "process.toml", "frames.csv"] {
+            let file = dir.path().join(name);
+            let text = std::fs::read_to_string(&file).unwrap();
+            std::fs::write(&file, format!("\u{feff}{text}")).unwrap();
+        }
+        assert_eq!(ThermalSequence::open(dir.path()).unwrap().frames.len(), 3);
+    }
+
+    #[test]
+    fn an_unknown_format_version_is_refused() {
+        let err = open_error(&[("dataset.toml", "format_version = 1", "format_version = 2")]);
+        assert!(
+            err.contains(
+                "dataset.toml:format_version: this build of amrepro reads `thermal-sequence` format_version 1, got 2"
+            ),
+            "{err}"
+        );
     }
 }

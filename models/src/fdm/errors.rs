@@ -45,10 +45,10 @@ pub enum ParamError {
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum FitError {
     /// A measured line is malformed (lengths differ, unsorted positions, non-finite values).
-    #[error("measured line {line}: {reason}")]
+    #[error("measured line{}: {reason}", line.map(|i| format!(" {i}")).unwrap_or_default())]
     BadLine {
-        /// Index of the line in the input slice (or `usize::MAX` when built alone).
-        line: usize,
+        /// Index of the line in the input slice (`None` for a line checked alone).
+        line: Option<usize>,
         /// What is wrong.
         reason: String,
     },

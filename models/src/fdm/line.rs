@@ -20,14 +20,18 @@ impl MeasuredLine {
     /// A checked line (see [`Self::validate`]).
     pub fn new(nominal: LineKinematics, positions_mm: Vec<f64>, widths_mm: Vec<f64>) -> Result<Self, FitError> {
         let line = Self { nominal, positions_mm, widths_mm };
-        line.validate(usize::MAX)?;
+        line.check(None)?;
         Ok(line)
     }
 
     /// Checks lengths agree, there are at least 10 samples, positions are finite, strictly
-    /// increasing and inside the line, and widths are finite and positive. `index` names
-    /// the line in the error.
+    /// increasing and inside the line, and widths are finite and positive. `index` (its
+    /// position in the input slice) names the line in the error.
     pub fn validate(&self, index: usize) -> Result<(), FitError> {
+        self.check(Some(index))
+    }
+
+    fn check(&self, index: Option<usize>) -> Result<(), FitError> {
         let bad = |reason: String| FitError::BadLine { line: index, reason };
         if self.positions_mm.len() != self.widths_mm.len() {
             return Err(bad(format!("{} positions but {} widths", self.positions_mm.len(), self.widths_mm.len())));
@@ -81,6 +85,11 @@ mod tests {
         let ws = vec![0.8; 20];
         assert!(MeasuredLine::new(k, xs.clone(), ws.clone()).is_ok());
         assert!(matches!(MeasuredLine::new(k, xs.clone(), vec![0.8; 19]), Err(FitError::BadLine { .. })));
+        // A line checked alone has no index to name (it used to print usize::MAX).
+        let alone = MeasuredLine::new(k, xs[..5].to_vec(), vec![0.8; 5]).unwrap_err().to_string();
+        assert_eq!(alone, "measured line: fewer than 10 samples");
+        let err = MeasuredLine { nominal: k, positions_mm: xs[..5].to_vec(), widths_mm: vec![0.8; 5] }.validate(3);
+        assert_eq!(err.unwrap_err().to_string(), "measured line 3: fewer than 10 samples");
         let mut unsorted = xs.clone();
         unsorted.swap(3, 4);
         assert!(MeasuredLine::new(k, unsorted, ws.clone()).is_err());

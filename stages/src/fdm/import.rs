@@ -41,7 +41,8 @@ impl StageKind for ImportStage {
         "fdm.import"
     }
     fn version(&self) -> u32 {
-        1
+        // 2: every raw row is checked at import (an invalid dataset was written before).
+        2
     }
     fn summary(&self) -> &'static str {
         "Raw measured line widths → an fdm-widths dataset (dataset.toml, lines.csv, widths/*.csv) plus widths.parquet"

@@ -4,7 +4,7 @@
 //! the analysis stages downstream read it exactly as they would read a measured one.
 
 use datasets::thermal::effects::Effects;
-use datasets::thermal::{generate, GenerateConfig, LeptonHabits};
+use datasets::thermal::{generate_into, GenerateConfig, LeptonHabits};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
@@ -63,7 +63,7 @@ impl StageKind for GenerateSequenceStage {
             effects,
             lepton_habits: LeptonHabits { repeated_frames: habits, shutter_freeze: habits },
         };
-        generate(&config, ctx.output_dir()).map_err(StageError::domain)?;
+        generate_into(&config, ctx.output_dir()).map_err(StageError::domain)?;
         Ok(())
     }
 }

@@ -64,7 +64,7 @@ use pipeline::StageError;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use vision::camera::Undistorter;
-use vision::frame::ThermalFrame;
+use vision::frame::{FrameError, ThermalFrame};
 use vision::homography::Homography;
 use vision::localize::TrajectoryView;
 use vision::matching::PredictedCorner;
@@ -269,6 +269,14 @@ impl FrameOutcome {
         self.located().is_some_and(|l| l.placed_by == Placement::Corners)
     }
 
+    /// [`Self::skip_reason`] without the frame's own file name, so that frames skipped
+    /// for one reason group together.
+    pub fn shared_skip_reason(&self) -> Option<&str> {
+        let reason = self.skip_reason()?;
+        let own = format!("{}: ", self.entry.file.display());
+        Some(reason.strip_prefix(own.as_str()).unwrap_or(reason))
+    }
+
     /// Why the frame is not localised: the chosen estimator's skip reason, or that it was
     /// placed by its recorded time for its widths only.
     pub fn skip_reason(&self) -> Option<&str> {
@@ -404,10 +412,9 @@ impl<'a> Localiser<'a> {
         ws: &mut FrameWorkspace,
         rng: &mut ChaCha8Rng,
     ) -> FrameOutcome {
-        let path = self.seq.frame_path(entry);
-        let frame = match ThermalFrame::from_png_file(&path) {
+        let frame = match self.decode(entry) {
             Ok(frame) => frame,
-            Err(e) => return FrameOutcome::skipped(entry, format!("{}: {e}", display_rel(&path))),
+            Err(e) => return FrameOutcome::skipped(entry, format!("{}: {e}", entry.file.display())),
         };
         let t_r = entry.recorded_time_s;
         let printed: Vec<PathCorner> =
@@ -438,6 +445,14 @@ impl<'a> Localiser<'a> {
             chosen: Err("not localised".into()),
             repeat_of: None,
         }
+    }
+
+    /// A frame's PNG decoded at the camera's size (`camera.toml`), checked against the
+    /// PNG header before anything is allocated.
+    fn decode(&self, entry: &FrameEntry) -> Result<ThermalFrame, FrameError> {
+        let bytes = std::fs::read(self.seq.frame_path(entry)).map_err(|e| FrameError::Unreadable(e.to_string()))?;
+        let camera = &self.seq.camera;
+        ThermalFrame::from_png_bytes_sized(&bytes, camera.width_px, camera.height_px)
     }
 
     /// The rigid-mount estimator over the sequence: fit on pass-1 pairs, then re-pair
@@ -653,11 +668,6 @@ fn detection_rows(ws: &FrameWorkspace, predicted: &[PredictedCorner]) -> Vec<Det
         .collect()
 }
 
-fn display_rel(path: &std::path::Path) -> String {
-    let parts: Vec<_> = path.iter().rev().take(2).collect();
-    parts.iter().rev().map(|p| p.to_string_lossy()).collect::<Vec<_>>().join("/")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -711,6 +721,13 @@ mod tests {
         let m = merged(&a, &b);
         assert_eq!(m.ids, [3, 5]);
         assert_eq!(m.image_px[0], [1.0, 1.0]);
+    }
+
+    #[test]
+    fn a_shared_skip_reason_leaves_out_the_frame_s_own_file() {
+        let f = FrameOutcome::skipped(&decoded(0, 3, 0.0).entry, "f.png: all pixels invalid (all-NaN)".into());
+        assert_eq!(f.shared_skip_reason(), Some("all pixels invalid (all-NaN)"));
+        assert_eq!(f.skip_reason(), Some("f.png: all pixels invalid (all-NaN)"));
     }
 
     #[test]

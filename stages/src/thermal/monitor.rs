@@ -132,7 +132,7 @@ impl StageKind for MonitorStage {
         "thermal.monitor"
     }
     fn version(&self) -> u32 {
-        10
+        11
     }
     fn summary(&self) -> &'static str {
         "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
@@ -373,11 +373,44 @@ fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
 
 /// The skip reasons of `frames`, counted: "12 × too few corners: …; 3 × …".
 fn skip_summary(frames: &[FrameOutcome]) -> String {
-    let mut counts: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
-    for reason in frames.iter().filter_map(|f| f.skip_reason()) {
-        *counts.entry(reason).or_default() += 1;
+    let mut groups: std::collections::BTreeMap<&str, Vec<(usize, usize)>> = std::collections::BTreeMap::new();
+    for f in frames {
+        if let Some(reason) = f.shared_skip_reason() {
+            groups.entry(reason).or_default().push((f.entry.layer, f.entry.frame));
+        }
     }
-    counts.iter().map(|(r, n)| format!("{n} × {r}")).collect::<Vec<_>>().join("; ")
+    let plural = |n: usize| if n == 1 { "frame" } else { "frames" };
+    groups
+        .iter()
+        .map(|(reason, ids)| format!("{} ({} {}): {reason}", frame_ranges(ids), ids.len(), plural(ids.len())))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// `layer 0, frames 3-40, 42; layer 1, frame 0` for `(layer, frame)` pairs.
+fn frame_ranges(ids: &[(usize, usize)]) -> String {
+    let mut ids = ids.to_vec();
+    ids.sort_unstable();
+    let mut layers: Vec<(usize, Vec<(usize, usize)>)> = Vec::new();
+    for (layer, frame) in ids {
+        match layers.last_mut() {
+            Some((l, runs)) if *l == layer => match runs.last_mut() {
+                Some((_, end)) if *end + 1 == frame => *end = frame,
+                _ => runs.push((frame, frame)),
+            },
+            _ => layers.push((layer, vec![(frame, frame)])),
+        }
+    }
+    let run = |&(a, b): &(usize, usize)| if a == b { a.to_string() } else { format!("{a}-{b}") };
+    layers
+        .iter()
+        .map(|(layer, runs)| {
+            let single = runs.len() == 1 && runs[0].0 == runs[0].1;
+            let list: Vec<String> = runs.iter().map(run).collect();
+            format!("layer {layer}, {} {}", if single { "frame" } else { "frames" }, list.join(", "))
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// `directions.parquet`: the deposition frame with and without DDA (Fig. 3).
@@ -664,4 +697,16 @@ fn mosaic_frame(
         f64_col("y_mm", keep.iter().map(|&i| y0 + ((i / nx) as f64 + 0.5) * MOSAIC_CELL_MM).collect()),
         f64_col("temp_c", keep.iter().map(|&i| temp[i]).collect()),
     ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_are_listed_as_runs_per_layer() {
+        let ids = [(0, 42), (0, 3), (0, 4), (0, 5), (1, 0), (0, 40)];
+        assert_eq!(frame_ranges(&ids), "layer 0, frames 3-5, 40, 42; layer 1, frame 0");
+        assert_eq!(frame_ranges(&[(2, 7), (2, 8)]), "layer 2, frames 7-8");
+    }
 }
