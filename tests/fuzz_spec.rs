@@ -2,14 +2,17 @@
 //! the real registry) on stable Rust, in `make test`: arbitrary text, and the shipped
 //! specs mutated byte- and token-wise. Each input must give a plan or a `SpecError`
 //! naming the spec file, never a panic. A fixed seed keeps the cases reproducible; the
-//! coverage-guided target in `fuzz/` runs the same check for longer.
+//! coverage-guided target in `fuzz/` runs the same check ([`spec_harness`]) for longer.
+
+mod spec_harness;
 
 use std::path::Path;
 
 use pipeline::spec::parse_spec;
-use pipeline::{Plan, Registry};
+use pipeline::Plan;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+use spec_harness::{check, registry};
 
 /// Tokens that stress a TOML spec: syntax, extreme numbers, variable expansions,
 /// names of real sections, kinds and fields.
@@ -54,22 +57,6 @@ const TOKENS: &[&str] = &[
     "params = { }",
     "seed = ",
 ];
-
-fn registry() -> Registry {
-    let mut registry = Registry::new();
-    stages::register(&mut registry);
-    reports::register(&mut registry);
-    registry
-}
-
-/// Parses and checks `text`; any error must name the spec file.
-fn check(registry: &Registry, text: &str) {
-    let file = Path::new("fuzzed.toml");
-    let result = parse_spec(file, text).and_then(|raw| Plan::check(file, raw, registry, |_| None));
-    if let Err(err) = result {
-        assert!(err.to_string().starts_with("fuzzed.toml: "), "{err}");
-    }
-}
 
 fn shipped_specs() -> Vec<String> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs");
