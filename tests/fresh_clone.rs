@@ -1,6 +1,7 @@
-//! A clone of the repository alone, in an empty folder with nothing beside it, runs a
-//! real-data spec: the measured data ships in `data/` and the specs find it there
-//! without `AMREPRO_DATA`.
+//! A clone of the repository alone, in an empty folder with nothing beside it, runs
+//! `make run`: the measured data ships in `data/` and the specs find it there without
+//! `AMREPRO_DATA`. The binary under test stands in for the clone's build (`make -o
+//! build`), and the power studies are cut to the tests' size.
 
 mod common;
 
@@ -10,7 +11,7 @@ use std::process::Command;
 use common::*;
 
 #[test]
-fn a_clone_alone_runs_the_real_data_spec() {
+fn a_clone_alone_runs_make_run() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     assert!(root.join(".git").exists(), "{} is not a git checkout: this test clones it", root.display());
     let tmp = tempfile::tempdir().unwrap();
@@ -19,7 +20,28 @@ fn a_clone_alone_runs_the_real_data_spec() {
         Command::new("git").args(["clone", "-q", "--no-hardlinks"]).arg(root).arg(&clone).status().expect("git runs");
     assert!(status.success(), "git clone failed");
     assert!(!tmp.path().join("shared").exists());
-    let text = ok(&clone, &["run", "-q", "specs/fsu_linewidth.toml"]);
-    assert!(text.contains("report:"), "{text}");
+    cut_power_studies(&clone.join("specs/discrepancy_fdm.toml"));
+    let out = Command::new("make")
+        .args(["-o", "build", "run", &format!("BIN={}", env!("CARGO_BIN_EXE_amrepro"))])
+        .current_dir(&clone)
+        .env_remove("AMREPRO_DATA")
+        .env_remove("MAKEFLAGS")
+        .output()
+        .expect("make runs");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "make run failed in a clone alone:\n{text}");
+    assert!(text.contains("open the report:"), "{text}");
     assert_eq!(parquet_rows(&clone.join("out/fdm/line_summary.parquet")), 18);
+    assert!(parquet_rows(&clone.join("out/discrepancy/causes.parquet")) > 0, "the real-data discrepancy spec ran");
+    for spec in shipped_spec_names() {
+        assert!(clone.join("out/runs").join(&spec).join("manifest.json").exists(), "{spec} did not run");
+    }
+}
+
+/// The clone's power studies at the tests' size (see [`TEST_POWER_STUDY`]).
+fn cut_power_studies(spec: &Path) {
+    let text = std::fs::read_to_string(spec).unwrap();
+    assert!(text.contains(SHIPPED_POWER_STUDY) && text.contains(SHIPPED_WHITE_STUDY), "update the shipped studies");
+    let text = text.replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY).replace(SHIPPED_WHITE_STUDY, TEST_WHITE_STUDY);
+    std::fs::write(spec, text).unwrap();
 }

@@ -51,6 +51,7 @@ impl OutputDir {
         let created = first_missing(parent);
         std::fs::create_dir_all(parent).map_err(|e| DatasetError::io(parent, e))?;
         let name = name.to_string_lossy();
+        remove_stale_staging(parent, &name);
         let staging = parent.join(format!(".{name}.staging-{}", std::process::id()));
         let out = Self { target: target.to_path_buf(), staging, created, committed: false };
         let _ = std::fs::remove_dir_all(&out.staging);
@@ -123,6 +124,23 @@ fn check_replaceable(target: &Path, rule: &Ownership) -> Result<(), String> {
     ))
 }
 
+/// Removes the staging folders `.NAME.staging-PID` beside the target that processes
+/// which no longer run left behind (killed writers). Whether a process runs is read
+/// from `/proc`; where there is none, nothing is removed.
+fn remove_stale_staging(parent: &Path, name: &str) {
+    let prefix = format!(".{name}.staging-");
+    let Ok(entries) = std::fs::read_dir(parent) else { return };
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name.to_str().and_then(|n| n.strip_prefix(&prefix)) else { continue };
+        let is_pid = !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit());
+        let proc = Path::new("/proc");
+        if is_pid && proc.join("self").exists() && !proc.join(pid).exists() {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
+}
+
 /// The topmost ancestor of `dir` (itself included) that does not exist yet.
 fn first_missing(dir: &Path) -> Option<PathBuf> {
     dir.ancestors().take_while(|a| !a.as_os_str().is_empty() && !a.exists()).last().map(Path::to_path_buf)
@@ -189,6 +207,21 @@ mod tests {
             let err = OutputDir::begin(Path::new(dot), &RULE).unwrap_err().to_string();
             assert!(err.contains("expected a folder name"), "{dot}: {err}");
         }
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn staging_left_by_a_dead_writer_is_removed_and_a_live_one_kept() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dead = tmp.path().join(format!(".ds.staging-{}", u32::MAX));
+        let live = tmp.path().join(".ds.staging-1");
+        for dir in [&dead, &live] {
+            std::fs::create_dir_all(dir.join("frames")).unwrap();
+        }
+        let out = OutputDir::begin(&tmp.path().join("ds"), &RULE).unwrap();
+        out.commit().unwrap();
+        assert!(!dead.exists(), "a killed writer's staging folder is cleaned");
+        assert!(live.exists(), "pid 1 runs: its staging folder is not ours to remove");
     }
 
     #[test]
