@@ -113,7 +113,7 @@ impl StageKind for ThermalFrameFigure {
         "figure.thermal_frame"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "An undistorted thermal frame with its 140-150 °C band, its detected corners and the nozzle, and the mosaic of aligned frames on the plane → thermal_frame.png/.svg"
