@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{replace_dir, write_atomic};
-use crate::error::{RunError, StageError};
+use crate::error::RunError;
 
 /// Folder under `runs/<run>/` holding the outputs of stages that finished in a run
 /// that has not committed yet.
@@ -45,10 +45,7 @@ pub fn commit(run_dir: &Path, moves: &[Move]) -> Result<(), RunError> {
     let pending = run_dir.join(PENDING_DIR);
     let journal = pending.join(JOURNAL_FILE);
     let json = serde_json::to_vec_pretty(moves).expect("serialisable");
-    write_atomic(&journal, &json).map_err(|e| match e {
-        StageError::Io { path, source } => RunError::Io { path, source },
-        other => RunError::Io { path: journal.clone(), source: io::Error::other(other.to_string()) },
-    })?;
+    write_atomic(&journal, &json).map_err(|e| RunError::bookkeeping(&journal, e))?;
     apply(&pending, moves)
 }
 

@@ -125,3 +125,13 @@ pub enum RunError {
         source_hint: String,
     },
 }
+
+impl RunError {
+    /// The engine's own write of `path` (journal, manifest) failed with `e`.
+    pub fn bookkeeping(path: &std::path::Path, e: StageError) -> Self {
+        match e {
+            StageError::Io { path, source } => Self::Io { path, source },
+            other => Self::Io { path: path.to_path_buf(), source: std::io::Error::other(other.to_string()) },
+        }
+    }
+}

@@ -457,7 +457,7 @@ impl Executor<'_> {
         let json = serde_json::to_vec_pretty(&self.manifest(stages, wall_time_s)?).expect("serialisable");
         let tmp = temp_sibling(&path);
         write_synced(&tmp, |f| std::io::Write::write_all(f, &json).map_err(|e| StageError::io(&tmp, e)))
-            .map_err(|e| run_io(&tmp, e))?;
+            .map_err(|e| RunError::bookkeeping(&tmp, e))?;
         moves.push(Move { from: tmp, to: path.clone(), folder: false });
         Ok(path)
     }
@@ -510,13 +510,6 @@ impl Executor<'_> {
 fn discard_files(moves: &[Move]) {
     for mv in moves.iter().filter(|mv| !mv.folder) {
         let _ = std::fs::remove_file(&mv.from);
-    }
-}
-
-fn run_io(path: &Path, e: StageError) -> RunError {
-    match e {
-        StageError::Io { path, source } => RunError::Io { path, source },
-        other => RunError::Io { path: path.to_path_buf(), source: std::io::Error::other(other.to_string()) },
     }
 }
 
