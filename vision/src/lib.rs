@@ -12,6 +12,10 @@
 //! frame replace the per-frame homography; [`rigid`] localises a frame that way from any
 //! number of corners, one included.
 //!
+//! For paper 000 (FDM line width, Sec. III), [`lines`] measures the width of a single
+//! printed line along its length from a top-view photo, to a fraction of a pixel, by
+//! fitting a blurred-edge model to each cross-section (with an Otsu-count baseline).
+//!
 //! The crate takes plain slices and structs: no tables, no datasets, no I/O beyond
 //! reading a frame file.
 #![deny(missing_docs)]
@@ -20,6 +24,7 @@ pub mod camera;
 pub mod corners;
 pub mod frame;
 pub mod homography;
+pub mod lines;
 pub mod localize;
 pub mod matching;
 pub mod mount;

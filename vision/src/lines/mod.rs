@@ -1,0 +1,373 @@
+//! Sub-pixel width of a single straight printed line in a top-view photo.
+//!
+//! Paper 000 (FDM line width) measured line widths from top-view camera photos of single
+//! straight lines, 120 mm long and 0.4-2 mm wide (Sec. III). This module gives the width
+//! along such a line every `step_mm` from one photo and its nominal geometry
+//! ([`LineGeometry`]: start, direction, length, scale, nominal width).
+//!
+//! The main method, [`segment_edge_fit`], fits a physical edge model rather than counting
+//! thresholded pixels, because a threshold count is biased by anything that moves the
+//! threshold against the local contrast (uneven lighting, vignetting, the PSF) and is
+//! quantised to whole pixels; the edge fit locates both edges to a fraction of a pixel:
+//!
+//! 1. **Axis** ([`axis`]): the metadata's start and direction may be off by ~10 px and
+//!    ~1°, so coarse profiles across the nominal axis give edge midpoints (extrema of the
+//!    smoothed derivative), a robust straight-line fit refines the axis, once more in a
+//!    narrow window; the ends are found along the refined axis, the start becomes the
+//!    origin of the positions, and the line's polarity (brighter or darker than the bed)
+//!    and contrast are measured.
+//! 2. **Profiles** ([`profile`]): at each position s_k = k · `step_mm` the photo is sampled
+//!    bilinearly along the normal over t ∈ [−T, T], T = max(1.5 w, w/2 + 8 px) for the
+//!    nominal width w, every 0.5 px, each sample averaged over a band of ±step/2 along
+//!    the line to cut noise.
+//! 3. **Edge model** ([`model`], [`fit`]): each profile is fitted by Levenberg–Marquardt
+//!    with I(t) = b0 + b1·t + A·½[erf((t − a)/(σ√2)) − erf((t − b)/(σ√2))], a bar blurred by
+//!    a Gaussian PSF on a linear background that absorbs the lighting gradient and the
+//!    vignetting locally; the width is (b − a)/px_per_mm. Fits whose edges leave the
+//!    window, whose |A| is low against the residual noise or the line's contrast, or that
+//!    do not converge are [`SkippedColumn`]s; so are positions within the end blur.
+//!
+//! [`segment_threshold_columns`] is the baseline a lab writes first (Otsu threshold of the
+//! lightly blurred photo, foreground pixels counted per image column); it shares step 1,
+//! so comparing the two measures the width estimators alone.
+//!
+//! Whole-image problems are [`LineError`]s: no line, a line leaving the frame, a stated
+//! scale that cannot be right. A px/mm that is 2× wrong is an error, not a set of skipped
+//! columns: the line's ends are then not where the nominal length puts them
+//! ([`LineError::LengthMismatch`]) or the line runs out of the frame
+//! ([`LineError::LeavesFrame`]), and widths far from the nominal one are
+//! [`LineError::WidthMismatch`].
+//!
+//! Library use: kornia-io decodes the PNG ([`GrayImage::from_png_bytes`]) and
+//! kornia-imgproc's `gaussian_blur` smooths the photo for the baseline. Hand-written,
+//! because kornia-imgproc 0.2.0 lacks them or works only on whole images: bilinear
+//! sampling along arbitrary directions, the 1-D Gaussian-derivative filter, erf, the LM
+//! solver with its 6 × 6 Cholesky, the robust line fit and Otsu's threshold.
+//!
+//! Speed: positions are measured in parallel with rayon (inside the caller's pool; run
+//! it in a one-thread pool to process one image per thread and parallelise over
+//! images), each worker reusing one set of buffers.
+
+pub mod axis;
+pub mod errors;
+pub mod fit;
+pub mod image;
+pub mod model;
+pub mod profile;
+pub mod threshold;
+
+use rayon::prelude::*;
+
+pub use errors::{LineError, SkipReason, SkippedColumn};
+pub use image::GrayImage;
+pub use threshold::segment_threshold_columns;
+
+use axis::FoundLine;
+use fit::{fit_edges, Profile};
+use model::EdgeParams;
+use profile::{band_offsets, gaussian_derivative, mean, median, peak, sample_across, AxisFrame, SampleGrid};
+
+/// The default spacing of the width samples along the line (mm).
+pub const DEFAULT_STEP_MM: f64 = 0.05;
+/// Lateral sample spacing of a profile (px).
+const PROFILE_DT_PX: f64 = 0.5;
+/// Positions closer than this to a found end are skipped (px): two PSF widths for the
+/// 1-2 px PSFs of our cameras, where the end blur changes the cross-section.
+const END_MARGIN_PX: f64 = 4.0;
+/// |A| must exceed this many times the fit's rms residual.
+const CONTRAST_SNR: f64 = 5.0;
+/// |A| must exceed this fraction of the line's contrast found by the axis step.
+const CONTRAST_FRACTION: f64 = 0.25;
+/// Accepted range of the median width as a multiple of the nominal width.
+const WIDTH_RATIO_RANGE: (f64, f64) = (0.3, 3.0);
+/// Most sample positions per image (a 10 m line at 0.01 mm); more is a unit mix-up.
+const MAX_POSITIONS: usize = 1_000_000;
+/// Smallest nominal width that can be measured (px).
+const MIN_WIDTH_PX: f64 = 2.0;
+
+/// The nominal geometry of the photographed line, as the print's metadata states it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LineGeometry {
+    /// Start point of the line (px, image coordinates: column + 0.5 at a pixel centre).
+    pub start_px: [f64; 2],
+    /// Direction from the start to the end (rad, image coordinates with v down).
+    pub direction_rad: f64,
+    /// Length of the line (mm).
+    pub length_mm: f64,
+    /// Image scale (px per mm).
+    pub px_per_mm: f64,
+    /// Width the line was printed for (mm); sets the sampling window.
+    pub nominal_width_mm: f64,
+}
+
+/// The refined axis the widths are measured along.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefinedAxis {
+    /// The found start of the line (px), the origin of [`Segmentation::positions_mm`].
+    pub start_px: [f64; 2],
+    /// The refined direction (rad).
+    pub direction_rad: f64,
+    /// Distance between the found ends (mm).
+    pub found_length_mm: f64,
+    /// True when the line is darker than the bed.
+    pub dark_line: bool,
+    /// Intensity step across the line (median over the axis profiles, signed: negative
+    /// for a dark line; units of [`GrayImage::pixels`]).
+    pub contrast: f64,
+}
+
+/// Widths along the line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segmentation {
+    /// Path coordinate of each width (mm from the found start), increasing.
+    pub positions_mm: Vec<f64>,
+    /// Width at each position (mm).
+    pub widths_mm: Vec<f64>,
+    /// Positions without a width, and why.
+    pub skipped: Vec<SkippedColumn>,
+    /// The axis the positions are measured along.
+    pub axis: RefinedAxis,
+}
+
+/// What one sample position gave.
+pub(crate) type Sample = Result<f64, SkipReason>;
+
+/// Widths every `step_mm` by fitting the blurred-bar edge model to each cross-section
+/// (see the module doc); in parallel over positions within the current rayon pool.
+pub fn segment_edge_fit(img: &GrayImage, geom: &LineGeometry, step_mm: f64) -> Result<Segmentation, LineError> {
+    let checked = CheckedGeometry::new(img, geom, step_mm)?;
+    let line = axis::find_line(img, &checked)?;
+    let fitter = EdgeFitter::new(&checked, &line);
+    let samples: Vec<Sample> = (0..checked.position_count)
+        .into_par_iter()
+        .map_init(|| fitter.scratch(), |scratch, k| fitter.measure(img, k, scratch))
+        .collect();
+    assemble(&checked, &line, samples)
+}
+
+/// The geometry checked and converted to pixels.
+#[derive(Debug, Clone, Copy)]
+pub struct CheckedGeometry {
+    /// Stated start (px).
+    pub start_px: [f64; 2],
+    /// Stated direction (rad).
+    pub direction_rad: f64,
+    /// Scale (px per mm).
+    pub px_per_mm: f64,
+    /// Nominal length (px).
+    pub length_px: f64,
+    /// Nominal width (px).
+    pub nominal_width_px: f64,
+    /// Half-width T of the profile window (px).
+    pub half_window_px: f64,
+    /// Spacing of the positions (px).
+    pub step_px: f64,
+    /// Number of positions k·step ≤ length.
+    pub position_count: usize,
+}
+
+impl CheckedGeometry {
+    /// Checks the image, the geometry and the step.
+    pub fn new(img: &GrayImage, geom: &LineGeometry, step_mm: f64) -> Result<Self, LineError> {
+        img.check_buffer()?;
+        if img.width < 8 || img.height < 8 {
+            return Err(img.bad("a line photo must be at least 8 × 8 px"));
+        }
+        let positive = |name: &str, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(value)
+            } else {
+                Err(LineError::BadGeometry(format!("{name} must be a positive finite number, got {value}")))
+            }
+        };
+        let px_per_mm = positive("px_per_mm", geom.px_per_mm)?;
+        let length_mm = positive("length_mm", geom.length_mm)?;
+        let width_mm = positive("nominal_width_mm", geom.nominal_width_mm)?;
+        let step_mm = positive("step_mm", step_mm)?;
+        if !(geom.start_px.iter().all(|v| v.is_finite()) && geom.direction_rad.is_finite()) {
+            return Err(LineError::BadGeometry("start_px and direction_rad must be finite".into()));
+        }
+        let position_count = (length_mm / step_mm + 1e-9).floor() + 1.0;
+        if position_count > MAX_POSITIONS as f64 {
+            return Err(LineError::BadGeometry(format!(
+                "{position_count} positions (length_mm / step_mm) exceed {MAX_POSITIONS}: check the units"
+            )));
+        }
+        let nominal_width_px = width_mm * px_per_mm;
+        if nominal_width_px < MIN_WIDTH_PX {
+            return Err(LineError::BadGeometry(format!(
+                "the nominal width is {nominal_width_px:.2} px, below the {MIN_WIDTH_PX} px that can be measured"
+            )));
+        }
+        Ok(Self {
+            start_px: geom.start_px,
+            direction_rad: geom.direction_rad,
+            px_per_mm,
+            length_px: length_mm * px_per_mm,
+            nominal_width_px,
+            half_window_px: (1.5 * nominal_width_px).max(0.5 * nominal_width_px + 8.0),
+            step_px: step_mm * px_per_mm,
+            position_count: position_count as usize,
+        })
+    }
+
+    /// Path coordinate of position `k` (px).
+    pub fn position_px(&self, k: usize) -> f64 {
+        k as f64 * self.step_px
+    }
+
+    /// Whether position `s_px` lies within the end blur of a line of `length_px`.
+    pub fn near_end(&self, s_px: f64, length_px: f64) -> bool {
+        let margin = END_MARGIN_PX + 0.5 * self.step_px;
+        s_px < margin || s_px > length_px - margin
+    }
+}
+
+/// Splits per-position outcomes into widths and skips and applies the whole-image checks.
+pub(crate) fn assemble(
+    geom: &CheckedGeometry,
+    line: &FoundLine,
+    samples: Vec<Sample>,
+) -> Result<Segmentation, LineError> {
+    let mut segmentation = Segmentation {
+        positions_mm: Vec::with_capacity(samples.len()),
+        widths_mm: Vec::with_capacity(samples.len()),
+        skipped: Vec::new(),
+        axis: refined_axis(geom, line),
+    };
+    for (k, sample) in samples.into_iter().enumerate() {
+        let position_mm = geom.position_px(k) / geom.px_per_mm;
+        match sample {
+            Ok(width_mm) => {
+                segmentation.positions_mm.push(position_mm);
+                segmentation.widths_mm.push(width_mm);
+            }
+            Err(reason) => segmentation.skipped.push(SkippedColumn { position_mm, reason }),
+        }
+    }
+    check_widths(geom, &segmentation)?;
+    Ok(segmentation)
+}
+
+/// The public form of the found line.
+fn refined_axis(geom: &CheckedGeometry, line: &FoundLine) -> RefinedAxis {
+    RefinedAxis {
+        start_px: line.axis.origin_px,
+        direction_rad: line.axis.direction_rad(),
+        found_length_mm: line.length_px / geom.px_per_mm,
+        dark_line: line.polarity < 0.0,
+        contrast: line.contrast,
+    }
+}
+
+/// Errors when nothing was measured or the median width is far from the nominal width.
+fn check_widths(geom: &CheckedGeometry, segmentation: &Segmentation) -> Result<(), LineError> {
+    if segmentation.widths_mm.is_empty() {
+        let first_reason = segmentation.skipped.first().map_or(SkipReason::OutsideFrame, |s| s.reason);
+        return Err(LineError::NothingMeasured { skipped: segmentation.skipped.len(), first_reason });
+    }
+    let median_width_mm = median(&mut segmentation.widths_mm.clone());
+    let nominal_width_mm = geom.nominal_width_px / geom.px_per_mm;
+    let (min_ratio, max_ratio) = WIDTH_RATIO_RANGE;
+    let ratio = median_width_mm / nominal_width_mm;
+    if !(min_ratio..=max_ratio).contains(&ratio) {
+        return Err(LineError::WidthMismatch { median_width_mm, nominal_width_mm, min_ratio, max_ratio });
+    }
+    Ok(())
+}
+
+/// Per-position edge fitting with shared settings.
+struct EdgeFitter {
+    axis: AxisFrame,
+    length_px: f64,
+    geom: CheckedGeometry,
+    polarity: f64,
+    contrast: f64,
+    band_px: Vec<f64>,
+    count: usize,
+}
+
+/// Buffers one worker reuses for every position.
+struct Scratch {
+    values: Vec<f64>,
+    derivative: Vec<f64>,
+}
+
+impl EdgeFitter {
+    fn new(geom: &CheckedGeometry, line: &FoundLine) -> Self {
+        let sub_samples = (geom.step_px.ceil() as usize).clamp(2, 5);
+        let count = (2.0 * geom.half_window_px / PROFILE_DT_PX).floor() as usize + 1;
+        Self {
+            axis: line.axis,
+            length_px: line.length_px,
+            geom: *geom,
+            polarity: line.polarity,
+            contrast: line.contrast,
+            band_px: band_offsets(0.5 * geom.step_px, sub_samples).collect(),
+            count,
+        }
+    }
+
+    fn scratch(&self) -> Scratch {
+        Scratch { values: vec![0.0; self.count], derivative: vec![0.0; self.count] }
+    }
+
+    fn grid(&self) -> SampleGrid<'_> {
+        SampleGrid { t0_px: -self.geom.half_window_px, dt_px: PROFILE_DT_PX, count: self.count, band_px: &self.band_px }
+    }
+
+    /// The width (mm) at position `k`, or why there is none.
+    fn measure(&self, img: &GrayImage, k: usize, scratch: &mut Scratch) -> Sample {
+        let s_px = self.geom.position_px(k);
+        if self.geom.near_end(s_px, self.length_px) {
+            return Err(SkipReason::NearLineEnd);
+        }
+        if !sample_across(img, &self.axis, s_px, self.grid(), &mut scratch.values) {
+            return Err(SkipReason::OutsideFrame);
+        }
+        let profile = Profile { t0_px: -self.geom.half_window_px, dt_px: PROFILE_DT_PX, values: &scratch.values };
+        let init = self.initial_guess(profile, &mut scratch.derivative);
+        let fit = fit_edges(profile, init).ok_or(SkipReason::FitDidNotConverge)?;
+        self.accept(profile, &fit)?;
+        Ok((fit.params.right_px - fit.params.left_px) / self.geom.px_per_mm)
+    }
+
+    /// Edges at the derivative extrema, background from the window's ends, σ = 1.5 px.
+    fn initial_guess(&self, profile: Profile<'_>, derivative: &mut [f64]) -> EdgeParams {
+        let values = profile.values;
+        let n = values.len();
+        gaussian_derivative(values, 2.0, derivative);
+        let half_nominal = 0.5 * self.geom.nominal_width_px;
+        let (left_px, right_px) =
+            match (peak(derivative, 4..n - 4, self.polarity), peak(derivative, 4..n - 4, -self.polarity)) {
+                (Some((_, l)), Some((_, r))) if l < r => {
+                    (profile.t_px(0) + l * profile.dt_px, profile.t_px(0) + r * profile.dt_px)
+                }
+                _ => (-half_nominal, half_nominal),
+            };
+        let flank = (n / 12).max(2);
+        let (left_bg, right_bg) = (mean(values, 0, flank), mean(values, n - flank, n));
+        let span_px = profile.t_px(n - flank / 2) - profile.t_px(flank / 2);
+        let centre = ((0.5 * (left_px + right_px) - profile.t0_px) / profile.dt_px).round() as usize;
+        let b0 = 0.5 * (left_bg + right_bg);
+        let contrast = values[centre.min(n - 1)] - b0;
+        EdgeParams { b0, b1: (right_bg - left_bg) / span_px, contrast, left_px, right_px, sigma_px: 1.5 }
+    }
+
+    /// Rejects fits with edges at the window border or too little contrast.
+    fn accept(&self, profile: Profile<'_>, fit: &fit::EdgeFit) -> Result<(), SkipReason> {
+        let p = &fit.params;
+        let (t_min, t_max) = (profile.t0_px, profile.t_px(profile.values.len() - 1));
+        if p.left_px < t_min + 2.0 * p.sigma_px || p.right_px > t_max - 2.0 * p.sigma_px {
+            return Err(SkipReason::EdgeOutsideWindow);
+        }
+        if p.sigma_px > 0.5 * (p.right_px - p.left_px) {
+            return Err(SkipReason::FitDidNotConverge);
+        }
+        let floor = (CONTRAST_SNR * fit.rms_residual).max(CONTRAST_FRACTION * self.contrast.abs());
+        if p.contrast * self.polarity < floor {
+            return Err(SkipReason::LowContrast);
+        }
+        Ok(())
+    }
+}
