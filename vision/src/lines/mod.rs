@@ -63,9 +63,9 @@ pub use image::GrayImage;
 pub use threshold::segment_threshold_columns;
 
 use axis::FoundLine;
-use fit::{fit_edges, Profile};
+use fit::{fit_edges, with_linear_parameters, Profile};
 use model::EdgeParams;
-use profile::{band_offsets, gaussian_derivative, mean, median, peak, sample_across, AxisFrame, SampleGrid};
+use profile::{band_offsets, mean, median, peak, sample_across, AxisFrame, DerivativeKernel, SampleGrid};
 
 /// The default spacing of the width samples along the line (mm).
 pub const DEFAULT_STEP_MM: f64 = 0.05;
@@ -199,13 +199,15 @@ impl CheckedGeometry {
                 "the nominal width is {nominal_width_px:.2} px, below the {MIN_WIDTH_PX} px that can be measured"
             )));
         }
+        let half_window_px = (1.5 * nominal_width_px).max(0.5 * nominal_width_px + 8.0);
+        check_fits(img, geom, length_mm * px_per_mm, half_window_px)?;
         Ok(Self {
             start_px: geom.start_px,
             direction_rad: geom.direction_rad,
             px_per_mm,
             length_px: length_mm * px_per_mm,
             nominal_width_px,
-            half_window_px: (1.5 * nominal_width_px).max(0.5 * nominal_width_px + 8.0),
+            half_window_px,
             step_px: step_mm * px_per_mm,
             position_count: position_count as usize,
         })
@@ -221,6 +223,26 @@ impl CheckedGeometry {
         let margin = END_MARGIN_PX + 0.5 * self.step_px;
         s_px < margin || s_px > length_px - margin
     }
+}
+
+/// A line longer than the image's diagonal, or a window wider than it, cannot be inside
+/// the image whatever the start: a [`LineError::LeavesFrame`] at the nominal end (this
+/// also bounds every buffer by the image size).
+fn check_fits(img: &GrayImage, geom: &LineGeometry, length_px: f64, half_window_px: f64) -> Result<(), LineError> {
+    let diagonal_px = (img.width as f64).hypot(img.height as f64);
+    if length_px <= diagonal_px + 2.0 * axis::START_SLACK_PX && 2.0 * half_window_px <= diagonal_px {
+        return Ok(());
+    }
+    let axis = AxisFrame::new(geom.start_px, geom.direction_rad);
+    let [u_px, v_px] = axis.point(length_px, 0.0);
+    Err(LineError::LeavesFrame {
+        s_mm: geom.length_mm,
+        margin_px: half_window_px,
+        u_px,
+        v_px,
+        width: img.width,
+        height: img.height,
+    })
 }
 
 /// Splits per-position outcomes into widths and skips and applies the whole-image checks.
@@ -285,6 +307,7 @@ struct EdgeFitter {
     contrast: f64,
     band_px: Vec<f64>,
     count: usize,
+    derivative: DerivativeKernel,
 }
 
 /// Buffers one worker reuses for every position.
@@ -305,6 +328,7 @@ impl EdgeFitter {
             contrast: line.contrast,
             band_px: band_offsets(0.5 * geom.step_px, sub_samples).collect(),
             count,
+            derivative: DerivativeKernel::new(2.0),
         }
     }
 
@@ -326,7 +350,7 @@ impl EdgeFitter {
             return Err(SkipReason::OutsideFrame);
         }
         let profile = Profile { t0_px: -self.geom.half_window_px, dt_px: PROFILE_DT_PX, values: &scratch.values };
-        let init = self.initial_guess(profile, &mut scratch.derivative);
+        let init = with_linear_parameters(profile, self.initial_guess(profile, &mut scratch.derivative));
         let fit = fit_edges(profile, init).ok_or(SkipReason::FitDidNotConverge)?;
         self.accept(profile, &fit)?;
         Ok((fit.params.right_px - fit.params.left_px) / self.geom.px_per_mm)
@@ -336,7 +360,7 @@ impl EdgeFitter {
     fn initial_guess(&self, profile: Profile<'_>, derivative: &mut [f64]) -> EdgeParams {
         let values = profile.values;
         let n = values.len();
-        gaussian_derivative(values, 2.0, derivative);
+        self.derivative.apply(values, derivative);
         let half_nominal = 0.5 * self.geom.nominal_width_px;
         let (left_px, right_px) =
             match (peak(derivative, 4..n - 4, self.polarity), peak(derivative, 4..n - 4, -self.polarity)) {

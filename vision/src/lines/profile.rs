@@ -73,18 +73,39 @@ pub fn bilinear(img: &GrayImage, u: f64, v: f64) -> Option<f64> {
 /// Fills `out[..grid.count]` with the band-averaged profile across the line at `s_px`;
 /// `false` (and `out` partly written) if any sample point lies outside the image.
 pub fn sample_across(img: &GrayImage, axis: &AxisFrame, s_px: f64, grid: SampleGrid<'_>, out: &mut [f64]) -> bool {
-    let weight = 1.0 / grid.band_px.len() as f64;
-    for (j, slot) in out.iter_mut().take(grid.count).enumerate() {
-        let t_px = grid.t0_px + j as f64 * grid.dt_px;
-        let mut sum = 0.0;
-        for &ds in grid.band_px {
-            let [u, v] = axis.point(s_px + ds, t_px);
-            match bilinear(img, u, v) {
-                Some(value) => sum += value,
-                None => return false,
-            }
+    let out = &mut out[..grid.count];
+    out.fill(0.0);
+    let step = [grid.dt_px * axis.normal[0], grid.dt_px * axis.normal[1]];
+    for &ds in grid.band_px {
+        let first = axis.point(s_px + ds, grid.t0_px);
+        if !add_segment(img, first, step, out) {
+            return false;
         }
-        *slot = sum * weight;
+    }
+    let weight = 1.0 / grid.band_px.len() as f64;
+    out.iter_mut().for_each(|v| *v *= weight);
+    true
+}
+
+/// Adds the bilinear samples at `first + j · step` to `out[j]`; `false` if the segment
+/// leaves the image. The image is convex, so checking both ends checks every sample.
+fn add_segment(img: &GrayImage, first: [f64; 2], step: [f64; 2], out: &mut [f64]) -> bool {
+    let last_j = out.len().saturating_sub(1) as f64;
+    let last = [first[0] + last_j * step[0], first[1] + last_j * step[1]];
+    if bilinear(img, first[0], first[1]).is_none() || bilinear(img, last[0], last[1]).is_none() {
+        return false;
+    }
+    let (max_i, max_j) = (img.width - 1, img.height - 1);
+    for (j, slot) in out.iter_mut().enumerate() {
+        let x = (first[0] - 0.5 + j as f64 * step[0]).max(0.0);
+        let y = (first[1] - 0.5 + j as f64 * step[1]).max(0.0);
+        let (i0, j0) = ((x as usize).min(max_i), (y as usize).min(max_j));
+        let (fx, fy) = ((x - i0 as f64) as f32, (y - j0 as f64) as f32);
+        let (i1, j1) = ((i0 + 1).min(max_i), (j0 + 1).min(max_j));
+        let (row0, row1) = (&img.pixels[j0 * img.width..], &img.pixels[j1 * img.width..]);
+        let top = row0[i0] + (row0[i1] - row0[i0]) * fx;
+        let bottom = row1[i0] + (row1[i1] - row1[i0]) * fx;
+        *slot += f64::from(top + (bottom - top) * fy);
     }
     true
 }
@@ -110,21 +131,49 @@ pub fn band_offsets(half_px: f64, count: usize) -> impl Iterator<Item = f64> {
     (0..count).map(move |m| ((m as f64 + 0.5) / count as f64 - 0.5) * 2.0 * half_px)
 }
 
+/// Largest radius of a [`DerivativeKernel`] (samples).
+const MAX_KERNEL_RADIUS: usize = 24;
+
+/// The weights of a Gaussian-derivative filter, k · exp(−k²/2σ²) for k = 1..radius.
+#[derive(Debug, Clone, Copy)]
+pub struct DerivativeKernel {
+    weights: [f64; MAX_KERNEL_RADIUS],
+    radius: usize,
+}
+
+impl DerivativeKernel {
+    /// The kernel of width σ (samples), cut at 3σ (at most 24 samples).
+    pub fn new(sigma_samples: f64) -> Self {
+        let radius = ((3.0 * sigma_samples).ceil() as usize).clamp(1, MAX_KERNEL_RADIUS);
+        let inv_two_var = 0.5 / (sigma_samples * sigma_samples);
+        let weights = std::array::from_fn(|i| {
+            let k = (i + 1) as f64;
+            if i < radius {
+                k * (-k * k * inv_two_var).exp()
+            } else {
+                0.0
+            }
+        });
+        Self { weights, radius }
+    }
+
+    /// Filters `values` into `out` (edges clamped); the scale is arbitrary but fixed.
+    pub fn apply(&self, values: &[f64], out: &mut [f64]) {
+        let last = values.len().saturating_sub(1);
+        for (i, slot) in out.iter_mut().enumerate().take(values.len()) {
+            let mut sum = 0.0;
+            for (k, weight) in self.weights[..self.radius].iter().enumerate() {
+                let k = k + 1;
+                sum += weight * (values[(i + k).min(last)] - values[i.saturating_sub(k)]);
+            }
+            *slot = sum;
+        }
+    }
+}
+
 /// Gaussian-derivative filter of `values` (σ in samples) into `out`, edges clamped.
 pub fn gaussian_derivative(values: &[f64], sigma_samples: f64, out: &mut [f64]) {
-    let radius = (3.0 * sigma_samples).ceil() as isize;
-    let last = values.len() as isize - 1;
-    let inv_two_var = 0.5 / (sigma_samples * sigma_samples);
-    for (i, slot) in out.iter_mut().enumerate().take(values.len()) {
-        let mut sum = 0.0;
-        for k in 1..=radius {
-            let weight = k as f64 * (-(k * k) as f64 * inv_two_var).exp();
-            let ahead = values[(i as isize + k).min(last) as usize];
-            let behind = values[(i as isize - k).max(0) as usize];
-            sum += weight * (ahead - behind);
-        }
-        *slot = sum;
-    }
+    DerivativeKernel::new(sigma_samples).apply(values, out);
 }
 
 /// Index of the largest `sign · values[i]` over `range` and its sub-sample position
