@@ -205,3 +205,18 @@ fn bad_geometry_and_step_are_errors() {
         assert!(matches!(segment_edge_fit(&img, &bad, 0.05), Err(LineError::BadGeometry(_))), "{bad:?}");
     }
 }
+
+#[test]
+fn widths_do_not_depend_on_the_number_of_threads() {
+    // Positions are fitted in fixed chunks, each from its own start: the same numbers on
+    // one thread as on several.
+    let scene = Scene::paper000(20.0, -3.0, true, 8, 21);
+    let (img, geom) = (scene.render(), scene.nominal_geometry());
+    let run = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| segment_edge_fit(&img, &geom, DEFAULT_STEP_MM).unwrap())
+    };
+    let one = run(1);
+    assert_eq!(one, run(3));
+    assert!(one.widths_mm.len() > 2300);
+}
