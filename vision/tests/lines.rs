@@ -94,19 +94,23 @@ fn assert_bounds(px_per_mm: f64, rmse_max_mm: f64, bias_max_mm: f64) {
     }
 }
 
+/// The brief's target; measured worst RMSE 0.0065 mm, |bias| 0.0003 mm.
 #[test]
 fn edge_fit_is_within_0_01_mm_rmse_and_0_005_mm_bias_at_40_px_per_mm() {
     assert_bounds(40.0, 0.01, 0.005);
 }
 
+/// Measured worst of the 12 lines: RMSE 0.013 mm, |bias| 0.0011 mm (the bed texture's
+/// error in px stays, each px is twice as wide); bounds with about 50 % slack.
 #[test]
 fn edge_fit_at_20_px_per_mm() {
-    assert_bounds(20.0, 0.02, 0.01);
+    assert_bounds(20.0, 0.02, 0.005);
 }
 
+/// Measured worst: RMSE 0.023 mm, |bias| 0.004 mm.
 #[test]
 fn edge_fit_at_10_px_per_mm() {
-    assert_bounds(10.0, 0.04, 0.02);
+    assert_bounds(10.0, 0.035, 0.01);
 }
 
 fn small_scene() -> Scene {

@@ -38,6 +38,14 @@
 //! ([`LineError::LeavesFrame`]), and widths far from the nominal one are
 //! [`LineError::WidthMismatch`].
 //!
+//! Accuracy on the virtual camera of `tests/lines.rs` (120 mm lines, 0.8 mm with a
+//! 1.3 mm start blob, ripple and trend, rough edges, −3°/0°/+2.5°, metadata 6 px and 0.5°
+//! off, lighting ramp, vignetting, 3 % bed texture, 1.5 % noise, both polarities, 8 and
+//! 16 bit; worst of 12 lines): RMSE 0.0065 / 0.013 / 0.023 mm at 40 / 20 / 10 px/mm with
+//! |bias| ≤ 0.004 mm, against 0.10 / 0.18 / 0.34 mm for the Otsu baseline, whose threshold
+//! sits away from half contrast. Without texture and noise the fit is exact to 3·10⁻⁵ mm;
+//! the bed texture dominates what is left.
+//!
 //! Library use: kornia-io decodes the PNG ([`GrayImage::from_png_bytes`]) and
 //! kornia-imgproc's `gaussian_blur` smooths the photo for the baseline. Hand-written,
 //! because kornia-imgproc 0.2.0 lacks them or works only on whole images: bilinear
