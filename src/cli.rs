@@ -129,9 +129,48 @@ pub struct InjectArgs {
 pub enum GenerateCommand {
     /// The virtual ink-jet printer of paper 002: an inkjet-scans dataset (scan after every layer).
     Inkjet(InkjetGenerateArgs),
+    /// The virtual FDM printer of paper 000's single lines with a top-view camera: an
+    /// fdm-lines dataset (photos, kinematics, truth/).
+    Fdm(FdmGenerateArgs),
     /// The virtual extrusion printer with a nozzle-mounted thermal camera of paper 003:
     /// a thermal-sequence dataset (frames, trajectory, camera, truth/).
     Thermal(ThermalGenerateArgs),
+}
+
+/// `amrepro datasets generate fdm`.
+#[derive(Debug, Args)]
+pub struct FdmGenerateArgs {
+    /// The printer profile, calibrated to the real lines of data/fsu-linewidth.
+    #[arg(long, value_parser = ["taz5", "taz6"])]
+    pub printer: String,
+    /// The set of (acceleration, feed) conditions: ren2021 (paper 000 Table I, nine lines).
+    #[arg(long, value_parser = ["ren2021"], default_value = "ren2021")]
+    pub conditions: String,
+    /// Seed of every random stream.
+    #[arg(long)]
+    pub seed: u64,
+    /// An extra effect (bed_tilt, gear_eccentricity, flow_saturation, camera_scale_error);
+    /// repeat, each followed by --strength.
+    #[arg(long = "effect", value_name = "NAME")]
+    pub effects: Vec<String>,
+    /// Strength of the preceding --effect (same order).
+    #[arg(long = "strength", value_name = "X", allow_negative_numbers = true)]
+    pub strengths: Vec<f64>,
+    /// The gear ripple's period in path length (mm), with --effect gear_eccentricity.
+    #[arg(long, default_value_t = 12.0)]
+    pub gear_period_mm: f64,
+    /// Lines printed per condition.
+    #[arg(long, default_value_t = 1)]
+    pub lines_per_condition: usize,
+    /// The camera's scale (px/mm).
+    #[arg(long, default_value_t = 40.0)]
+    pub px_per_mm: f64,
+    /// Bits per pixel of the photos.
+    #[arg(long, value_parser = ["8", "16"], default_value = "8")]
+    pub bit_depth: String,
+    /// Dataset folder to write (replaced atomically if it is an earlier output of this command).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// `amrepro datasets generate thermal`.

@@ -8,8 +8,8 @@ use pipeline::graph::{render, GraphFormat};
 use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
-    Cli, Command, DatasetsCommand, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg, ImportCommand,
-    InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
+    Cli, Command, DatasetsCommand, FdmGenerateArgs, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg,
+    ImportCommand, InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
 };
 
 /// Every stage kind this binary knows: domain stages and figures (and, for the fault
@@ -31,6 +31,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Graph(args) => graph(args),
         Command::Stages(args) => list_stages(args),
         Command::Datasets(DatasetsCommand::Import(ImportCommand::FsuLinewidth(args))) => import_fsu(args),
+        Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Fdm(args))) => generate_fdm(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Inkjet(args))) => generate_inkjet(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Thermal(args))) => generate_thermal(args),
         Command::Datasets(DatasetsCommand::Inject(args)) => inject(args),
@@ -189,6 +190,34 @@ fn effect_pairs<'a>(effects: &'a [String], strengths: &[f64]) -> Result<Vec<(&'a
         bail!("every --effect needs one --strength (got {} effects, {} strengths)", effects.len(), strengths.len());
     }
     Ok(effects.iter().map(String::as_str).zip(strengths.iter().copied()).collect())
+}
+
+fn generate_fdm(args: FdmGenerateArgs) -> Result<()> {
+    use datasets::fdm_lines::camera::CameraSettings;
+    use datasets::fdm_lines::generate::{conditions_named, generate, GenerateConfig};
+    use models::fdm::printer::Effects;
+    let pairs = effect_pairs(&args.effects, &args.strengths)?;
+    let effects = Effects { gear_period_mm: args.gear_period_mm, ..Effects::from_pairs(pairs)? };
+    let config = GenerateConfig {
+        conditions: conditions_named(&args.conditions).context("an unknown condition set")?,
+        lines_per_condition: args.lines_per_condition,
+        effects,
+        camera: CameraSettings {
+            px_per_mm: args.px_per_mm,
+            bit_depth: args.bit_depth.parse()?,
+            ..CameraSettings::default()
+        },
+        ..GenerateConfig::new(&args.printer, args.seed)
+    };
+    let lines = generate(&config, &args.out).with_context(|| format!("generating {}", args.out.display()))?;
+    let described: Vec<String> = effects.active().iter().map(|(n, s)| format!("{n} {s}")).collect();
+    println!(
+        "wrote fdm-lines dataset {} ({lines} lines of the virtual {}, effects: {})",
+        args.out.display(),
+        args.printer,
+        if described.is_empty() { "none".into() } else { described.join(", ") }
+    );
+    Ok(())
 }
 
 fn generate_thermal(args: ThermalGenerateArgs) -> Result<()> {

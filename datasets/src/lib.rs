@@ -10,6 +10,7 @@
 pub mod csv_table;
 pub mod error;
 pub mod fdm_inject;
+pub mod fdm_lines;
 pub mod fdm_widths;
 pub mod fsu;
 pub mod inkjet;
@@ -21,3 +22,11 @@ pub mod text;
 pub mod thermal;
 
 pub use error::DatasetError;
+
+/// A random stream of the seed, independent of the others and of thread scheduling.
+pub(crate) fn stream(seed: u64, id: u64) -> rand_chacha::ChaCha8Rng {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(id);
+    rng
+}

@@ -14,6 +14,14 @@ use crate::error::DatasetError;
 /// map then stays under 200 MB.
 pub const IMAGE_SIDE_PX: RangeInclusive<usize> = 2..=2048;
 
+/// Width and height of an `fdm-lines` photo (px). At least 8: a profile across the
+/// line needs a few pixels on each side. At most 32 768: a 300 mm bed at 100 px/mm.
+pub const LINE_IMAGE_SIDE_PX: RangeInclusive<usize> = 8..=32_768;
+
+/// Pixels of an `fdm-lines` photo. At most 64 M: 6 × a 120 mm line at 40 px/mm with
+/// its margins; decoded to 32-bit floats it takes 256 MB.
+pub const LINE_IMAGE_PIXELS: RangeInclusive<usize> = 64..=64 * 1024 * 1024;
+
 /// Ink-jet grid cells along x and along y (`m_x`, `m_y`). At most 2048: 20 × the
 /// largest grid of paper 002 (the 100 × 100 pipe junction); one layer of heights is then
 /// at most 32 MB.

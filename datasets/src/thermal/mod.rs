@@ -29,14 +29,14 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use models::thermal::{setup::corner_test_path, PrintSetup, Trajectory};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use rayon::prelude::*;
 
 use crate::error::DatasetError;
 use crate::limits::{check_option, THERMAL_LAYERS};
 use crate::manifest::{DatasetManifest, Provenance, MANIFEST_FILE};
 use crate::output::{write_file, OutputDir, Ownership};
+use crate::stream;
 use camera::{Distortion, FrameCapture, Intrinsics, Mount, Pose, HEIGHT_PX, WIDTH_PX};
 use deposition::{conventional_command, LayerDeposit};
 use heat::{HeatParams, LayerHeat};
@@ -175,13 +175,6 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
         corners_in_view: corners,
         layer_duration_s: trajectory.duration_s(),
     })
-}
-
-/// A random stream of the seed, independent of the others and of thread scheduling.
-fn stream(seed: u64, id: u64) -> ChaCha8Rng {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(id);
-    rng
 }
 
 /// Heat sources of every layer; the substrate of layer n carries the configured

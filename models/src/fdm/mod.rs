@@ -12,6 +12,9 @@
 //! - [`discrepancy`](mod@discrepancy): what the lag model gets wrong on measured widths — the
 //!   candidate mechanisms, their forward model, injection and the power study, as the
 //!   FDM domain of the generic `discrepancy` engine (DESIGN §7).
+//! - [`printer`]: the virtual FDM printer's physics (DESIGN §5.1): the lag model with the
+//!   mechanisms the discrepancy engine names on the real lines, wander and edge roughness,
+//!   the switchable effects, and its calibration to measured lines.
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
 //! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
 //!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
@@ -29,6 +32,7 @@ pub mod line;
 pub mod loo;
 pub mod piecewise;
 pub mod predict;
+pub mod printer;
 mod small_linalg;
 pub mod synthetic;
 pub mod transfer;
