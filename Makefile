@@ -16,7 +16,7 @@ SPECS := $(sort $(wildcard specs/*.toml))
 ## run: build, run every shipped spec into $(OUT)/, print where the report is
 run: build
 	@for spec in $(SPECS); do $(BIN) run --out $(OUT) $$spec || exit 1; done
-	@echo "published tables: $(OUT)/fdm/, $(OUT)/inkjet/, $(OUT)/thermal/, $(OUT)/discrepancy/ (see docs/OUTPUTS.md)"
+	@echo "published tables: $(OUT)/fdm/, $(OUT)/fdm_virtual/, $(OUT)/inkjet/, $(OUT)/thermal/, $(OUT)/discrepancy/ (see docs/OUTPUTS.md)"
 	@echo "open the report:  $(OUT)/report/index.html"
 
 build:

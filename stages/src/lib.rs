@@ -5,6 +5,7 @@
 #![deny(missing_docs)]
 
 pub mod concat;
+pub mod effects;
 pub mod fdm;
 pub mod inkjet;
 pub mod table;

@@ -8,6 +8,7 @@ mod inkjet_model_vs_scan;
 mod inkjet_pipe_junction;
 mod loo_predictions;
 mod r_surface;
+mod segment_accuracy;
 #[cfg(test)]
 pub(crate) mod test_util;
 mod thermal_common;
@@ -19,6 +20,7 @@ mod thermal_overdeposition;
 #[cfg(test)]
 pub(crate) mod thermal_test_data;
 mod transfer_cv;
+mod virtual_agreement;
 mod width_profiles;
 
 pub use discrepancy::{DiscoveryPowerFigure, DiscrepancyLinesFigure, DiscrepancyResidualsFigure};
@@ -28,12 +30,14 @@ pub use inkjet_model_vs_scan::InkjetModelVsScanFigure;
 pub use inkjet_pipe_junction::InkjetPipeJunctionFigure;
 pub use loo_predictions::LooPredictionsFigure;
 pub use r_surface::RSurfaceFigure;
+pub use segment_accuracy::SegmentAccuracyFigure;
 pub use thermal_contour_error::ThermalContourErrorFigure;
 pub use thermal_corners::ThermalCornersFigure;
 pub use thermal_directions::ThermalDirectionsFigure;
 pub use thermal_frame::ThermalFrameFigure;
 pub use thermal_overdeposition::ThermalOverdepositionFigure;
 pub use transfer_cv::TransferCvFigure;
+pub use virtual_agreement::VirtualAgreementFigure;
 pub use width_profiles::WidthProfilesFigure;
 
 use pipeline::params::ParamDefault;
@@ -62,6 +66,8 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(DiscrepancyResidualsFigure));
     registry.register(Box::new(DiscrepancyLinesFigure));
     registry.register(Box::new(DiscoveryPowerFigure));
+    registry.register(Box::new(VirtualAgreementFigure));
+    registry.register(Box::new(SegmentAccuracyFigure));
 }
 
 /// The `title` parameter of a figure whose default title is a fixed description.
@@ -91,6 +97,14 @@ fn draw_width_profile_mesh<DB: DrawingBackend>(
         .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y:.1}"))
         .draw()
+}
+
+/// The distinct values, ascending (the rows and columns of a panel grid).
+pub(crate) fn distinct(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
 }
 
 /// A vertical viridis colour bar for `lo..hi` in `bands` equal bands (band k has

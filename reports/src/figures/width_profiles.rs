@@ -16,7 +16,7 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text, PALETTE};
 
-use super::draw_width_profile_mesh;
+use super::{distinct, draw_width_profile_mesh};
 
 /// The `figure.fdm_width_profiles` stage kind.
 pub struct WidthProfilesFigure;
@@ -152,11 +152,4 @@ fn draw_panel<DB: DrawingBackend>(
         chart.draw_series(dashed)?.label(format!("steady {steady:.3} mm"));
     }
     Ok(())
-}
-
-fn distinct(values: impl Iterator<Item = f64>) -> Vec<f64> {
-    let mut v: Vec<f64> = values.collect();
-    v.sort_by(f64::total_cmp);
-    v.dedup();
-    v
 }

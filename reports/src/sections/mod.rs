@@ -4,11 +4,13 @@
 
 mod chen2024;
 mod discrepancy_fdm;
+mod fdm_virtual;
 mod lu2015;
 mod ren2021;
 
 pub use chen2024::Chen2024Section;
 pub use discrepancy_fdm::DiscrepancyFdmSection;
+pub use fdm_virtual::FdmVirtualSection;
 pub use lu2015::Lu2015Section;
 
 pub use ren2021::Ren2021Section;
@@ -22,6 +24,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(Lu2015Section));
     registry.register(Box::new(Chen2024Section));
     registry.register(Box::new(DiscrepancyFdmSection));
+    registry.register(Box::new(FdmVirtualSection));
 }
 
 /// One comparison row.

@@ -11,7 +11,9 @@ mod kinematics;
 mod line_summary;
 mod lines;
 mod loo;
+mod segment;
 mod transfer;
+mod virtual_lines;
 
 pub use discovery_power::DiscoveryPowerStage;
 pub use discrepancy::DiscrepancyStage;
@@ -20,7 +22,9 @@ pub use infill::InfillStage;
 pub use kinematics::KinematicsStage;
 pub use line_summary::{summarize_line, LineSummary, LineSummaryStage, SummaryWindows};
 pub use loo::{LagLooStage, PiecewiseLooStage};
+pub use segment::{SegmentAccuracyStage, SegmentWidthsStage};
 pub use transfer::TransferCvStage;
+pub use virtual_lines::{GenerateLinesStage, VirtualAgreementStage};
 
 use pipeline::Registry;
 
@@ -35,4 +39,8 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(InfillStage));
     registry.register(Box::new(DiscrepancyStage));
     registry.register(Box::new(DiscoveryPowerStage));
+    registry.register(Box::new(GenerateLinesStage));
+    registry.register(Box::new(VirtualAgreementStage));
+    registry.register(Box::new(SegmentWidthsStage));
+    registry.register(Box::new(SegmentAccuracyStage));
 }

@@ -70,18 +70,7 @@ impl StageKind for GenerateSequenceStage {
 
 /// Parses `name=strength, name=strength` into checked effects.
 pub fn parse_effects(text: &str) -> Result<Effects, String> {
-    let params_error = |message: String| message;
-    let mut pairs = Vec::new();
-    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-        let (name, value) =
-            item.split_once('=').ok_or_else(|| params_error(format!("effects: `{item}` is not name=strength")))?;
-        let strength: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| params_error(format!("effects: strength of `{}` is not a number: `{value}`", name.trim())))?;
-        pairs.push((name.trim(), strength));
-    }
-    Effects::from_pairs(pairs).map_err(|e| params_error(format!("effects: {e}")))
+    Effects::from_pairs(crate::effects::pairs(text)?).map_err(|e| format!("effects: {e}"))
 }
 
 #[cfg(test)]
