@@ -41,7 +41,7 @@ bench:
 
 ## fuzz: every cargo-fuzz target for FUZZ_SECONDS each (nightly + cargo-fuzz; fuzz/README.md)
 FUZZ_SECONDS ?= 180
-FUZZ_TARGETS := fdm_widths inkjet_scans thermal_sequence thermal_truth fsu_raw png_frame spec
+FUZZ_TARGETS := fdm_widths fdm_lines inkjet_scans thermal_sequence thermal_truth fsu_raw png_frame spec
 fuzz:
 	cd fuzz && for t in $(FUZZ_TARGETS); do \
 		cargo +nightly fuzz run -O $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) || exit 1; done

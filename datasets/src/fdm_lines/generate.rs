@@ -225,9 +225,10 @@ fn manifest(config: &GenerateConfig) -> DatasetManifest {
         format_version: FORMAT_VERSION,
         printer: config.printer.clone(),
         description: format!(
-            "Virtual {} (physics calibrated to the real lines, DESIGN §5.1): {} straight {LENGTH_MM} mm lines, photographed from above at {} px/mm, {}-bit.",
+            "Virtual {} (physics calibrated to the real lines, DESIGN §5.1): {} straight {LENGTH_MM} mm line{}, photographed from above at {} px/mm, {}-bit.",
             config.printer,
             config.conditions.len() * config.lines_per_condition,
+            if config.conditions.len() * config.lines_per_condition == 1 { "" } else { "s" },
             c.px_per_mm,
             c.bit_depth
         ),

@@ -11,10 +11,11 @@
 
 use std::path::{Path, PathBuf};
 
+use datasets::fdm_lines::FdmLinesDataset;
 use datasets::fdm_widths::FdmWidthsDataset;
 use datasets::fsu::{read_printer, FsuPrinter, ImportOptions};
 use datasets::inkjet::InkjetScans;
-use datasets::limits::{GRID_SIDE_CELLS, IMAGE_SIDE_PX, MAX_COORDINATE_MM};
+use datasets::limits::{GRID_SIDE_CELLS, IMAGE_SIDE_PX, LINE_IMAGE_PIXELS, LINE_IMAGE_SIDE_PX, MAX_COORDINATE_MM};
 use datasets::thermal::{ThermalSequence, ThermalTruth};
 
 /// The readers under test, one per fuzz target.
@@ -30,12 +31,14 @@ pub enum Reader {
     ThermalTruth,
     /// `fsu::read_printer` without checksums (the raw files `import --no-verify` reads).
     FsuRaw,
+    /// `FdmLinesDataset::read` (its PNG headers) and `fdm_lines::generate::read_truth`.
+    FdmLines,
 }
 
 impl Reader {
     /// Every reader.
-    pub const ALL: [Self; 5] =
-        [Self::FdmWidths, Self::InkjetScans, Self::ThermalSequence, Self::ThermalTruth, Self::FsuRaw];
+    pub const ALL: [Self; 6] =
+        [Self::FdmWidths, Self::InkjetScans, Self::ThermalSequence, Self::ThermalTruth, Self::FsuRaw, Self::FdmLines];
 
     /// The fuzz target's name (`fuzz/fuzz_targets/<name>.rs`, `tests/crashers/<name>/`).
     pub fn name(self) -> &'static str {
@@ -45,6 +48,7 @@ impl Reader {
             Self::ThermalSequence => "thermal_sequence",
             Self::ThermalTruth => "thermal_truth",
             Self::FsuRaw => "fsu_raw",
+            Self::FdmLines => "fdm_lines",
         }
     }
 
@@ -55,6 +59,7 @@ impl Reader {
             Self::InkjetScans => "inkjet-scans",
             Self::ThermalSequence | Self::ThermalTruth => "thermal-sequence",
             Self::FsuRaw => "fsu-raw",
+            Self::FdmLines => "fdm-lines",
         }
     }
 
@@ -74,6 +79,13 @@ impl Reader {
                 "truth/deposit_L00.png",
             ],
             Self::FsuRaw => &["taz5/S400F3000_xiao120.csv"],
+            Self::FdmLines => &[
+                "dataset.toml",
+                "lines.csv",
+                "images/S400F3000.png",
+                "truth/placement.csv",
+                "truth/widths/S400F3000.csv",
+            ],
         }
     }
 }
@@ -172,6 +184,18 @@ impl Workspace {
             }
             Reader::FsuRaw => {
                 let _ = read_printer(dir, FsuPrinter::Taz5, ImportOptions { verify_sha256: false });
+            }
+            Reader::FdmLines => {
+                if let Ok(d) = FdmLinesDataset::read(dir) {
+                    for l in &d.lines {
+                        assert!(l.image.starts_with(dir), "photo outside the folder");
+                        if let Ok((w, h)) = l.image_size_px {
+                            assert!(LINE_IMAGE_SIDE_PX.contains(&w) && LINE_IMAGE_SIDE_PX.contains(&h));
+                            assert!(LINE_IMAGE_PIXELS.contains(&(w * h)), "photo too large");
+                        }
+                    }
+                }
+                let _ = datasets::fdm_lines::generate::read_truth(dir);
             }
         }
     }
