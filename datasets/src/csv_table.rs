@@ -62,6 +62,30 @@ impl CsvTable {
             .ok_or_else(|| self.field_error(row.0, col, format!("expected a finite number, got `{raw}`")))
     }
 
+    /// Every row read by `read_row`, refusing an id (column `id_col`, as `id_of`
+    /// gives it back) that an earlier row already has.
+    pub fn rows_with_unique_ids<T>(
+        &self,
+        id_col: usize,
+        id_of: impl Fn(&T) -> &str,
+        mut read_row: impl FnMut(&(usize, Vec<String>)) -> Result<T, DatasetError>,
+    ) -> Result<Vec<T>, DatasetError> {
+        let mut items: Vec<T> = Vec::with_capacity(self.rows.len());
+        for row in &self.rows {
+            let item = read_row(row)?;
+            if let Some(k) = items.iter().position(|earlier| id_of(earlier) == id_of(&item)) {
+                let (first, id) = (self.rows[k].0, id_of(&item));
+                return Err(self.field_error(
+                    row.0,
+                    id_col,
+                    format!("expected a unique id, `{id}` is also on line {first}"),
+                ));
+            }
+            items.push(item);
+        }
+        Ok(items)
+    }
+
     /// An error about field `col` at `line`.
     pub fn field_error(&self, line: usize, col: usize, expected: impl Into<String>) -> DatasetError {
         DatasetError::Malformed {

@@ -27,6 +27,15 @@ pub const READABLE_VERSIONS: &[u32] = &[FORMAT_VERSION];
 pub const LINE_COLUMNS: [&str; 7] =
     ["line_id", "condition", "accel_mm_s2", "feed_mm_s", "jerk_mm_s", "length_mm", "widths_file"];
 
+/// The units of an `fdm-widths` dataset's quantities (`[units]` of `dataset.toml`).
+pub const UNITS: [(&str, &str); 6] =
+    [("position", "mm"), ("width", "mm"), ("accel", "mm/s^2"), ("feed", "mm/s"), ("jerk", "mm/s"), ("length", "mm")];
+
+/// The `[units]` table of `dataset.toml` for `units`.
+pub fn units_table(units: &[(&str, &str)]) -> std::collections::BTreeMap<String, String> {
+    units.iter().map(|(q, u)| (q.to_string(), u.to_string())).collect()
+}
+
 /// Commanded motion of one straight line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LineMotion {
@@ -70,19 +79,11 @@ impl FdmWidthsDataset {
         let manifest = DatasetManifest::read(dir, KIND, READABLE_VERSIONS)?;
         let table = CsvTable::read(&file_in(dir, "lines.csv")?)?;
         let cols: Vec<usize> = LINE_COLUMNS.iter().map(|c| table.column(c)).collect::<Result<_, _>>()?;
-        let mut lines: Vec<WidthLine> = Vec::with_capacity(table.rows.len());
-        for row in &table.rows {
-            let line = read_line(dir, &table, row, &cols)?;
-            if let Some(k) = lines.iter().position(|l| l.line_id == line.line_id) {
-                let first = table.rows[k].0;
-                return Err(table.field_error(
-                    row.0,
-                    cols[0],
-                    format!("expected a unique id, `{}` is also on line {first}", line.line_id),
-                ));
-            }
-            lines.push(line);
-        }
+        let lines = table.rows_with_unique_ids(
+            cols[0],
+            |l: &WidthLine| &l.line_id,
+            |row| read_line(dir, &table, row, &cols),
+        )?;
         Ok(Self { manifest, lines })
     }
 

@@ -282,20 +282,12 @@ fn verify_checksum(src_root: &Path, path: &Path) -> Result<(), DatasetError> {
 }
 
 fn manifest(printer: FsuPrinter) -> DatasetManifest {
-    let units = [
-        ("position", "mm"),
-        ("width", "mm"),
-        ("accel", "mm/s^2"),
-        ("feed", "mm/s"),
-        ("jerk", "mm/s"),
-        ("length", "mm"),
-    ];
     DatasetManifest {
         kind: KIND.into(),
         format_version: FORMAT_VERSION,
         printer: printer.name().into(),
         description: printer.description().into(),
-        units: units.iter().map(|(q, u)| (q.to_string(), u.to_string())).collect(),
+        units: crate::fdm_widths::units_table(&crate::fdm_widths::UNITS),
         provenance: Provenance::Measured {
             source: "FAMU-FSU-IME/IISE-Co-learning, Linewidth_Data.zip (sha256 30fe042feb5dbae124fa844c570da0f285b4dd13e73b2f9055b090e83c7bf169)".into(),
             license: "Apache-2.0".into(),

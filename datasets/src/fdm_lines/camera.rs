@@ -136,23 +136,18 @@ pub fn photograph(
     let frame = frame(line, length_mm, settings, scale_error, rng);
     let texture = Texture::new(&frame, settings, rng);
     let gradient_angle = rng.random_range(0.0..2.0 * PI);
-    let levels = if settings.bit_depth == 8 { 255.0 } else { 65535.0 };
+    let full_scale = if settings.bit_depth == 8 { 255.0 } else { 65535.0 };
     let pixel_seed: u64 = rng.random();
-    let rows: Vec<Vec<u16>> = (0..frame.height)
-        .into_par_iter()
-        .map(|j| {
-            let mut row_rng = ChaCha8Rng::seed_from_u64(pixel_seed ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let normal = Normal::new(0.0, settings.noise * settings.contrast.abs()).expect("finite noise");
-            (0..frame.width)
-                .map(|i| {
-                    let (u, v) = (i as f64 + 0.5, j as f64 + 0.5);
-                    let clean = intensity(&frame, line, length_mm, settings, &texture, gradient_angle, u, v);
-                    let value = clean + normal.sample(&mut row_rng);
-                    (value.clamp(0.0, 1.0) * levels).round() as u16
-                })
-                .collect()
-        })
-        .collect();
+    let mut gray_levels = vec![0u16; frame.width * frame.height];
+    gray_levels.par_chunks_mut(frame.width).enumerate().for_each(|(j, row)| {
+        let mut row_rng = ChaCha8Rng::seed_from_u64(pixel_seed ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let normal = Normal::new(0.0, settings.noise * settings.contrast.abs()).expect("finite noise");
+        for (i, out) in row.iter_mut().enumerate() {
+            let (u, v) = (i as f64 + 0.5, j as f64 + 0.5);
+            let clean = intensity(&frame, line, length_mm, settings, &texture, gradient_angle, u, v);
+            *out = ((clean + normal.sample(&mut row_rng)).clamp(0.0, 1.0) * full_scale).round() as u16;
+        }
+    });
     let recorded = marked(&frame, settings, rng);
     let truth = ImagePlacement {
         px_per_mm: frame.px_per_mm,
@@ -160,7 +155,7 @@ pub fn photograph(
         start_y_px: frame.start[1],
         direction_deg: frame.direction[1].atan2(frame.direction[0]).to_degrees(),
     };
-    let png = encode(&rows, frame.width, frame.height, settings.bit_depth)?;
+    let png = encode(&gray_levels, frame.width, frame.height, settings.bit_depth)?;
     Ok(Photo { png, size_px: (frame.width, frame.height), recorded, truth })
 }
 
@@ -304,11 +299,12 @@ impl Texture {
     }
 }
 
-fn encode(rows: &[Vec<u16>], width: usize, height: usize, bit_depth: u8) -> Result<Vec<u8>, CameraError> {
+/// The gray levels as a PNG (8-bit: one byte a pixel; 16-bit: big-endian pairs).
+fn encode(levels: &[u16], width: usize, height: usize, bit_depth: u8) -> Result<Vec<u8>, CameraError> {
     let data: Vec<u8> = if bit_depth == 8 {
-        rows.iter().flatten().map(|&v| v as u8).collect()
+        levels.iter().map(|&v| v as u8).collect()
     } else {
-        rows.iter().flatten().flat_map(|v| v.to_be_bytes()).collect()
+        levels.iter().flat_map(|v| v.to_be_bytes()).collect()
     };
     let mut out = Vec::new();
     {

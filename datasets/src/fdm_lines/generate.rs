@@ -209,17 +209,8 @@ fn manifest(config: &GenerateConfig) -> DatasetManifest {
     if config.effects.gear_eccentricity != 0.0 {
         effects.insert("gear_period_mm".into(), config.effects.gear_period_mm);
     }
-    let units = [
-        ("position", "mm"),
-        ("width", "mm"),
-        ("accel", "mm/s^2"),
-        ("feed", "mm/s"),
-        ("jerk", "mm/s"),
-        ("length", "mm"),
-        ("pixel_scale", "px/mm"),
-        ("pixel", "px"),
-        ("direction", "deg"),
-    ];
+    let mut units = crate::fdm_widths::UNITS.to_vec();
+    units.extend([("pixel_scale", "px/mm"), ("pixel", "px"), ("direction", "deg")]);
     DatasetManifest {
         kind: KIND.into(),
         format_version: FORMAT_VERSION,
@@ -232,7 +223,7 @@ fn manifest(config: &GenerateConfig) -> DatasetManifest {
             c.px_per_mm,
             c.bit_depth
         ),
-        units: units.iter().map(|(q, u)| (q.to_string(), u.to_string())).collect(),
+        units: crate::fdm_widths::units_table(&units),
         provenance: Provenance::Virtual {
             generator: GENERATOR.into(),
             version: env!("CARGO_PKG_VERSION").into(),

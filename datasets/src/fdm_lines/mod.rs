@@ -108,19 +108,11 @@ impl FdmLinesDataset {
         let manifest = DatasetManifest::read(dir, KIND, READABLE_VERSIONS)?;
         let table = CsvTable::read(&file_in(dir, "lines.csv")?)?;
         let cols: Vec<usize> = LINE_COLUMNS.iter().map(|c| table.column(c)).collect::<Result<_, _>>()?;
-        let mut lines: Vec<PhotoLine> = Vec::with_capacity(table.rows.len());
-        for row in &table.rows {
-            let line = read_line(dir, &table, row, &cols)?;
-            if let Some(k) = lines.iter().position(|l| l.line_id == line.line_id) {
-                let first = table.rows[k].0;
-                return Err(table.field_error(
-                    row.0,
-                    cols[0],
-                    format!("expected a unique id, `{}` is also on line {first}", line.line_id),
-                ));
-            }
-            lines.push(line);
-        }
+        let lines = table.rows_with_unique_ids(
+            cols[0],
+            |l: &PhotoLine| &l.line_id,
+            |row| read_line(dir, &table, row, &cols),
+        )?;
         Ok(Self { manifest, lines })
     }
 }

@@ -296,22 +296,23 @@ fn ornstein_uhlenbeck(n: usize, process: Wander, rng: &mut ChaCha8Rng) -> Vec<f6
 /// A profile fitted to measured lines: the lag model (with a start blob if
 /// `has_start_blob`, with the width cap if `width_cap`) by the discrepancy engine's
 /// least squares on all lines; the line-to-line height, the wander and the edge
-/// roughness from the fit's residuals. Each line's mean relative residual is its own
-/// height's (their root mean square the height's deviation); the rest is split by a
-/// [`WANDER_WINDOW_MM`] moving average: its slow part (relative to the fit) gives the
-/// wander's deviation, and the distance at which its autocorrelation falls to 1/e its
-/// length; the fast part gives the roughness, its
-/// variance split evenly between two independent edges, and its lag-one
-/// autocorrelation its length. The measured widths carry the camera's quantisation and
-/// noise too, which the roughness absorbs.
+/// roughness from the fit's relative residuals.
+///
+/// - Each line's mean relative residual is its own height's; their root mean square
+///   is the height's deviation.
+/// - The rest is split by a [`WANDER_WINDOW_MM`] moving average. Its slow part gives
+///   the wander's deviation, and the lag at which its autocorrelation falls below 1/e
+///   its length.
+/// - The fast part (in mm) gives the roughness: its variance split evenly between two
+///   independent edges, its lag-one autocorrelation the length. The measured widths
+///   carry the camera's quantisation and noise too, which the roughness absorbs.
 pub fn calibrate(lines: &[MeasuredLine], has_start_blob: bool, width_cap: bool) -> Result<PrinterProfile, String> {
     let groups: Vec<FdmLine> = lines.iter().enumerate().map(|(i, l)| FdmLine::new(i.to_string(), l.clone())).collect();
     let model = FdmModel::new(&groups, has_start_blob, SMOOTHING_MM);
     let active: &[usize] = if width_cap { &[WIDTH_CAP] } else { &[] };
     let train: Vec<&FdmLine> = groups.iter().collect();
     let fitted = fit(&model, active, &train, None).map_err(|e| e.to_string())?;
-    let (mut slow, mut fast, mut offsets) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut slow_lag, mut fast_lag) = (Vec::new(), Vec::new());
+    let (mut offsets, mut slow, mut fast) = (Vec::new(), Vec::new(), Vec::new());
     for group in &groups {
         let predicted = predict(&model, &fitted, group, None).map_err(|e| e.to_string())?;
         let line = &group.line;
@@ -321,22 +322,34 @@ pub fn calibrate(lines: &[MeasuredLine], has_start_blob: bool, width_cap: bool) 
         offsets.push(offset);
         let step = mean_step(&line.positions_mm);
         let smooth = moving_average(&relative, (WANDER_WINDOW_MM / step).round().max(1.0) as usize);
-        let residual_mm: Vec<f64> =
-            relative.iter().zip(&smooth).zip(&predicted).map(|((r, s), p)| (r - s) * p).collect();
-        slow_lag.push((smooth.clone(), step));
-        fast_lag.push((residual_mm.clone(), step));
-        slow.extend(smooth);
-        fast.extend(residual_mm);
+        let rough_mm: Vec<f64> = relative.iter().zip(&smooth).zip(&predicted).map(|((r, s), p)| (r - s) * p).collect();
+        slow.push(Series { values: smooth, step_mm: step });
+        fast.push(Series { values: rough_mm, step_mm: step });
     }
-    let wander_sd = rms(&slow);
-    let fast_sd = rms(&fast);
+    let (wander_sd, rough_sd) = (Series::rms(&slow), Series::rms(&fast));
     Ok(PrinterProfile {
         theta: fitted.theta,
         has_start_blob,
         line_height_sd: rms(&offsets),
-        wander: Wander { sd: wander_sd, length_mm: correlation_length(&slow_lag, wander_sd * wander_sd, 1.0) },
-        edge: Wander { sd: fast_sd / 2f64.sqrt(), length_mm: correlation_length(&fast_lag, fast_sd * fast_sd, 0.0) },
+        wander: Wander { sd: wander_sd, length_mm: correlation_length(&slow, wander_sd * wander_sd, 1.0) },
+        edge: Wander { sd: rough_sd / 2f64.sqrt(), length_mm: correlation_length(&fast, rough_sd * rough_sd, 0.0) },
     })
+}
+
+/// One line's residual series, evenly spaced along the path.
+struct Series {
+    values: Vec<f64>,
+    step_mm: f64,
+}
+
+impl Series {
+    /// The root mean square over every value of every series.
+    fn rms(series: &[Series]) -> f64 {
+        let (sum, count) = series
+            .iter()
+            .fold((0.0, 0usize), |(s, n), x| (s + x.values.iter().map(|v| v * v).sum::<f64>(), n + x.values.len()));
+        (sum / count.max(1) as f64).sqrt()
+    }
 }
 
 /// How well a virtual printer calibrated without one line reproduces it.
@@ -457,30 +470,30 @@ fn moving_average(values: &[f64], window: usize) -> Vec<f64> {
 
 /// The OU correlation length of the series: from the autocorrelation at one sample
 /// (`from_mm = 0`), or the first lag at which it falls below 1/e, searched from
-/// `from_mm` on.
-fn correlation_length(series: &[(Vec<f64>, f64)], variance: f64, from_mm: f64) -> f64 {
-    if variance == 0.0 {
+/// `from_mm` on (half a line at most).
+fn correlation_length(series: &[Series], variance: f64, from_mm: f64) -> f64 {
+    if variance == 0.0 || series.is_empty() {
         return 1.0;
     }
     let autocorrelation = |lag: usize| {
         let (mut sum, mut count) = (0.0, 0usize);
-        for (values, _) in series {
-            for w in values.windows(lag + 1) {
+        for s in series {
+            for w in s.values.windows(lag + 1) {
                 sum += w[0] * w[lag];
                 count += 1;
             }
         }
         sum / count.max(1) as f64 / variance
     };
-    let step = series[0].1;
+    let (step, samples) = (series[0].step_mm, series[0].values.len());
     if from_mm == 0.0 {
         let rho = autocorrelation(1).clamp(1e-3, 0.999);
         return -step / rho.ln();
     }
     let first = (from_mm / step).ceil() as usize;
-    (first..series[0].0.len() / 2)
+    (first..samples / 2)
         .find(|&lag| autocorrelation(lag) < (-1f64).exp())
-        .map_or(series[0].0.len() as f64 * step / 2.0, |lag| lag as f64 * step)
+        .map_or(samples as f64 * step / 2.0, |lag| lag as f64 * step)
 }
 
 #[cfg(test)]

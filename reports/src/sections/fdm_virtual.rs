@@ -18,7 +18,7 @@ use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
 use super::ren2021::median;
 use super::{comparison_frame, Row};
-use crate::html::escape;
+use crate::html::{escape, format_sig};
 use crate::read::{bools, f64s, i64s, read_parquet, strs};
 
 /// The `report.fdm_virtual` stage kind.
@@ -215,7 +215,7 @@ fn discrepancy_part(
     rows: &mut Vec<Row>,
 ) -> Result<String, StageError> {
     let mut html = String::from(
-        "<h4>The discrepancy engine on photos</h4>\n<p>The engine runs on widths segmented from two photo sets of the virtual Taz 6, whose physics is the lag model alone: one set as printed, one with an effect hidden in the printer. It is told nothing of either; what each set holds is read from its dataset afterwards.</p>\n<table><tr><th class=\"t\">engine run</th><th class=\"t\">photo set holds</th><th class=\"t\">verdict</th><th class=\"t\">named</th><th>held-out gain (%)</th><th>adjusted p</th></tr>\n",
+        "<h4>The discrepancy engine on photos</h4>\n<p>The engine runs on widths segmented from two photo sets of the virtual Taz 6, whose physics is the lag model alone: one set as printed, one with an effect hidden in the printer. It is told nothing of either; what each set holds is read from its dataset afterwards.</p>\n<table><tr><th class=\"t\">engine run</th><th class=\"t\">photo set holds</th><th class=\"t\">verdict</th><th class=\"t\">named</th><th class=\"t\">fitted, with 95 % interval</th><th>held-out gain (%)</th><th>adjusted p</th></tr>\n",
     );
     for ((dir, stage), photos) in runs.iter().zip(photo_sets) {
         let path = dir.join("causes.parquet");
@@ -230,15 +230,40 @@ fn discrepancy_part(
         let first_verdict =
             (0..df.height()).min_by_key(|&i| round[i]).map_or("—".to_string(), |i| verdict[i].clone());
         if hits.is_empty() {
-            let _ = writeln!(html, "<tr><td class=\"t\">{stage}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">nothing</td><td>—</td><td>—</td></tr>", escape(&holds), first_verdict.replace('_', " "));
+            let _ = writeln!(html, "<tr><td class=\"t\">{stage}</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td class=\"t\">nothing</td><td class=\"t\">—</td><td>—</td><td>—</td></tr>", escape(&holds), first_verdict.replace('_', " "));
         }
         for &i in &hits {
-            let _ = writeln!(html, "<tr><td class=\"t\">{stage}</td><td class=\"t\">{}</td><td class=\"t\">named (round {})</td><td class=\"t\">{}</td><td>{:.1}</td><td>{:.2e}</td></tr>", escape(&holds), round[i], mechanism[i].replace('_', " "), gain[i], p[i]);
+            let fitted = fitted_parameters(dir, &mechanism[i])?;
+            let _ = writeln!(html, "<tr><td class=\"t\">{stage}</td><td class=\"t\">{}</td><td class=\"t\">named (round {})</td><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{:.1}</td><td>{:.2e}</td></tr>", escape(&holds), round[i], mechanism[i].replace('_', " "), escape(&fitted), gain[i], p[i]);
             let source = format!("causes.parquet of stage {stage} (fdm.discrepancy)");
             rows.push(row("discrepancy", format!("{stage} {} gain", mechanism[i]), gain[i], "%", source));
         }
     }
     Ok(html + "</table>\n")
+}
+
+/// The named mechanism's parameters from the run's `extension.parquet`:
+/// `period_mm 12.10 mm [12.00, 12.20]; …`.
+fn fitted_parameters(dir: &Path, mechanism: &str) -> Result<String, StageError> {
+    let path = dir.join("extension.parquet");
+    let df = read_parquet(&path)?;
+    let (m, name, unit) = (strs(&df, "mechanism", &path)?, strs(&df, "parameter", &path)?, strs(&df, "unit", &path)?);
+    let (est, lo, hi) = (f64s(&df, "estimate", &path)?, f64s(&df, "ci_lo", &path)?, f64s(&df, "ci_hi", &path)?);
+    let unit_text = |u: &str| if u == "1" || u.is_empty() { String::new() } else { format!(" {u}") };
+    let parts: Vec<String> = (0..df.height())
+        .filter(|&i| m[i] == mechanism)
+        .map(|i| {
+            format!(
+                "{} {}{} [{}, {}]",
+                name[i],
+                format_sig(est[i]),
+                unit_text(&unit[i]),
+                format_sig(lo[i]),
+                format_sig(hi[i])
+            )
+        })
+        .collect();
+    Ok(if parts.is_empty() { "—".into() } else { parts.join("; ") })
 }
 
 fn distinct_strs(values: &[String]) -> Vec<String> {
