@@ -104,6 +104,32 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
     assert_eq!(named("discrepancy_clean"), Vec::<String>::new());
     assert_eq!(named("discrepancy_hidden"), ["gear_eccentricity"]);
 
+    // The same with paper 000's piecewise model as the baseline, on the same photos.
+    let piecewise = tmp.path().join("piecewise.toml");
+    let widths = |set: &str| runs.join(format!("widths_{set}")).display().to_string();
+    let text = format!(
+        "[run]\nname = \"piecewise\"\n\n[dataset.clean_widths]\npath = \"{}\"\n\n[dataset.hidden_widths]\npath = \"{}\"\n\n\
+         [stage.clean]\nkind = \"fdm.discrepancy\"\ninputs = [\"clean_widths\"]\nparams = {{ start_blob = \"none\", baseline = \"piecewise_model\" }}\n\n\
+         [stage.hidden]\nkind = \"fdm.discrepancy\"\ninputs = [\"hidden_widths\"]\nparams = {{ start_blob = \"none\", baseline = \"piecewise_model\" }}\n",
+        widths("clean"),
+        widths("hidden")
+    );
+    std::fs::write(&piecewise, text).unwrap();
+    ok(tmp.path(), &["run", "-q", piecewise.to_str().unwrap()]);
+    let piecewise_runs = tmp.path().join("out/runs/piecewise");
+    let named_on = |stage: &str| -> Vec<String> {
+        let df = read(&piecewise_runs.join(stage).join("causes.parquet"));
+        let (m, n) = (strs(&df, "mechanism"), bools(&df, "named"));
+        assert!(strs(&df, "base_model").iter().all(|b| b.starts_with("piecewise_model")));
+        (0..df.height()).filter(|&i| n[i]).map(|i| m[i].clone()).collect()
+    };
+    assert_eq!(named_on("clean"), Vec::<String>::new());
+    assert_eq!(named_on("hidden"), ["gear_eccentricity"]);
+    let ext = read(&piecewise_runs.join("hidden/extension.parquet"));
+    let (param, lo, hi) = (strs(&ext, "parameter"), f64s(&ext, "ci_lo"), f64s(&ext, "ci_hi"));
+    let k = param.iter().position(|p| p == "amplitude").unwrap();
+    assert!(lo[k] <= 0.05 && 0.05 <= hi[k], "the amplitude's interval [{}, {}] covers the hidden 5 %", lo[k], hi[k]);
+
     let section = std::fs::read_to_string(runs.join("section/section.html")).unwrap();
     for text in ["The discrepancy engine on photos", "gear eccentricity=0.05", "edge fit", "threshold"] {
         assert!(section.contains(text), "section lacks `{text}`");

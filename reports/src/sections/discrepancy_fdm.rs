@@ -24,7 +24,7 @@ impl StageKind for DiscrepancyFdmSection {
         "report.discrepancy_fdm"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "What the lag model gets wrong on the measured lines, the cause named, the extension and its gain, and the engine's power → section.html, comparison.parquet"
@@ -45,17 +45,27 @@ impl StageKind for DiscrepancyFdmSection {
         let params = Param::read(&dir.join("extension.parquet"))?;
         let gains = GainRow::read(&dir.join("gain.parquet"))?;
         let structure = Structure::read(&dir.join("residuals.parquet"))?;
-        let mut power = Vec::new();
+        // The other inputs: power studies (power.parquet), and engine runs on another
+        // baseline (causes.parquet without power.parquet).
+        let (mut power, mut power_stages, mut other_baselines) = (Vec::new(), Vec::new(), Vec::new());
         for input in &ctx.inputs[1..] {
-            power.extend(PowerRow::read(&input.dir.join("power.parquet"))?);
+            if input.dir.join("power.parquet").exists() || !input.dir.join("causes.parquet").exists() {
+                power.extend(PowerRow::read(&input.dir.join("power.parquet"))?);
+                power_stages.push(input.name.as_str());
+            } else {
+                other_baselines.push(input);
+            }
         }
         let stage = ctx.inputs[0].name.clone();
-        let power_stage = ctx.inputs[1..].iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", ");
+        let power_stage = power_stages.join(", ");
         let mut html = String::from("<h3>What the lag model gets wrong, and why</h3>\n");
         html += &method(&causes);
         let mut rows = Vec::new();
         for g in &gains {
             html += &printer_part(g, &causes, &params, &structure, &stage, &mut rows);
+        }
+        for input in other_baselines {
+            html += &other_baseline_part(&input.dir, &input.name, &mut rows)?;
         }
         html += &power_part(&power, &power_stage, &mut rows);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
@@ -457,6 +467,51 @@ fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
 }
 
 /// A fraction as a percentage with at most one decimal (`0.05` → `5`, `0.025` → `2.5`).
+/// The engine on another baseline (paper 000's piecewise model): per printer, the
+/// baseline's held-out RMSE, what was named and the candidates' scores.
+fn other_baseline_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String, StageError> {
+    let causes = Cause::read(&dir.join("causes.parquet"))?;
+    let gains = GainRow::read(&dir.join("gain.parquet"))?;
+    let baseline = causes.first().map_or("piecewise_model".to_string(), |c| c.base_model.clone());
+    let mut html = format!(
+        "<h4>The paper's own model as the baseline ({})</h4>\n<p>The same engine with paper 000's piecewise model (eqs 1-3, its r_a × r_F grid search in every fold) in place of the lag model. A curve fitted per phase has no flow to extend, so the candidates are the three that act on the width it predicts: a tilted bed, a gear's ripple and flow lost at high flow.</p>\n",
+        escape(&baseline.replace('_', " "))
+    );
+    for g in &gains {
+        let mine: Vec<&Cause> = causes.iter().filter(|c| c.printer == g.printer).collect();
+        let named: Vec<String> = mine.iter().filter(|c| c.named).map(|c| c.mechanism.replace('_', " ")).collect();
+        let verdict = if named.is_empty() {
+            "no candidate is significant, so the model stays as it is".to_string()
+        } else {
+            format!(
+                "named: {}; the extended model's held-out RMSE is {:.4} mm, a gain of {} % (95 % interval {} to {} %)",
+                named.join(", "),
+                g.after,
+                percent(g.gain.0),
+                percent(g.gain.1),
+                percent(g.gain.2)
+            )
+        };
+        let _ = writeln!(
+            html,
+            "<p><b>{}</b>: held-out RMSE of the piecewise model {:.4} mm; {verdict}.</p>",
+            escape(&printer_name(&g.printer)),
+            g.before
+        );
+        html += &causes_table(&mine);
+        let source = format!("gain.parquet of stage {stage} (fdm.discrepancy, baseline {baseline})");
+        rows.push(Row {
+            section: "piecewise_baseline",
+            item: format!("{} piecewise model held-out rmse", g.printer),
+            paper: None,
+            ours: g.before,
+            unit: "mm",
+            source,
+        });
+    }
+    Ok(html)
+}
+
 fn percent(x: f64) -> String {
     let p = (1000.0 * x).round() / 10.0;
     if p.fract() == 0.0 {

@@ -1,4 +1,5 @@
-//! `fdm.discrepancy`: what the lag model (`fdm.lag_model`, DESIGN §5.1) gets wrong on
+//! `fdm.discrepancy`: what the lag model (`fdm.lag_model`, DESIGN §5.1) — or, with
+//! `baseline = "piecewise_model"`, paper 000's piecewise model — gets wrong on
 //! measured line widths, which physical cause explains it, the extended model and its
 //! held-out gain (DESIGN §7) — the FDM domain of the `discrepancy` engine
 //! (`models::fdm::discrepancy`). One run per printer over the lines of every input
@@ -12,7 +13,9 @@
 //! line's held-out predictions before and after, for the figures).
 
 use discrepancy::{discover, Discovery, Model, Settings, VariableKind, Verdict};
-use models::fdm::discrepancy::{FdmFit, FdmLine, FdmModel};
+use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
+use models::fdm::discrepancy::{FdmLine, FdmModel};
+use models::fdm::PiecewiseParams;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
@@ -25,6 +28,18 @@ pub struct DiscrepancyStage;
 
 const PARAMS: &[ParamSpec] = &[
     START_BLOB,
+    ParamSpec {
+        name: "baseline",
+        ty: ParamType::Choice(&["lag_model", "piecewise_model"]),
+        default: ParamDefault::Str("lag_model"),
+        doc: "The model whose errors are searched: the lag model (DESIGN §5.1; seven candidates) or paper 000's piecewise model (eqs 1-3 with the r_a × r_F grid search; the three candidates that act on its widths: bed_tilt, gear_eccentricity, flow_saturation).",
+    },
+    ParamSpec {
+        name: "r_step",
+        ty: ParamType::Float { min: 0.005, max: 0.1 },
+        default: ParamDefault::Float(0.02),
+        doc: "With the piecewise baseline: step of its r_a, r_F grid over [0.9, 1.1] (paper 000: 0.01; every fold and candidate fits it again, so the default is coarser).",
+    },
     ParamSpec {
         name: "alpha",
         ty: ParamType::Float { min: 0.001, max: 0.5 },
@@ -73,13 +88,13 @@ impl StageKind for DiscrepancyStage {
         "fdm.discrepancy"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)"
     }
     fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 000's lines (lag model of DESIGN §5.1 as the baseline)"
+        "DESIGN §7 on paper 000's lines (the lag model of DESIGN §5.1, or paper 000's piecewise model eqs 1-3, as the baseline)"
     }
     fn params(&self) -> &'static [ParamSpec] {
         PARAMS
@@ -95,12 +110,27 @@ impl StageKind for DiscrepancyStage {
         let smoothing = ctx.params.f64("smoothing_mm");
         let mut tables = Tables::new(settings.alpha);
         for (printer, lines) in &printers {
-            let model = FdmModel::new(lines, blob.has(printer), smoothing);
-            let found = discover(&model, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
-            tables.add(printer, &model, lines, &found);
+            let lag = FdmModel::new(lines, blob.has(printer), smoothing);
+            if ctx.params.str("baseline") == "piecewise_model" {
+                let model = PiecewiseModel { params: piecewise_params(ctx, blob.has(printer))?, lag };
+                let found = discover(&model, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
+                tables.add(printer, &model, lines, &found);
+            } else {
+                let found = discover(&lag, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
+                tables.add(printer, &lag, lines, &found);
+            }
         }
         tables.write(ctx)
     }
+}
+
+/// The piecewise fit's settings: paper 000's, with the `r_step` of the stage.
+fn piecewise_params(ctx: &StageContext, start_blob: bool) -> Result<models::fdm::PiecewiseValidParams, StageError> {
+    let defaults =
+        if start_blob { PiecewiseParams::paper_defaults() } else { PiecewiseParams::paper_defaults_without_blob() };
+    PiecewiseParams { r_step: ctx.params.f64("r_step"), ..defaults }
+        .check()
+        .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })
 }
 
 /// Every input's lines as groups, pooled by printer in the order first seen.
@@ -177,7 +207,7 @@ impl StartBlob {
 }
 
 /// The name of a mechanism of the model (`None`: the baseline).
-fn mechanism_name(model: &FdmModel, mechanism: Option<usize>) -> String {
+fn mechanism_name<M: Model>(model: &M, mechanism: Option<usize>) -> String {
     mechanism.map_or(model.name(), |c| model.candidates()[c].name()).to_string()
 }
 
@@ -347,7 +377,13 @@ fn s(text: &str) -> Value {
 }
 
 impl Tables {
-    fn add(&mut self, printer: &str, model: &FdmModel, lines: &[FdmLine], found: &Discovery<FdmFit>) {
+    fn add<M: Model<Group = FdmLine>>(
+        &mut self,
+        printer: &str,
+        model: &M,
+        lines: &[FdmLine],
+        found: &Discovery<M::Fit>,
+    ) {
         self.add_residuals(printer, model, found);
         self.add_causes(printer, model, lines.len(), found);
         self.add_extension(printer, model, found);
@@ -355,7 +391,7 @@ impl Tables {
         self.add_predictions(printer, lines, found);
     }
 
-    fn add_residuals(&mut self, printer: &str, model: &FdmModel, found: &Discovery<FdmFit>) {
+    fn add_residuals<M: Model>(&mut self, printer: &str, model: &M, found: &Discovery<M::Fit>) {
         for (label, structure) in [("baseline", &found.structure_before), ("extended", &found.structure_after)] {
             for v in structure {
                 let variable = model.variables()[v.variable];
@@ -386,7 +422,7 @@ impl Tables {
         }
     }
 
-    fn add_causes(&mut self, printer: &str, model: &FdmModel, groups: usize, found: &Discovery<FdmFit>) {
+    fn add_causes<M: Model>(&mut self, printer: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
         let alpha = self.alpha;
         for round in &found.rounds {
             let base: Vec<String> = round.base.iter().map(|&c| mechanism_name(model, Some(c))).collect();
@@ -414,7 +450,7 @@ impl Tables {
         }
     }
 
-    fn add_extension(&mut self, printer: &str, model: &FdmModel, found: &Discovery<FdmFit>) {
+    fn add_extension<M: Model>(&mut self, printer: &str, model: &M, found: &Discovery<M::Fit>) {
         let round_of = |c: Option<usize>| -> i64 {
             let named_in = |r: &&discrepancy::Round| c.is_some_and(|c| r.verdict == Verdict::Named(c));
             found.rounds.iter().find(named_in).map_or(0, |r| r.index as i64)
@@ -434,7 +470,7 @@ impl Tables {
         }
     }
 
-    fn add_gain(&mut self, printer: &str, model: &FdmModel, groups: usize, found: &Discovery<FdmFit>) {
+    fn add_gain<M: Model>(&mut self, printer: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
         let named: Vec<String> = found.named.iter().map(|&c| mechanism_name(model, Some(c))).collect();
         let g = &found.gain;
         self.gain.push(vec![
@@ -450,7 +486,7 @@ impl Tables {
         ]);
     }
 
-    fn add_predictions(&mut self, printer: &str, lines: &[FdmLine], found: &Discovery<FdmFit>) {
+    fn add_predictions<F>(&mut self, printer: &str, lines: &[FdmLine], found: &Discovery<F>) {
         for (k, line) in lines.iter().enumerate() {
             let m = &line.line;
             for i in 0..m.len() {
@@ -477,6 +513,6 @@ impl Tables {
 }
 
 /// `lag_model` or `lag_model + width_cap + …`.
-fn base_label(model: &FdmModel, extensions: &[String]) -> String {
+fn base_label<M: Model>(model: &M, extensions: &[String]) -> String {
     std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
 }

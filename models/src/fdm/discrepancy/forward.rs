@@ -232,13 +232,20 @@ pub fn widths(
     if theta.saturation_loss == 0.0 && theta.tilt_width_change == 0.0 {
         return out.iter().all(|w| w.is_finite());
     }
-    let k_tilt = -theta.tilt_width_change / (1.0 + theta.tilt_width_change / 2.0);
     for (w, &x) in out.iter_mut().zip(positions_mm) {
-        let v_cmd = nominal.speed_at_position(x);
-        *w *= (1.0 - theta.saturation_loss * (v_cmd / setting.v_ref_mm_s).powi(2))
-            / (1.0 + k_tilt * (x.clamp(0.0, length) / length - 0.5));
+        let speed_ratio = nominal.speed_at_position(x) / setting.v_ref_mm_s;
+        *w *= width_factor(theta.tilt_width_change, theta.saturation_loss, speed_ratio, x.clamp(0.0, length) / length);
     }
     out.iter().all(|w| w.is_finite())
+}
+
+/// The width factor of a bed tilt `c_t` (width change end to end) and a flow
+/// saturation `S` at the fraction `u = x/L` of the line, where the commanded speed is
+/// `speed_ratio` times the reference: `(1 − S·speed_ratio²) / (1 + k(u − ½))`,
+/// `k = −c_t/(1 + c_t/2)`.
+pub fn width_factor(tilt_width_change: f64, saturation_loss: f64, speed_ratio: f64, u: f64) -> f64 {
+    let k_tilt = -tilt_width_change / (1.0 + tilt_width_change / 2.0);
+    (1.0 - saturation_loss * speed_ratio.powi(2)) / (1.0 + k_tilt * (u - 0.5))
 }
 
 impl Scratch {

@@ -7,6 +7,8 @@
 //! - [`FdmModel`]: the baseline (the lag model of [`crate::fdm::lag`], `fdm.lag_model`)
 //!   as a [`discrepancy::Model`]: bounded least squares of every active parameter on
 //!   the training lines, the gear's period searched on a grid and its phase per line.
+//! - [`piecewise_baseline`]: paper 000's piecewise model as the baseline instead, with
+//!   the candidates that act on the width it predicts (tilt, gear, saturation).
 //! - [`variables`]: the candidate variables the residuals are shown against.
 //! - [`inject`]: hiding an effect in a data set by its physics; [`surrogate`] and
 //!   [`power`]: the power study that asks how strong an effect must be to be found.
@@ -20,6 +22,7 @@ pub mod forward;
 pub mod gear;
 pub mod inject;
 pub mod mechanisms;
+pub mod piecewise_baseline;
 pub mod power;
 pub mod surrogate;
 pub mod variables;
