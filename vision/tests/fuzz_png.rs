@@ -7,19 +7,14 @@
 //! committed crasher (`tests/crashers/png_frame/`) is replayed.
 
 mod harness;
+mod mutate;
 
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use vision::camera::{CameraModel, Distortion, Undistorter};
 use vision::frame::{encode_centikelvin_png, ThermalFrame};
 
 /// Cases of each test: about 1 s each in release.
 const CASES: u32 = 4000;
-
-fn runner() -> TestRunner {
-    let config = Config { cases: CASES, failure_persistence: None, ..Config::default() };
-    TestRunner::new_with_rng(config, TestRng::deterministic_rng(RngAlgorithm::ChaCha))
-}
 
 /// A valid 160 × 120 frame and a small one, as PNG bytes.
 fn seeds() -> Vec<Vec<u8>> {
@@ -27,25 +22,11 @@ fn seeds() -> Vec<Vec<u8>> {
     vec![encode_centikelvin_png(160, 120, &ramp).unwrap(), encode_centikelvin_png(4, 3, &[30_000; 12]).unwrap()]
 }
 
-/// The seed with 1-4 byte splices; the header (bytes 16-28: size, depth, colour) is hit often.
-fn mutated() -> impl Strategy<Value = Vec<u8>> {
-    let edit = (prop_oneof![1 => 0usize..40, 1 => any::<usize>()], 0usize..8, prop::collection::vec(any::<u8>(), 0..8));
-    (0usize..2, prop::collection::vec(edit, 1..4)).prop_map(|(which, edits)| {
-        let mut bytes = seeds()[which].clone();
-        for (at, len, with) in edits {
-            let start = at % (bytes.len() + 1);
-            let end = (start + len).min(bytes.len());
-            bytes.splice(start..end, with);
-        }
-        bytes
-    })
-}
-
 #[test]
 fn the_png_decoder_survives_mutated_and_random_bytes() {
-    let png = prop_oneof![4 => mutated(), 1 => prop::collection::vec(any::<u8>(), 0..300)];
+    let png = prop_oneof![4 => mutate::spliced(seeds()), 1 => prop::collection::vec(any::<u8>(), 0..300)];
     let strategy = (prop_oneof![Just((160u8, 120u8)), Just((4, 3)), any::<(u8, u8)>()], png);
-    runner()
+    mutate::runner(CASES)
         .run(&strategy, |((width, height), png)| {
             harness::check_input(&[&[width, height][..], &png].concat());
             Ok(())
@@ -57,7 +38,7 @@ fn the_png_decoder_survives_mutated_and_random_bytes() {
 fn the_undistorter_survives_any_camera() {
     let coefficient = prop_oneof![4 => -1.0f64..1.0, 1 => any::<f64>()];
     let strategy = (0usize..24, 0usize..24, prop::collection::vec(coefficient, 8));
-    runner()
+    mutate::runner(CASES)
         .run(&strategy, |(width, height, c)| {
             let mut camera = CameraModel::lepton35(Distortion { k1: c[0], k2: c[1], p1: c[2], p2: c[3] });
             camera.intrinsics.fx_px = c[4] * 300.0;

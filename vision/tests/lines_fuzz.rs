@@ -5,19 +5,15 @@
 //! both methods, which must also return a result or an error. Random geometries on a real
 //! line photo must do the same.
 
+mod mutate;
+
 use proptest::prelude::*;
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use vision::lines::{segment_edge_fit, segment_threshold_columns, GrayImage, LineGeometry};
 
 /// Cases per test: well under a second each in release.
 const CASES: u32 = 2000;
 /// Pixel limit of the decoder in these tests.
 const MAX_PIXELS: usize = 1 << 16;
-
-fn runner() -> TestRunner {
-    let config = Config { cases: CASES, failure_persistence: None, ..Config::default() };
-    TestRunner::new_with_rng(config, TestRng::deterministic_rng(RngAlgorithm::ChaCha))
-}
 
 /// A 64 × 24 8-bit photo of a bright bar and a 16-bit 5 × 4 one, as PNG bytes.
 fn seeds() -> Vec<Vec<u8>> {
@@ -31,19 +27,6 @@ fn seeds() -> Vec<Vec<u8>> {
     vec![png8, png16]
 }
 
-fn mutated() -> impl Strategy<Value = Vec<u8>> {
-    let edit = (prop_oneof![1 => 0usize..40, 1 => any::<usize>()], 0usize..8, prop::collection::vec(any::<u8>(), 0..8));
-    (0usize..2, prop::collection::vec(edit, 1..4)).prop_map(|(which, edits)| {
-        let mut bytes = seeds()[which].clone();
-        for (at, len, with) in edits {
-            let start = at % (bytes.len() + 1);
-            let end = (start + len).min(bytes.len());
-            bytes.splice(start..end, with);
-        }
-        bytes
-    })
-}
-
 /// The bar of `seeds()[0]` read at 4 px/mm: 14 mm of a 1.5 mm (6 px) wide line along row 12.
 fn bar_geometry() -> LineGeometry {
     LineGeometry { start_px: [4.0, 12.0], direction_rad: 0.0, length_mm: 14.0, px_per_mm: 4.0, nominal_width_mm: 1.5 }
@@ -51,8 +34,8 @@ fn bar_geometry() -> LineGeometry {
 
 #[test]
 fn decoding_and_segmenting_never_panic_on_mutated_or_random_bytes() {
-    let png = prop_oneof![4 => mutated(), 1 => prop::collection::vec(any::<u8>(), 0..300)];
-    runner()
+    let png = prop_oneof![4 => mutate::spliced(seeds()), 1 => prop::collection::vec(any::<u8>(), 0..300)];
+    mutate::runner(CASES)
         .run(&png, |bytes| {
             if let Ok(img) = GrayImage::from_png_bytes(&bytes, MAX_PIXELS) {
                 prop_assert_eq!(img.pixels.len(), img.width * img.height);
@@ -70,7 +53,7 @@ fn random_geometries_never_panic() {
     let img = GrayImage::from_png_bytes(&seeds()[0], MAX_PIXELS).unwrap();
     let number = prop_oneof![4 => -100.0f64..100.0, 1 => any::<f64>()];
     let strategy = (prop::collection::vec(number, 6), prop_oneof![3 => 0.01f64..2.0, 1 => any::<f64>()]);
-    runner()
+    mutate::runner(CASES)
         .run(&strategy, |(g, step_mm)| {
             let geom = LineGeometry {
                 start_px: [g[0], g[1]],
