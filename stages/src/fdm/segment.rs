@@ -467,6 +467,25 @@ mod tests {
     }
 
     #[test]
+    fn a_photo_cropped_close_to_the_line_is_still_measured() {
+        // 10 px/mm with 1.6 mm of bed around the line (16 px): the ends' search windows
+        // (24 px) are clipped at the frame, and the widths come out as on a wide photo.
+        let tmp = tempfile::tempdir().unwrap();
+        let camera =
+            CameraSettings { px_per_mm: 10.0, margin_mm: 1.6, max_offset_px: 0.0, ..CameraSettings::default() };
+        let config = GenerateConfig { conditions: vec![(400.0, 100.0)], camera, ..GenerateConfig::new("taz6", 5) };
+        generate_into(&config, tmp.path()).unwrap();
+        let data = FdmLinesDataset::read(tmp.path()).unwrap();
+        let s = segment_one(&data.lines[0], "edge_fit", 0.05).unwrap();
+        assert!(s.widths_mm.len() > 2300, "{} widths", s.widths_mm.len());
+        let truth = &read_truth(tmp.path()).unwrap()["S400F6000"];
+        let errors: Vec<f64> =
+            s.positions_mm.iter().zip(&s.widths_mm).map(|(x, w)| w - true_width_at(truth, *x)).collect();
+        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+        assert!(rmse < 0.02, "rmse {rmse}");
+    }
+
+    #[test]
     fn bed_tilt_shows_in_the_photos_as_a_linear_trend() {
         let (x, r) = ratio("bed_tilt=0.1", 2.0, 118.0);
         let (a, b) = line_fit(&x, &r);

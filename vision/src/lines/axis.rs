@@ -24,8 +24,12 @@ pub const AXIS_PROFILES: usize = 32;
 pub const START_SLACK_PX: f64 = 12.0;
 /// How far the stated direction may be off (rad); the metadata's "~1°" with a margin.
 pub const ANGLE_SLACK_RAD: f64 = 1.5 * std::f64::consts::PI / 180.0;
-/// Half-length of the window searched for each line end, along the axis (px).
+/// Half-length of the window searched for each line end, along the axis (px); clipped
+/// where the photo ends, down to [`MIN_END_WINDOW_PX`].
 pub const END_WINDOW_PX: f64 = START_SLACK_PX + 12.0;
+/// Shortest end window that can show an end (px): its step is read between 6 px flanks
+/// on either side of it.
+pub const MIN_END_WINDOW_PX: f64 = 24.0;
 /// An edge must stand this many robust σ above the derivative's noise.
 const EDGE_SNR: f64 = 6.0;
 /// An end must show at least this fraction of the line's contrast.
@@ -258,11 +262,12 @@ fn fit_line(s: &[f64], t: &[f64], keep: &[bool]) -> Option<[f64; 2]> {
     (sxx > 0.0).then(|| [t_mean - sxt / sxx * s_mean, sxt / sxx])
 }
 
-/// Checks that the rectangle the segmenter samples (ends with their search windows,
-/// lateral window with a margin) lies inside the image.
+/// Checks that the rectangle the segmenter samples (the line from its stated start to its
+/// stated length, the lateral window with a margin) lies inside the image; the ends'
+/// search windows beyond it are clipped where the photo ends ([`find_end`]).
 fn check_inside(img: &GrayImage, axis: &AxisFrame, geom: &CheckedGeometry) -> Result<(), LineError> {
     let margin_px = geom.half_window_px + 2.0;
-    for s_px in [-END_WINDOW_PX, geom.length_px + END_WINDOW_PX] {
+    for s_px in [0.0, geom.length_px] {
         for t_px in [-margin_px, margin_px] {
             let [u, v] = axis.point(s_px, t_px);
             let inside = u >= 0.5 && v >= 0.5 && u <= img.width as f64 - 0.5 && v <= img.height as f64 - 0.5;
@@ -273,6 +278,27 @@ fn check_inside(img: &GrayImage, axis: &AxisFrame, geom: &CheckedGeometry) -> Re
         }
     }
     Ok(())
+}
+
+/// The range of path coordinates (px) along `axis` over which the points at every
+/// lateral offset of `offsets_px` lie between the image's outer pixel centres.
+fn inside_range(img: &GrayImage, axis: &AxisFrame, offsets_px: &[f64]) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for &t_px in offsets_px {
+        let p0 = axis.point(0.0, t_px);
+        for (c, side) in [(0, img.width), (1, img.height)] {
+            let (min, max) = (0.5, side as f64 - 0.5);
+            if axis.dir[c].abs() < 1e-12 {
+                if p0[c] < min || p0[c] > max {
+                    return (0.0, -1.0);
+                }
+                continue;
+            }
+            let (s1, s2) = ((min - p0[c]) / axis.dir[c], (max - p0[c]) / axis.dir[c]);
+            (lo, hi) = (lo.max(s1.min(s2)), hi.min(s1.max(s2)));
+        }
+    }
+    (lo, hi)
 }
 
 /// The path coordinate (px) of the line end near `s_nominal_px`, where the intensity
@@ -288,10 +314,13 @@ fn find_end(
     which: &'static str,
 ) -> Result<f64, LineError> {
     const DS_PX: f64 = 0.5;
-    let count = (2.0 * END_WINDOW_PX / DS_PX) as usize + 1;
     let band: Vec<f64> = band_offsets(0.25 * geom.nominal_width_px, 5).collect();
+    // The window, clipped (to whole steps, a step inside) where the photo ends.
+    let (inside_lo, inside_hi) = inside_range(img, axis, &band);
+    let s0_px = (s_nominal_px - END_WINDOW_PX).max(inside_lo + DS_PX);
+    let s1_px = (s_nominal_px + END_WINDOW_PX).min(inside_hi - DS_PX);
+    let count = if s1_px > s0_px { ((s1_px - s0_px) / DS_PX) as usize + 1 } else { 0 };
     let (mut values, mut derivative) = (vec![0.0; count], vec![0.0; count]);
-    let s0_px = s_nominal_px - END_WINDOW_PX;
     let window_mm = END_WINDOW_PX / geom.px_per_mm;
     let mismatch = |found_step| LineError::LengthMismatch {
         which,
@@ -300,11 +329,11 @@ fn find_end(
         contrast: contrast.abs(),
         length_mm: geom.length_px / geom.px_per_mm,
     };
-    if !sample_along(img, axis, s0_px, DS_PX, &band, &mut values) {
+    let flank = (6.0 / DS_PX) as usize;
+    if (count as f64) * DS_PX < MIN_END_WINDOW_PX || !sample_along(img, axis, s0_px, DS_PX, &band, &mut values) {
         return Err(mismatch(f64::NAN));
     }
     gaussian_derivative(&values, 2.0, &mut derivative);
-    let flank = (6.0 / DS_PX) as usize;
     let (index, x) = peak(&derivative, flank..count - flank, derivative_sign).ok_or(mismatch(f64::NAN))?;
     let after = mean(&values, index + flank, index + 2 * flank);
     let before = mean(&values, index.saturating_sub(2 * flank), index - flank);
