@@ -21,7 +21,7 @@
 use std::f64::consts::{FRAC_1_SQRT_2, PI};
 use std::io::BufWriter;
 
-use models::fdm::printer::{PrintedLine, TRUTH_STEP_MM};
+use models::fdm::printer::{truth_grid_weights, PrintedLine};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -247,11 +247,7 @@ fn coverage(line: &PrintedLine, length_mm: f64, sigma_mm: f64, s: f64, t: f64) -
 
 /// The edges at `s` (mm), linear between the truth samples.
 fn edges_at(line: &PrintedLine, s: f64) -> (f64, f64) {
-    let last = line.positions_mm.len() - 1;
-    let x = s / TRUTH_STEP_MM;
-    let i = (x.floor() as usize).min(last.saturating_sub(1));
-    let f = (x - i as f64).clamp(0.0, 1.0);
-    let j = (i + 1).min(last);
+    let (i, j, f) = truth_grid_weights(line.positions_mm.len(), s);
     let lerp = |a: &[f64]| a[i] + f * (a[j] - a[i]);
     (lerp(&line.left_mm), lerp(&line.right_mm))
 }
@@ -320,6 +316,8 @@ fn encode(levels: &[u16], width: usize, height: usize, bit_depth: u8) -> Result<
 
 #[cfg(test)]
 mod tests {
+    use models::fdm::printer::TRUTH_STEP_MM;
+
     use super::*;
 
     fn straight(width_mm: f64, length_mm: f64) -> PrintedLine {

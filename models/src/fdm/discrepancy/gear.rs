@@ -288,9 +288,14 @@ pub fn shared_amplitude(lines: &[PhasedLine], period_mm: f64, g: f64) -> f64 {
 
 /// Applies a ripple of amplitude `amplitude` and phase `phase` to the model widths.
 pub fn apply(positions_mm: &[f64], widths: &mut [f64], period_mm: f64, g: f64, amplitude: f64, phase: f64) {
-    for (w, x) in widths.iter_mut().zip(positions_mm) {
-        *w *= 1.0 + g * amplitude * (2.0 * PI * x / period_mm + phase).sin();
+    for (w, &x) in widths.iter_mut().zip(positions_mm) {
+        *w *= ripple_factor(x, period_mm, g, amplitude, phase);
     }
+}
+
+/// The ripple's width factor at `x_mm`: `1 + g·A·sin(2πx/P + φ)`.
+pub fn ripple_factor(x_mm: f64, period_mm: f64, g: f64, amplitude: f64, phase: f64) -> f64 {
+    1.0 + g * amplitude * (2.0 * PI * x_mm / period_mm + phase).sin()
 }
 
 #[cfg(test)]

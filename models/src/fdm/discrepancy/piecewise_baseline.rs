@@ -245,24 +245,34 @@ impl PiecewiseModel {
         };
         let which: Vec<usize> = [(TILT, tilt), (SATURATION, saturation)].iter().filter(|w| w.1).map(|w| w.0).collect();
         let (lo, hi): (Vec<f64>, Vec<f64>) = which.iter().map(|&c| bounds(c)).unzip();
-        let samples: usize = train.iter().map(|g| g.fit_positions_mm().len()).sum();
+        // Each fit sample's curve width, observation and where it lies (speed ratio,
+        // fraction of the line), computed once: the residuals are then arithmetic.
         let v_ref = self.lag.setting.v_ref_mm_s;
+        let samples: Vec<FactorSample> = train
+            .iter()
+            .zip(curves)
+            .flat_map(|(g, curve)| {
+                let (nominal, length) = (&g.line.nominal, g.line.nominal.length_mm);
+                g.fit_positions_mm().iter().zip(curve).zip(g.fit_widths_mm()).map(
+                    move |((&x, &curve_mm), &observed_mm)| FactorSample {
+                        curve_mm,
+                        observed_mm,
+                        speed_ratio: nominal.speed_at_position(x) / v_ref,
+                        fraction: x.clamp(0.0, length) / length,
+                    },
+                )
+            })
+            .collect();
         let residuals = |x: &[f64], r: &mut [f64]| {
             let value = |c: usize| which.iter().position(|&w| w == c).map_or(0.0, |k| x[k]);
             let (t, s) = (value(TILT), value(SATURATION));
-            let mut k = 0;
-            for (g, curve) in train.iter().zip(curves) {
-                let mut w = curve.clone();
-                apply_factors(&mut w, g.fit_positions_mm(), &g.line, t, s, v_ref);
-                for (model, observed) in w.iter().zip(g.fit_widths_mm()) {
-                    r[k] = observed - model;
-                    k += 1;
-                }
+            for (r, p) in r.iter_mut().zip(&samples) {
+                *r = p.observed_mm - p.curve_mm * width_factor(t, s, p.speed_ratio, p.fraction);
             }
             r.iter().all(|v| v.is_finite())
         };
         let x0 = vec![0.0; which.len()];
-        let solution = minimize(residuals, &x0, &lo, &hi, samples, &LmSettings::default())
+        let solution = minimize(residuals, &x0, &lo, &hi, samples.len(), &LmSettings::default())
             .ok_or_else(|| ModelError::Fit("the factors' least squares could not start".into()))?;
         for (k, &c) in which.iter().enumerate() {
             match c {
@@ -317,13 +327,22 @@ impl PiecewiseModel {
         let sse = phased
             .iter()
             .map(|(x, m, y, phase)| {
-                let mut w = m.to_vec();
-                gear::apply(x, &mut w, period_mm, gain, amplitude, *phase);
-                w.iter().zip(y.iter()).map(|(w, y)| (y - w).powi(2)).sum::<f64>()
+                let ripple = |x: f64| gear::ripple_factor(x, period_mm, gain, amplitude, *phase);
+                (0..x.len()).map(|i| (y[i] - m[i] * ripple(x[i])).powi(2)).sum::<f64>()
             })
             .sum();
         (amplitude, sse)
     }
+}
+
+/// One training sample of the factors' least squares.
+struct FactorSample {
+    curve_mm: f64,
+    observed_mm: f64,
+    /// Commanded speed over the reference speed.
+    speed_ratio: f64,
+    /// Position as a fraction of the line.
+    fraction: f64,
 }
 
 /// The period within one grid step (in frequency) of `grid_period_mm` that minimises

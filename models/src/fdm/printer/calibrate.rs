@@ -4,7 +4,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::{print_line, Effects, PrintedLine, PrinterProfile, Wander, SMOOTHING_MM, TRUTH_STEP_MM};
+use super::{print_line, truth_grid_weights, Effects, PrintedLine, PrinterProfile, Wander, SMOOTHING_MM};
 use crate::fdm::discrepancy::fit::{fit, predict};
 use crate::fdm::discrepancy::mechanisms::WIDTH_CAP;
 use crate::fdm::discrepancy::{FdmLine, FdmModel};
@@ -138,14 +138,11 @@ pub fn held_out_agreement(
 
 /// Linear interpolation of a profile on the truth grid at `positions_mm`.
 fn interpolate(widths_mm: &[f64], positions_mm: &[f64]) -> Vec<f64> {
-    let last = widths_mm.len() - 1;
     positions_mm
         .iter()
-        .map(|x| {
-            let u = (x / TRUTH_STEP_MM).max(0.0);
-            let i = (u.floor() as usize).min(last.saturating_sub(1));
-            let f = (u - i as f64).min(1.0);
-            widths_mm[i] + f * (widths_mm[(i + 1).min(last)] - widths_mm[i])
+        .map(|&x| {
+            let (i, j, f) = truth_grid_weights(widths_mm.len(), x);
+            widths_mm[i] + f * (widths_mm[j] - widths_mm[i])
         })
         .collect()
 }

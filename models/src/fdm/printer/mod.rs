@@ -36,7 +36,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::discrepancy::forward::{widths, LineSetting, Scratch, Theta};
-use super::discrepancy::gear::attenuation;
+use super::discrepancy::gear::{self, attenuation};
 use super::kinematics::LineKinematics;
 
 mod calibrate;
@@ -219,6 +219,16 @@ impl PrintedLine {
     }
 }
 
+/// Linear interpolation on the truth grid of `samples` values ([`TRUTH_STEP_MM`] apart
+/// from 0): the two samples around `x_mm` and the weight of the second, held at the
+/// first and last sample outside the grid. `value = v[i] + f·(v[j] − v[i])`.
+pub fn truth_grid_weights(samples: usize, x_mm: f64) -> (usize, usize, f64) {
+    let last = samples - 1;
+    let u = (x_mm / TRUTH_STEP_MM).max(0.0);
+    let i = (u.floor() as usize).min(last.saturating_sub(1));
+    (i, (i + 1).min(last), (u - i as f64).min(1.0))
+}
+
 /// Why a line could not be printed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PrintError {
@@ -257,9 +267,7 @@ pub fn print_line(
     let phase = rng.random_range(0.0..2.0 * PI);
     if effects.gear_eccentricity != 0.0 {
         let g = attenuation(effects.gear_period_mm, SMOOTHING_MM);
-        for (w, x) in w.iter_mut().zip(&positions_mm) {
-            *w *= 1.0 + g * effects.gear_eccentricity * (2.0 * PI * x / effects.gear_period_mm + phase).sin();
-        }
+        gear::apply(&positions_mm, &mut w, effects.gear_period_mm, g, effects.gear_eccentricity, phase);
     }
     let height = 1.0 + profile.line_height_sd * Normal::new(0.0, 1.0).expect("unit normal").sample(rng);
     let wander = ornstein_uhlenbeck(n, profile.wander, rng);
