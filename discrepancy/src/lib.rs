@@ -33,6 +33,7 @@ pub mod engine;
 pub mod least_squares;
 pub mod mechanism;
 pub mod model;
+pub mod power;
 pub mod show;
 pub mod split;
 pub mod stats;

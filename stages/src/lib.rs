@@ -5,6 +5,7 @@
 #![deny(missing_docs)]
 
 pub mod concat;
+mod discrepancy_tables;
 pub mod effects;
 pub mod fdm;
 pub mod inkjet;

@@ -229,6 +229,8 @@ pub struct PrintRecording {
     pub substrate_measured: HeightMap,
     /// True substrate.
     pub substrate_truth: HeightMap,
+    /// The print's nozzle (grid column) volume factors (ground truth).
+    pub nozzle_factors: Vec<f64>,
     /// The layers in print order.
     pub layers: Vec<LayerRecord>,
 }
@@ -258,7 +260,12 @@ pub fn run_print(
     let mut run = scenario.truth.start(grid, rng);
     let mut recording = record.then(|| {
         let substrate_measured = run.measure();
-        PrintRecording { substrate_measured, substrate_truth: run.truth().clone(), layers: Vec::new() }
+        PrintRecording {
+            substrate_measured,
+            substrate_truth: run.truth().clone(),
+            nozzle_factors: run.nozzle_factors().to_vec(),
+            layers: Vec::new(),
+        }
     });
     let mut part_top_um = vec![None; if scenario.two_material.is_some() { grid.len() } else { 0 }];
     let controller = ClosedLoopController::new(scenario.mpc)?;

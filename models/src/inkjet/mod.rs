@@ -14,11 +14,14 @@
 //! - [`experiments`]: the paper's simulations (Figs 11-12, Table II, Sec. IV-C).
 //! - [`pipe_junction`]: the two-material pipe junction (Figs 13-15) and its
 //!   edge-deformation metrics.
+//! - [`discrepancy`]: what eqs 2-7 get wrong on a print's scans (DESIGN §7): the
+//!   candidate mechanisms, the extended model as the engine's `Model`, the power study.
 //!
 //! Architecture Invariant: pure numerics: no I/O, every random stream comes from a
 //! caller-supplied seeded generator, and results do not depend on the thread count.
 
 pub mod controller;
+pub mod discrepancy;
 pub mod errors;
 pub mod experiments;
 pub mod grid;

@@ -192,7 +192,7 @@ impl Profiler {
     }
 
     /// The spot weights `(di, dj, w)` on `grid`, unnormalised, centre included.
-    fn kernel(&self, grid: Grid) -> Vec<(isize, isize, f64)> {
+    pub fn kernel(&self, grid: Grid) -> Vec<(isize, isize, f64)> {
         if self.spot_sigma_um <= 0.0 {
             return vec![(0, 0, 1.0)];
         }
@@ -300,6 +300,11 @@ impl PrintRun {
     /// The true profile (ground truth; a controller sees only [`PrintRun::measure`]).
     pub fn truth(&self) -> &HeightMap {
         &self.truth
+    }
+
+    /// The nozzle (grid column) volume factors of this print (all 1 without nozzle bias).
+    pub fn nozzle_factors(&self) -> &[f64] {
+        &self.nozzle_factor
     }
 
     /// Layers printed so far.

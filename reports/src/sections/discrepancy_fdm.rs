@@ -41,9 +41,9 @@ impl StageKind for DiscrepancyFdmSection {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let dir = &ctx.inputs[0].dir;
-        let causes = Cause::read(&dir.join("causes.parquet"))?;
-        let params = Param::read(&dir.join("extension.parquet"))?;
-        let gains = GainRow::read(&dir.join("gain.parquet"))?;
+        let causes = Cause::read(&dir.join("causes.parquet"), &FDM)?;
+        let params = Param::read(&dir.join("extension.parquet"), &FDM)?;
+        let gains = GainRow::read(&dir.join("gain.parquet"), &FDM)?;
         let structure = Structure::read(&dir.join("residuals.parquet"))?;
         // The other inputs: power studies (power.parquet), and engine runs on another
         // baseline (causes.parquet without power.parquet).
@@ -74,36 +74,54 @@ impl StageKind for DiscrepancyFdmSection {
     }
 }
 
+/// The column names and words a domain's discrepancy tables use.
+pub(super) struct Names {
+    /// The column naming the data set (`printer`, `dataset`).
+    pub(super) set: &'static str,
+    /// The unit suffix of residual and RMSE columns (`mm`, `um`).
+    pub(super) unit: &'static str,
+    /// The unit as printed (`mm`, `µm`).
+    pub(super) unit_label: &'static str,
+    /// What a group is, plural (`lines`, `layer blocks`).
+    pub(super) groups: &'static str,
+}
+
+/// The FDM tables: one discovery per printer, widths in mm, a group is a line.
+const FDM: Names = Names { set: "printer", unit: "mm", unit_label: "mm", groups: "lines" };
+
 /// A row of `causes.parquet`.
-struct Cause {
-    printer: String,
-    round: i64,
-    base_model: String,
-    mechanism: String,
-    before: f64,
-    after: f64,
-    gain: (f64, f64, f64),
-    helped: i64,
-    groups: i64,
-    p: f64,
-    p_adjusted: f64,
-    alpha: f64,
-    named: bool,
-    verdict: String,
+pub(super) struct Cause {
+    pub(super) printer: String,
+    pub(super) round: i64,
+    pub(super) base_model: String,
+    pub(super) mechanism: String,
+    pub(super) before: f64,
+    pub(super) after: f64,
+    pub(super) gain: (f64, f64, f64),
+    pub(super) helped: i64,
+    pub(super) groups: i64,
+    pub(super) p: f64,
+    pub(super) p_adjusted: f64,
+    pub(super) alpha: f64,
+    pub(super) named: bool,
+    pub(super) verdict: String,
 }
 
 impl Cause {
-    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
         let (printer, base, mechanism, verdict) = (
-            strs(&df, "printer", path)?,
+            strs(&df, names.set, path)?,
             strs(&df, "base_model", path)?,
             strs(&df, "mechanism", path)?,
             strs(&df, "verdict", path)?,
         );
         let (round, helped, groups) =
             (ints(&df, "round", path)?, ints(&df, "groups_helped", path)?, ints(&df, "groups", path)?);
-        let (before, after) = (f64s(&df, "cv_rmse_before_mm", path)?, f64s(&df, "cv_rmse_after_mm", path)?);
+        let (before, after) = (
+            f64s(&df, &format!("cv_rmse_before_{}", names.unit), path)?,
+            f64s(&df, &format!("cv_rmse_after_{}", names.unit), path)?,
+        );
         let (gain, lo, hi) =
             (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
         let (p, padj, alpha) = (f64s(&df, "p_value", path)?, f64s(&df, "p_adjusted", path)?, f64s(&df, "alpha", path)?);
@@ -130,21 +148,21 @@ impl Cause {
 }
 
 /// A row of `extension.parquet`.
-struct Param {
-    printer: String,
-    mechanism: String,
-    parameter: String,
-    unit: String,
-    estimate: f64,
-    ci: (f64, f64),
-    meaning: String,
+pub(super) struct Param {
+    pub(super) printer: String,
+    pub(super) mechanism: String,
+    pub(super) parameter: String,
+    pub(super) unit: String,
+    pub(super) estimate: f64,
+    pub(super) ci: (f64, f64),
+    pub(super) meaning: String,
 }
 
 impl Param {
-    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
         let (printer, mechanism, parameter, unit, meaning) = (
-            strs(&df, "printer", path)?,
+            strs(&df, names.set, path)?,
             strs(&df, "mechanism", path)?,
             strs(&df, "parameter", path)?,
             strs(&df, "unit", path)?,
@@ -166,21 +184,24 @@ impl Param {
 }
 
 /// A row of `gain.parquet`.
-struct GainRow {
-    printer: String,
-    extended: String,
-    groups: i64,
-    before: f64,
-    after: f64,
-    gain: (f64, f64, f64),
+pub(super) struct GainRow {
+    pub(super) printer: String,
+    pub(super) extended: String,
+    pub(super) groups: i64,
+    pub(super) before: f64,
+    pub(super) after: f64,
+    pub(super) gain: (f64, f64, f64),
 }
 
 impl GainRow {
-    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
-        let (printer, extended) = (strs(&df, "printer", path)?, strs(&df, "extended_model", path)?);
+        let (printer, extended) = (strs(&df, names.set, path)?, strs(&df, "extended_model", path)?);
         let groups = ints(&df, "groups", path)?;
-        let (before, after) = (f64s(&df, "rmse_before_mm", path)?, f64s(&df, "rmse_after_mm", path)?);
+        let (before, after) = (
+            f64s(&df, &format!("rmse_before_{}", names.unit), path)?,
+            f64s(&df, &format!("rmse_after_{}", names.unit), path)?,
+        );
         let (gain, lo, hi) =
             (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
         Ok((0..df.height())
@@ -227,22 +248,22 @@ impl Structure {
 }
 
 /// A row of `power.parquet`.
-struct PowerRow {
-    base: String,
-    noise: String,
-    own: String,
-    effect: String,
-    strength: f64,
-    draws: i64,
-    correct: (f64, f64, f64),
-    wrong: i64,
-    false_alarm: (f64, f64, f64),
-    covered: i64,
-    with_interval: i64,
+pub(super) struct PowerRow {
+    pub(super) base: String,
+    pub(super) noise: String,
+    pub(super) own: String,
+    pub(super) effect: String,
+    pub(super) strength: f64,
+    pub(super) draws: i64,
+    pub(super) correct: (f64, f64, f64),
+    pub(super) wrong: i64,
+    pub(super) false_alarm: (f64, f64, f64),
+    pub(super) covered: i64,
+    pub(super) with_interval: i64,
 }
 
 impl PowerRow {
-    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    pub(super) fn read(path: &Path) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
         let (base, own, effect) =
             (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
@@ -306,7 +327,7 @@ fn printer_part(
     let source = format!("out/discrepancy/causes.parquet (stage {stage}, fdm.discrepancy)");
     let mut html = format!("<h4>{}</h4>\n", escape(&printer_name(printer)));
     html += &finding(g, &mine, structure);
-    html += &causes_table(&mine);
+    html += &causes_table(&mine, &FDM);
     html += &parameter_table(params.iter().filter(|p| &p.printer == printer));
     let _ = writeln!(
         html,
@@ -413,9 +434,10 @@ its Holm-adjusted p-value is {:.4}.",
     text + "</p>\n"
 }
 
-fn causes_table(causes: &[&Cause]) -> String {
-    let mut html = String::from(
-        "<table><tr><th>round</th><th class=\"t\">candidate</th><th>held-out RMSE before (mm)</th><th>after (mm)</th><th>gain (%)</th><th>95 % interval (%)</th><th>lines helped</th><th>p</th><th>p, Holm</th><th class=\"t\">outcome</th></tr>\n",
+pub(super) fn causes_table(causes: &[&Cause], names: &Names) -> String {
+    let (unit, groups) = (names.unit_label, names.groups);
+    let mut html = format!(
+        "<table><tr><th>round</th><th class=\"t\">candidate</th><th>held-out RMSE before ({unit})</th><th>after ({unit})</th><th>gain (%)</th><th>95 % interval (%)</th><th>{groups} helped</th><th>p</th><th>p, Holm</th><th class=\"t\">outcome</th></tr>\n",
     );
     for c in causes {
         let verdict = if c.named {
@@ -446,7 +468,7 @@ fn causes_table(causes: &[&Cause]) -> String {
     html + "</table>\n"
 }
 
-fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
+pub(super) fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
     let mut html = String::from(
         "<table><tr><th class=\"t\">model part</th><th class=\"t\">parameter</th><th>estimate</th><th>95 % interval</th><th class=\"t\">unit</th><th class=\"t\">meaning</th></tr>\n",
     );
@@ -470,8 +492,8 @@ fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> String {
 /// The engine on another baseline (paper 000's piecewise model): per printer, the
 /// baseline's held-out RMSE, what was named and the candidates' scores.
 fn other_baseline_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String, StageError> {
-    let causes = Cause::read(&dir.join("causes.parquet"))?;
-    let gains = GainRow::read(&dir.join("gain.parquet"))?;
+    let causes = Cause::read(&dir.join("causes.parquet"), &FDM)?;
+    let gains = GainRow::read(&dir.join("gain.parquet"), &FDM)?;
     let baseline = causes.first().map_or("piecewise_model".to_string(), |c| c.base_model.clone());
     let mut html = format!(
         "<h4>The paper's own model as the baseline ({})</h4>\n<p>The same engine with paper 000's piecewise model (eqs 1-3, its r_a × r_F grid search in every fold) in place of the lag model. A curve fitted per phase has no flow to extend, so the candidates are the three that act on the width it predicts: a tilted bed, a gear's ripple and flow lost at high flow.</p>\n",
@@ -498,7 +520,7 @@ fn other_baseline_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<S
             escape(&printer_name(&g.printer)),
             g.before
         );
-        html += &causes_table(&mine);
+        html += &causes_table(&mine, &FDM);
         let source = format!("gain.parquet of stage {stage} (fdm.discrepancy, baseline {baseline})");
         rows.push(Row {
             section: "piecewise_baseline",
@@ -512,7 +534,7 @@ fn other_baseline_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<S
     Ok(html)
 }
 
-fn percent(x: f64) -> String {
+pub(super) fn percent(x: f64) -> String {
     let p = (1000.0 * x).round() / 10.0;
     if p.fract() == 0.0 {
         format!("{p:.0}")

@@ -10,9 +10,9 @@
 //! rate, and how often the strength's interval covered the truth) and
 //! `power_draws.parquet` (one row per draw).
 
-use discrepancy::stats::{clopper_pearson, mix_seed};
+use discrepancy::stats::mix_seed;
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
-use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Noise, Outcome, PowerDesign};
+use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Noise, PowerDesign};
 use models::fdm::discrepancy::FdmModel;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
@@ -199,7 +199,7 @@ impl PowerRows {
             self.noise.push(noise.name().into());
             self.base.push(base.label.clone());
             self.own.push(names(&base.own));
-            self.effect.push(row.effect.name().into());
+            self.effect.push(row.effect.into());
             self.strength.push(row.strength);
             self.draws.push(row.draws as i64);
             self.correct.push(row.correct as i64);
@@ -210,8 +210,7 @@ impl PowerRows {
             let (covered, with) = row.covered;
             self.covered.push(covered as i64);
             self.with_interval.push(with as i64);
-            let (lo, hi) = clopper_pearson(covered, with, 0.95);
-            push3(&mut self.coverage, (if with > 0 { covered as f64 / with as f64 } else { f64::NAN }, lo, hi));
+            push3(&mut self.coverage, row.coverage_rate());
         }
     }
 
@@ -274,14 +273,7 @@ impl DrawRows {
             self.seed.push(format!("{:016x}", d.seed));
             self.injected.push(d.injected);
             self.named.push(names(&d.named));
-            self.outcome.push(
-                match d.outcome {
-                    Outcome::Correct => "correct",
-                    Outcome::Wrong => "wrong",
-                    Outcome::None => "none",
-                }
-                .into(),
-            );
+            self.outcome.push(d.outcome.label().into());
             push3(&mut self.fitted, d.fitted.unwrap_or((f64::NAN, f64::NAN, f64::NAN)));
         }
     }

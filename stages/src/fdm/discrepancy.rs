@@ -12,7 +12,7 @@
 //! `gain.parquet` (held-out RMSE before and after) and `predictions.parquet` (each
 //! line's held-out predictions before and after, for the figures).
 
-use discrepancy::{discover, Discovery, Model, Settings, VariableKind, Verdict};
+use discrepancy::{discover, Discovery, Settings};
 use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
@@ -20,8 +20,8 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
+use crate::discrepancy_tables::{DiscrepancyTables, Domain, Kind, Table, Value};
 use crate::fdm::lines::PrinterLines;
-use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 /// The `fdm.discrepancy` stage kind.
 pub struct DiscrepancyStage;
@@ -206,98 +206,9 @@ impl StartBlob {
     }
 }
 
-/// The name of a mechanism of the model (`None`: the baseline).
-fn mechanism_name<M: Model>(model: &M, mechanism: Option<usize>) -> String {
-    mechanism.map_or(model.name(), |c| model.candidates()[c].name()).to_string()
-}
+/// The FDM tables' names: one discovery per printer, widths in mm.
+const FDM: Domain = Domain { set_column: "printer", unit: "mm" };
 
-/// A column's type.
-#[derive(Clone, Copy, PartialEq, Debug)]
-enum Kind {
-    F,
-    I,
-    S,
-    B,
-}
-
-/// One value of a row.
-#[derive(Clone)]
-enum Value {
-    F(f64),
-    I(i64),
-    S(String),
-    B(bool),
-}
-
-impl Value {
-    fn kind(&self) -> Kind {
-        match self {
-            Self::F(_) => Kind::F,
-            Self::I(_) => Kind::I,
-            Self::S(_) => Kind::S,
-            Self::B(_) => Kind::B,
-        }
-    }
-}
-
-/// The columns of each output table, declared once (docs/OUTPUTS.md lists them).
-const RESIDUALS: &[(&str, Kind)] = &[
-    ("printer", Kind::S),
-    ("model", Kind::S),
-    ("variable", Kind::S),
-    ("unit", Kind::S),
-    ("bin", Kind::I),
-    ("label", Kind::S),
-    ("bin_lo", Kind::F),
-    ("bin_hi", Kind::F),
-    ("mean_residual_mm", Kind::F),
-    ("ci_lo_mm", Kind::F),
-    ("ci_hi_mm", Kind::F),
-    ("n", Kind::I),
-    ("groups", Kind::I),
-    ("structure", Kind::F),
-];
-const CAUSES: &[(&str, Kind)] = &[
-    ("printer", Kind::S),
-    ("round", Kind::I),
-    ("base_model", Kind::S),
-    ("mechanism", Kind::S),
-    ("cv_rmse_before_mm", Kind::F),
-    ("cv_rmse_after_mm", Kind::F),
-    ("gain_pct", Kind::F),
-    ("gain_ci_lo_pct", Kind::F),
-    ("gain_ci_hi_pct", Kind::F),
-    ("groups_helped", Kind::I),
-    ("groups", Kind::I),
-    ("p_value", Kind::F),
-    ("p_adjusted", Kind::F),
-    ("alpha", Kind::F),
-    ("named", Kind::B),
-    ("verdict", Kind::S),
-    ("failure", Kind::S),
-];
-const EXTENSION: &[(&str, Kind)] = &[
-    ("printer", Kind::S),
-    ("round", Kind::I),
-    ("mechanism", Kind::S),
-    ("parameter", Kind::S),
-    ("unit", Kind::S),
-    ("estimate", Kind::F),
-    ("ci_lo", Kind::F),
-    ("ci_hi", Kind::F),
-    ("meaning", Kind::S),
-];
-const GAIN: &[(&str, Kind)] = &[
-    ("printer", Kind::S),
-    ("baseline", Kind::S),
-    ("extended_model", Kind::S),
-    ("groups", Kind::I),
-    ("rmse_before_mm", Kind::F),
-    ("rmse_after_mm", Kind::F),
-    ("gain_pct", Kind::F),
-    ("gain_ci_lo_pct", Kind::F),
-    ("gain_ci_hi_pct", Kind::F),
-];
 const PREDICTIONS: &[(&str, Kind)] = &[
     ("printer", Kind::S),
     ("condition", Kind::S),
@@ -309,190 +220,31 @@ const PREDICTIONS: &[(&str, Kind)] = &[
     ("extended_width_mm", Kind::F),
 ];
 
-/// A table being filled row by row against its declared columns.
-struct Table {
-    name: &'static str,
-    schema: &'static [(&'static str, Kind)],
-    columns: Vec<Vec<Value>>,
-}
-
-impl Table {
-    fn new(name: &'static str, schema: &'static [(&'static str, Kind)]) -> Self {
-        Self { name, schema, columns: vec![Vec::new(); schema.len()] }
-    }
-
-    fn push(&mut self, row: Vec<Value>) {
-        debug_assert_eq!(row.len(), self.schema.len(), "{}: row length", self.name);
-        for ((column, value), (name, kind)) in self.columns.iter_mut().zip(row).zip(self.schema) {
-            debug_assert_eq!(value.kind(), *kind, "{}.{name}", self.name);
-            column.push(value);
-        }
-    }
-
-    fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let columns =
-            self.schema.iter().zip(&self.columns).map(|((name, kind), values)| to_column(name, *kind, values));
-        let mut df = frame(columns.collect())?;
-        ctx.write_table(self.name, &mut df)?;
-        Ok(())
-    }
-}
-
-fn to_column(name: &str, kind: Kind, values: &[Value]) -> polars::prelude::Column {
-    match kind {
-        Kind::I => i64_col(name, values.iter().map(|v| if let Value::I(x) = v { *x } else { 0 }).collect()),
-        Kind::S => {
-            str_col(name, values.iter().map(|v| if let Value::S(x) = v { x.clone() } else { String::new() }).collect())
-        }
-        Kind::B => bool_col(name, values.iter().map(|v| matches!(v, Value::B(true))).collect()),
-        Kind::F => f64_col(name, values.iter().map(|v| if let Value::F(x) = v { *x } else { f64::NAN }).collect()),
-    }
-}
-
-/// Rows of every output table.
+/// The four discrepancy tables and each line's held-out predictions.
 struct Tables {
-    alpha: f64,
-    residuals: Table,
-    causes: Table,
-    extension: Table,
-    gain: Table,
+    tables: DiscrepancyTables,
     predictions: Table,
 }
 
 impl Tables {
     fn new(alpha: f64) -> Self {
-        Self {
-            alpha,
-            residuals: Table::new("residuals", RESIDUALS),
-            causes: Table::new("causes", CAUSES),
-            extension: Table::new("extension", EXTENSION),
-            gain: Table::new("gain", GAIN),
-            predictions: Table::new("predictions", PREDICTIONS),
-        }
+        Self { tables: DiscrepancyTables::new(FDM, alpha), predictions: Table::new("predictions", PREDICTIONS, FDM) }
     }
-}
 
-fn s(text: &str) -> Value {
-    Value::S(text.to_string())
-}
-
-impl Tables {
-    fn add<M: Model<Group = FdmLine>>(
+    fn add<M: discrepancy::Model<Group = FdmLine>>(
         &mut self,
         printer: &str,
         model: &M,
         lines: &[FdmLine],
         found: &Discovery<M::Fit>,
     ) {
-        self.add_residuals(printer, model, found);
-        self.add_causes(printer, model, lines.len(), found);
-        self.add_extension(printer, model, found);
-        self.add_gain(printer, model, lines.len(), found);
-        self.add_predictions(printer, lines, found);
-    }
-
-    fn add_residuals<M: Model>(&mut self, printer: &str, model: &M, found: &Discovery<M::Fit>) {
-        for (label, structure) in [("baseline", &found.structure_before), ("extended", &found.structure_after)] {
-            for v in structure {
-                let variable = model.variables()[v.variable];
-                for b in &v.bins {
-                    let bin_label = match variable.kind {
-                        VariableKind::Categorical(labels) => labels[b.bin].to_string(),
-                        VariableKind::Continuous if b.lo == b.hi => format!("{}", b.lo),
-                        VariableKind::Continuous => format!("[{:.4}, {:.4}]", b.lo, b.hi),
-                    };
-                    self.residuals.push(vec![
-                        s(printer),
-                        s(label),
-                        s(variable.name),
-                        s(variable.unit),
-                        Value::I(b.bin as i64),
-                        Value::S(bin_label),
-                        Value::F(b.lo),
-                        Value::F(b.hi),
-                        Value::F(b.mean),
-                        Value::F(b.ci_lo),
-                        Value::F(b.ci_hi),
-                        Value::I(b.n as i64),
-                        Value::I(b.groups as i64),
-                        Value::F(v.structure),
-                    ]);
-                }
-            }
-        }
-    }
-
-    fn add_causes<M: Model>(&mut self, printer: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
-        let alpha = self.alpha;
-        for round in &found.rounds {
-            let base: Vec<String> = round.base.iter().map(|&c| mechanism_name(model, Some(c))).collect();
-            for c in &round.candidates {
-                self.causes.push(vec![
-                    s(printer),
-                    Value::I(round.index as i64),
-                    Value::S(base_label(model, &base)),
-                    Value::S(mechanism_name(model, Some(c.mechanism))),
-                    Value::F(c.rmse_before),
-                    Value::F(c.rmse_after),
-                    Value::F(c.gain_pct),
-                    Value::F(c.gain_ci_pct.0),
-                    Value::F(c.gain_ci_pct.1),
-                    Value::I(c.log_gains.iter().filter(|&&d| d > 0.0).count() as i64),
-                    Value::I(groups as i64),
-                    Value::F(c.p_value),
-                    Value::F(c.p_adjusted),
-                    Value::F(alpha),
-                    Value::B(c.named),
-                    s(round.verdict.label()),
-                    Value::S(c.failure.clone().unwrap_or_default()),
-                ]);
-            }
-        }
-    }
-
-    fn add_extension<M: Model>(&mut self, printer: &str, model: &M, found: &Discovery<M::Fit>) {
-        let round_of = |c: Option<usize>| -> i64 {
-            let named_in = |r: &&discrepancy::Round| c.is_some_and(|c| r.verdict == Verdict::Named(c));
-            found.rounds.iter().find(named_in).map_or(0, |r| r.index as i64)
-        };
-        for e in &found.extension {
-            self.extension.push(vec![
-                s(printer),
-                Value::I(round_of(e.mechanism)),
-                Value::S(mechanism_name(model, e.mechanism)),
-                s(e.parameter.name),
-                s(e.parameter.unit),
-                Value::F(e.estimate),
-                Value::F(e.ci_lo),
-                Value::F(e.ci_hi),
-                s(e.parameter.meaning),
-            ]);
-        }
-    }
-
-    fn add_gain<M: Model>(&mut self, printer: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
-        let named: Vec<String> = found.named.iter().map(|&c| mechanism_name(model, Some(c))).collect();
-        let g = &found.gain;
-        self.gain.push(vec![
-            s(printer),
-            s(model.name()),
-            Value::S(base_label(model, &named)),
-            Value::I(groups as i64),
-            Value::F(g.rmse_before),
-            Value::F(g.rmse_after),
-            Value::F(g.gain_pct),
-            Value::F(g.ci_pct.0),
-            Value::F(g.ci_pct.1),
-        ]);
-    }
-
-    fn add_predictions<F>(&mut self, printer: &str, lines: &[FdmLine], found: &Discovery<F>) {
+        self.tables.add(printer, model, lines.len(), found);
         for (k, line) in lines.iter().enumerate() {
             let m = &line.line;
             for i in 0..m.len() {
                 self.predictions.push(vec![
-                    s(printer),
-                    s(&line.label),
+                    Value::S(printer.to_string()),
+                    Value::S(line.label.clone()),
                     Value::F(m.nominal.accel_mm_s2),
                     Value::F(m.nominal.feed_mm_s),
                     Value::F(m.positions_mm[i]),
@@ -505,14 +257,7 @@ impl Tables {
     }
 
     fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
-        for table in [self.residuals, self.causes, self.extension, self.gain, self.predictions] {
-            table.write(ctx)?;
-        }
-        Ok(())
+        self.tables.write(ctx)?;
+        self.predictions.write(ctx)
     }
-}
-
-/// `lag_model` or `lag_model + width_cap + …`.
-fn base_label<M: Model>(model: &M, extensions: &[String]) -> String {
-    std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
 }

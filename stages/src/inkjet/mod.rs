@@ -6,10 +6,12 @@
 //! the layer-to-layer model against them. The numerics live in
 //! [`models::inkjet::experiments`]; these stages only run them and write tables.
 
+mod discrepancy;
 mod print;
 mod recovery;
 mod scans;
 
+pub use discrepancy::{print_of, DiscoveryPowerStage, DiscrepancyStage};
 pub use print::{height_map_frame, summary_frame, PrintExperimentStage};
 pub use recovery::{recovery_frame, RecoveryStage};
 pub use scans::{effects_label, layer_residuals, GenerateScansStage, LayerResidual, ScanResidualsStage};
@@ -22,4 +24,6 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(RecoveryStage));
     registry.register(Box::new(GenerateScansStage));
     registry.register(Box::new(ScanResidualsStage));
+    registry.register(Box::new(DiscrepancyStage));
+    registry.register(Box::new(DiscoveryPowerStage));
 }

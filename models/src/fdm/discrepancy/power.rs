@@ -17,7 +17,8 @@
 
 use rayon::prelude::*;
 
-use ::discrepancy::stats::{clopper_pearson, mix_seed};
+use ::discrepancy::power::DrawScore;
+use ::discrepancy::stats::mix_seed;
 use ::discrepancy::{discover, discover_warm, EngineError, Model, Settings};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -116,16 +117,7 @@ impl Base {
     }
 }
 
-/// How one draw came out.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Outcome {
-    /// The injected mechanism and nothing else was named.
-    Correct,
-    /// Something other than the injected mechanism was named.
-    Wrong,
-    /// Nothing was named.
-    None,
-}
+pub use ::discrepancy::power::{Outcome, PowerRow};
 
 /// One draw.
 #[derive(Debug, Clone, PartialEq)]
@@ -152,6 +144,16 @@ impl DrawResult {
     /// Whether the interval covers the injected strength (when correct).
     pub fn covered(&self) -> Option<bool> {
         self.fitted.map(|(_, lo, hi)| lo <= self.injected && self.injected <= hi)
+    }
+
+    /// What the power table needs.
+    pub fn score(&self) -> DrawScore {
+        DrawScore {
+            effect: self.effect.name(),
+            strength: self.strength,
+            outcome: self.outcome,
+            covered: self.covered(),
+        }
     }
 }
 
@@ -203,11 +205,7 @@ fn one_draw(
     let engine = Settings { seed, ..design.engine };
     let found = discover_warm(&base.model, &lines, &base.own, Some(&base.folds), &engine)?;
     let target = candidate_index(effect.name());
-    let outcome = match (found.named.is_empty(), target) {
-        (true, _) => Outcome::None,
-        (false, Some(t)) if found.named.iter().all(|&n| n == t) => Outcome::Correct,
-        _ => Outcome::Wrong,
-    };
+    let outcome = Outcome::of(&found.named, target);
     let fitted = (outcome == Outcome::Correct)
         .then(|| {
             let name = effect.strength_parameter()?;
@@ -230,64 +228,9 @@ fn white_noise(residual: &[f64], seed: u64) -> Vec<f64> {
     residual.iter().map(|_| normal.sample(&mut rng)).collect()
 }
 
-/// One row of the power table.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PowerRow {
-    /// The effect (`none` for the null).
-    pub effect: Effect,
-    /// Its strength (magnitude).
-    pub strength: f64,
-    /// Draws.
-    pub draws: usize,
-    /// Draws that named the injected mechanism only.
-    pub correct: usize,
-    /// Draws that named something else.
-    pub wrong: usize,
-    /// Draws that named nothing.
-    pub none: usize,
-    /// `correct / draws` with its Clopper–Pearson 95 % interval.
-    pub correct_rate: (f64, f64, f64),
-    /// `wrong / draws` with its Clopper–Pearson 95 % interval (for the null: any cause).
-    pub false_alarm_rate: (f64, f64, f64),
-    /// Correct draws whose strength interval covers the injected strength, of those
-    /// with an interval.
-    pub covered: (usize, usize),
-}
-
 /// The draws summarised per (effect, strength), in the order first seen.
 pub fn summarize(draws: &[DrawResult]) -> Vec<PowerRow> {
-    let mut cells: Vec<(Effect, f64)> = Vec::new();
-    for d in draws {
-        if !cells.iter().any(|c| c.0 == d.effect && c.1 == d.strength) {
-            cells.push((d.effect, d.strength));
-        }
-    }
-    cells
-        .into_iter()
-        .map(|(effect, strength)| {
-            let cell: Vec<&DrawResult> =
-                draws.iter().filter(|d| d.effect == effect && d.strength == strength).collect();
-            let count = |o: Outcome| cell.iter().filter(|d| d.outcome == o).count();
-            let n = cell.len();
-            let rate = |k: usize| {
-                let (lo, hi) = clopper_pearson(k, n, 0.95);
-                (k as f64 / n.max(1) as f64, lo, hi)
-            };
-            let with_interval: Vec<bool> = cell.iter().filter_map(|d| d.covered()).collect();
-            let (correct, wrong, none) = (count(Outcome::Correct), count(Outcome::Wrong), count(Outcome::None));
-            PowerRow {
-                effect,
-                strength,
-                draws: n,
-                correct,
-                wrong,
-                none,
-                correct_rate: rate(correct),
-                false_alarm_rate: rate(wrong),
-                covered: (with_interval.iter().filter(|&&c| c).count(), with_interval.len()),
-            }
-        })
-        .collect()
+    ::discrepancy::power::summarize(&draws.iter().map(DrawResult::score).collect::<Vec<_>>())
 }
 
 /// The names of mechanisms, joined by `+` (`none` for none).
@@ -302,6 +245,7 @@ pub fn names(mechanisms: &[usize]) -> String {
 mod tests {
     use super::*;
     use crate::fdm::test_support::real_lines;
+    use ::discrepancy::stats::clopper_pearson;
 
     fn taz5() -> Option<Vec<FdmLine>> {
         let lines = real_lines("taz5")?;
@@ -331,20 +275,15 @@ mod tests {
         for r in &rows {
             eprintln!(
                 "{} {}: correct {} wrong {} none {} covered {:?}",
-                r.effect.name(),
-                r.strength,
-                r.correct,
-                r.wrong,
-                r.none,
-                r.covered
+                r.effect, r.strength, r.correct, r.wrong, r.none, r.covered
             );
         }
         let null = &rows[0];
-        assert_eq!((null.effect, null.draws), (Effect::None, 60));
+        assert_eq!((null.effect, null.draws), ("none", 60));
         assert!(null.false_alarm_rate.1 < 0.05, "null false alarms {} of 60", null.wrong);
         for r in &rows[1..] {
-            assert!(r.correct_rate.2 >= 0.95, "{}: named {} of {}", r.effect.name(), r.correct, r.draws);
-            assert!(r.false_alarm_rate.1 < 0.02, "{}: wrong {} of {}", r.effect.name(), r.wrong, r.draws);
+            assert!(r.correct_rate.2 >= 0.95, "{}: named {} of {}", r.effect, r.correct, r.draws);
+            assert!(r.false_alarm_rate.1 < 0.02, "{}: wrong {} of {}", r.effect, r.wrong, r.draws);
         }
         // The strength intervals' coverage over all correct draws: not significantly
         // outside 90-98 %.

@@ -1,0 +1,312 @@
+//! The tables every domain's discrepancy stage writes from a [`Discovery`]
+//! (`fdm.discrepancy`, `inkjet.discrepancy`; docs/OUTPUTS.md lists the columns):
+//! `residuals.parquet` (held-out residuals binned per candidate variable, baseline and
+//! extended), `causes.parquet` (every candidate of every round with its cross-validated
+//! gain, p-values and the verdict), `extension.parquet` (the final model's parameters
+//! with jackknife intervals) and `gain.parquet` (held-out RMSE before and after). The
+//! columns are declared once, below, with the domain's set column and unit filled in.
+
+use discrepancy::{Discovery, Model, VariableKind, Verdict};
+use pipeline::{StageContext, StageError};
+
+use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+
+/// The name of a mechanism of the model (`None`: the baseline).
+fn mechanism_name<M: Model>(model: &M, mechanism: Option<usize>) -> String {
+    mechanism.map_or(model.name(), |c| model.candidates()[c].name()).to_string()
+}
+
+/// A column's type.
+#[derive(Clone, Copy, PartialEq, Debug)]
+pub(crate) enum Kind {
+    /// f64.
+    F,
+    /// i64.
+    I,
+    /// String.
+    S,
+    /// bool.
+    B,
+}
+
+/// One value of a row.
+#[derive(Clone)]
+pub(crate) enum Value {
+    /// f64.
+    F(f64),
+    /// i64.
+    I(i64),
+    /// String.
+    S(String),
+    /// bool.
+    B(bool),
+}
+
+impl Value {
+    fn kind(&self) -> Kind {
+        match self {
+            Self::F(_) => Kind::F,
+            Self::I(_) => Kind::I,
+            Self::S(_) => Kind::S,
+            Self::B(_) => Kind::B,
+        }
+    }
+}
+
+/// The columns of each output table, declared once (docs/OUTPUTS.md lists them).
+const RESIDUALS: &[(&str, Kind)] = &[
+    ("{set}", Kind::S),
+    ("model", Kind::S),
+    ("variable", Kind::S),
+    ("unit", Kind::S),
+    ("bin", Kind::I),
+    ("label", Kind::S),
+    ("bin_lo", Kind::F),
+    ("bin_hi", Kind::F),
+    ("mean_residual_{unit}", Kind::F),
+    ("ci_lo_{unit}", Kind::F),
+    ("ci_hi_{unit}", Kind::F),
+    ("n", Kind::I),
+    ("groups", Kind::I),
+    ("structure", Kind::F),
+];
+const CAUSES: &[(&str, Kind)] = &[
+    ("{set}", Kind::S),
+    ("round", Kind::I),
+    ("base_model", Kind::S),
+    ("mechanism", Kind::S),
+    ("cv_rmse_before_{unit}", Kind::F),
+    ("cv_rmse_after_{unit}", Kind::F),
+    ("gain_pct", Kind::F),
+    ("gain_ci_lo_pct", Kind::F),
+    ("gain_ci_hi_pct", Kind::F),
+    ("groups_helped", Kind::I),
+    ("groups", Kind::I),
+    ("p_value", Kind::F),
+    ("p_adjusted", Kind::F),
+    ("alpha", Kind::F),
+    ("named", Kind::B),
+    ("verdict", Kind::S),
+    ("failure", Kind::S),
+];
+const EXTENSION: &[(&str, Kind)] = &[
+    ("{set}", Kind::S),
+    ("round", Kind::I),
+    ("mechanism", Kind::S),
+    ("parameter", Kind::S),
+    ("unit", Kind::S),
+    ("estimate", Kind::F),
+    ("ci_lo", Kind::F),
+    ("ci_hi", Kind::F),
+    ("meaning", Kind::S),
+];
+const GAIN: &[(&str, Kind)] = &[
+    ("{set}", Kind::S),
+    ("baseline", Kind::S),
+    ("extended_model", Kind::S),
+    ("groups", Kind::I),
+    ("rmse_before_{unit}", Kind::F),
+    ("rmse_after_{unit}", Kind::F),
+    ("gain_pct", Kind::F),
+    ("gain_ci_lo_pct", Kind::F),
+    ("gain_ci_hi_pct", Kind::F),
+];
+
+/// A table being filled row by row against its declared columns.
+pub(crate) struct Table {
+    name: &'static str,
+    schema: Vec<(String, Kind)>,
+    columns: Vec<Vec<Value>>,
+}
+
+impl Table {
+    /// A table of these columns; `{set}` and `{unit}` in a name are replaced by the
+    /// domain's set column and residual unit.
+    pub(crate) fn new(name: &'static str, schema: &[(&str, Kind)], domain: Domain) -> Self {
+        let schema: Vec<(String, Kind)> = schema
+            .iter()
+            .map(|(n, k)| (n.replace("{set}", domain.set_column).replace("{unit}", domain.unit), *k))
+            .collect();
+        Self { name, columns: vec![Vec::new(); schema.len()], schema }
+    }
+
+    /// Appends a row, one value per column in order.
+    pub(crate) fn push(&mut self, row: Vec<Value>) {
+        debug_assert_eq!(row.len(), self.schema.len(), "{}: row length", self.name);
+        for ((column, value), (name, kind)) in self.columns.iter_mut().zip(row).zip(&self.schema) {
+            debug_assert_eq!(value.kind(), *kind, "{}.{name}", self.name);
+            column.push(value);
+        }
+    }
+
+    /// Writes the table as `NAME.parquet` through the context.
+    pub(crate) fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let columns =
+            self.schema.iter().zip(&self.columns).map(|((name, kind), values)| to_column(name, *kind, values));
+        let mut df = frame(columns.collect())?;
+        ctx.write_table(self.name, &mut df)?;
+        Ok(())
+    }
+}
+
+fn to_column(name: &str, kind: Kind, values: &[Value]) -> polars::prelude::Column {
+    match kind {
+        Kind::I => i64_col(name, values.iter().map(|v| if let Value::I(x) = v { *x } else { 0 }).collect()),
+        Kind::S => {
+            str_col(name, values.iter().map(|v| if let Value::S(x) = v { x.clone() } else { String::new() }).collect())
+        }
+        Kind::B => bool_col(name, values.iter().map(|v| matches!(v, Value::B(true))).collect()),
+        Kind::F => f64_col(name, values.iter().map(|v| if let Value::F(x) = v { *x } else { f64::NAN }).collect()),
+    }
+}
+
+/// Which column names a domain's discrepancy tables carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Domain {
+    /// The column naming the data set a discovery ran on (`printer`, `dataset`).
+    pub(crate) set_column: &'static str,
+    /// The unit of residuals and RMSEs in column names (`mm`, `um`).
+    pub(crate) unit: &'static str,
+}
+
+/// Rows of the four tables every domain's discrepancy stage writes.
+pub(crate) struct DiscrepancyTables {
+    alpha: f64,
+    residuals: Table,
+    causes: Table,
+    extension: Table,
+    gain: Table,
+}
+
+fn s(text: &str) -> Value {
+    Value::S(text.to_string())
+}
+
+impl DiscrepancyTables {
+    /// Empty tables with the domain's column names.
+    pub(crate) fn new(domain: Domain, alpha: f64) -> Self {
+        Self {
+            alpha,
+            residuals: Table::new("residuals", RESIDUALS, domain),
+            causes: Table::new("causes", CAUSES, domain),
+            extension: Table::new("extension", EXTENSION, domain),
+            gain: Table::new("gain", GAIN, domain),
+        }
+    }
+
+    /// The rows of one discovery on the set `label` of `groups` groups.
+    pub(crate) fn add<M: Model>(&mut self, label: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
+        self.add_residuals(label, model, found);
+        self.add_causes(label, model, groups, found);
+        self.add_extension(label, model, found);
+        self.add_gain(label, model, groups, found);
+    }
+
+    fn add_residuals<M: Model>(&mut self, label: &str, model: &M, found: &Discovery<M::Fit>) {
+        for (which, structure) in [("baseline", &found.structure_before), ("extended", &found.structure_after)] {
+            for v in structure {
+                let variable = model.variables()[v.variable];
+                for b in &v.bins {
+                    let bin_label = match variable.kind {
+                        VariableKind::Categorical(labels) => labels[b.bin].to_string(),
+                        VariableKind::Continuous if b.lo == b.hi => format!("{}", b.lo),
+                        VariableKind::Continuous => format!("[{:.4}, {:.4}]", b.lo, b.hi),
+                    };
+                    self.residuals.push(vec![
+                        s(label),
+                        s(which),
+                        s(variable.name),
+                        s(variable.unit),
+                        Value::I(b.bin as i64),
+                        Value::S(bin_label),
+                        Value::F(b.lo),
+                        Value::F(b.hi),
+                        Value::F(b.mean),
+                        Value::F(b.ci_lo),
+                        Value::F(b.ci_hi),
+                        Value::I(b.n as i64),
+                        Value::I(b.groups as i64),
+                        Value::F(v.structure),
+                    ]);
+                }
+            }
+        }
+    }
+
+    fn add_causes<M: Model>(&mut self, label: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
+        let alpha = self.alpha;
+        for round in &found.rounds {
+            let base: Vec<String> = round.base.iter().map(|&c| mechanism_name(model, Some(c))).collect();
+            for c in &round.candidates {
+                self.causes.push(vec![
+                    s(label),
+                    Value::I(round.index as i64),
+                    Value::S(base_label(model, &base)),
+                    Value::S(mechanism_name(model, Some(c.mechanism))),
+                    Value::F(c.rmse_before),
+                    Value::F(c.rmse_after),
+                    Value::F(c.gain_pct),
+                    Value::F(c.gain_ci_pct.0),
+                    Value::F(c.gain_ci_pct.1),
+                    Value::I(c.log_gains.iter().filter(|&&d| d > 0.0).count() as i64),
+                    Value::I(groups as i64),
+                    Value::F(c.p_value),
+                    Value::F(c.p_adjusted),
+                    Value::F(alpha),
+                    Value::B(c.named),
+                    s(round.verdict.label()),
+                    Value::S(c.failure.clone().unwrap_or_default()),
+                ]);
+            }
+        }
+    }
+
+    fn add_extension<M: Model>(&mut self, label: &str, model: &M, found: &Discovery<M::Fit>) {
+        let round_of = |c: Option<usize>| -> i64 {
+            let named_in = |r: &&discrepancy::Round| c.is_some_and(|c| r.verdict == Verdict::Named(c));
+            found.rounds.iter().find(named_in).map_or(0, |r| r.index as i64)
+        };
+        for e in &found.extension {
+            self.extension.push(vec![
+                s(label),
+                Value::I(round_of(e.mechanism)),
+                Value::S(mechanism_name(model, e.mechanism)),
+                s(e.parameter.name),
+                s(e.parameter.unit),
+                Value::F(e.estimate),
+                Value::F(e.ci_lo),
+                Value::F(e.ci_hi),
+                s(e.parameter.meaning),
+            ]);
+        }
+    }
+
+    fn add_gain<M: Model>(&mut self, label: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
+        let named: Vec<String> = found.named.iter().map(|&c| mechanism_name(model, Some(c))).collect();
+        let g = &found.gain;
+        self.gain.push(vec![
+            s(label),
+            s(model.name()),
+            Value::S(base_label(model, &named)),
+            Value::I(groups as i64),
+            Value::F(g.rmse_before),
+            Value::F(g.rmse_after),
+            Value::F(g.gain_pct),
+            Value::F(g.ci_pct.0),
+            Value::F(g.ci_pct.1),
+        ]);
+    }
+
+    /// Writes the four tables.
+    pub(crate) fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
+        for table in [self.residuals, self.causes, self.extension, self.gain] {
+            table.write(ctx)?;
+        }
+        Ok(())
+    }
+}
+
+/// `lag_model` or `lag_model + width_cap + …`.
+fn base_label<M: Model>(model: &M, extensions: &[String]) -> String {
+    std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
+}

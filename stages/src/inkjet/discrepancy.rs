@@ -1,0 +1,359 @@
+//! `inkjet.discrepancy`: what paper 002's layer-to-layer model (eqs 2-7, the dataset's
+//! nominal droplets) gets wrong on an `inkjet-scans` print, which physical cause
+//! explains it, the extended model and its held-out gain — the ink-jet domain of the
+//! `discrepancy` engine (`models::inkjet::discrepancy`). One discovery per input
+//! dataset; a group is a block of consecutive layers. Reads datasets only through the
+//! documented format, never `truth/`.
+//!
+//! `inkjet.discovery_power`: the power study. Prints on the virtual printer with one
+//! effect hidden at a given strength (sign drawn for tilt and drift), plus null prints,
+//! each scored against what the printer did. An evaluation stage: it knows the truth
+//! because it printed it.
+//!
+//! Outputs (docs/OUTPUTS.md): `residuals`, `causes`, `extension`, `gain` (the columns of
+//! `fdm.discrepancy` with `dataset` for `printer` and µm for mm); `power.parquet` (the
+//! columns of `fdm.discovery_power`'s) and `power_draws.parquet` (one row per draw,
+//! with each candidate's first-round p-value).
+
+use datasets::inkjet::InkjetScans;
+use discrepancy::power::{summarize, PowerRow};
+use discrepancy::{discover, Settings};
+use models::inkjet::discrepancy::mechanisms::CANDIDATES;
+use models::inkjet::discrepancy::power::{names, run_draws, DrawResult, PowerDesign, PrintDesign};
+use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
+use models::inkjet::printer::Effect;
+use models::inkjet::{DropletCoeffs, Grid};
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::discrepancy_tables::{DiscrepancyTables, Domain};
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The ink-jet tables' names: one discovery per dataset, heights in µm.
+const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
+
+const LAYERS_PER_GROUP: ParamSpec = ParamSpec {
+    name: "layers_per_group",
+    ty: ParamType::Int { min: 1, max: 100 },
+    default: ParamDefault::Int(4),
+    doc: "Consecutive layers per group: blocks share only their boundary scan, so held-out blocks are close to independent (at least 3 groups are needed; 8 or more before anything can be named at α = 0.05 over 6 candidates).",
+};
+const ALPHA: ParamSpec = ParamSpec {
+    name: "alpha",
+    ty: ParamType::Float { min: 0.001, max: 0.5 },
+    default: ParamDefault::Float(0.05),
+    doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
+};
+const MAX_ROUNDS: ParamSpec = ParamSpec {
+    name: "max_rounds",
+    ty: ParamType::Int { min: 1, max: 6 },
+    default: ParamDefault::Int(3),
+    doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
+};
+
+/// The `inkjet.discrepancy` stage kind.
+pub struct DiscrepancyStage;
+
+const PARAMS: &[ParamSpec] = &[
+    LAYERS_PER_GROUP,
+    ALPHA,
+    MAX_ROUNDS,
+    ParamSpec {
+        name: "bins",
+        ty: ParamType::Int { min: 2, max: 60 },
+        default: ParamDefault::Int(12),
+        doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
+    },
+    ParamSpec {
+        name: "bootstrap_draws",
+        ty: ParamType::Int { min: 100, max: 100_000 },
+        default: ParamDefault::Int(2000),
+        doc: "Bootstrap draws over groups of every gain interval.",
+    },
+];
+
+impl StageKind for DiscrepancyStage {
+    fn name(&self) -> &'static str {
+        "inkjet.discrepancy"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "What the layer-to-layer model gets wrong on a print's scans, the cause named by grouped cross-validation among 6 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 on paper 002's layer-to-layer model (eqs 2-7) and the inkjet-scans format"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::at_least(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let p = &ctx.params;
+        let settings = Settings {
+            alpha: p.f64("alpha"),
+            max_rounds: p.i64("max_rounds") as usize,
+            bins: p.i64("bins") as usize,
+            bootstrap_draws: p.i64("bootstrap_draws") as usize,
+            level: 0.95,
+            seed: ctx.seed,
+        };
+        let per_group = p.i64("layers_per_group") as usize;
+        let mut tables = DiscrepancyTables::new(INKJET, settings.alpha);
+        for input in &ctx.inputs {
+            let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
+            let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
+            let blocks = model.print().blocks(per_group);
+            let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
+                StageError::Domain(
+                    format!(
+                        "discrepancy engine on dataset `{}` ({} groups of {per_group} layers): {e}",
+                        input.name,
+                        blocks.len()
+                    )
+                    .into(),
+                )
+            })?;
+            tables.add(&input.name, &model, blocks.len(), &found);
+        }
+        tables.write(ctx)
+    }
+}
+
+/// The model's view of a dataset: its scans, patterns, nominal droplets and profiler.
+pub fn print_of(dataset: &InkjetScans) -> Result<InkjetPrint, models::inkjet::InkjetError> {
+    let g = &dataset.grid;
+    let footprint: Vec<bool> = dataset.target.iter().map(Option::is_some).collect();
+    InkjetPrint::new(PrintParts {
+        grid: Grid::new(g.m_x, g.m_y, g.spacing_um)?,
+        scans: &dataset.scans,
+        patterns: &dataset.patterns,
+        part: DropletCoeffs::from(g.part),
+        support: g.support.map(DropletCoeffs::from),
+        max_shortfall: g.variation_pct / 100.0,
+        footprint: &footprint,
+        spot_sigma_um: g.profiler.spot_sigma_um,
+        noise_um: g.profiler.noise_um,
+    })
+}
+
+/// The `inkjet.discovery_power` stage kind.
+pub struct DiscoveryPowerStage;
+
+/// The effects the study can hide, with the parameter naming their strengths.
+const STUDIED: [Effect; 5] =
+    [Effect::CuringShrinkage, Effect::VolumeDrift, Effect::LevellingFlow, Effect::NozzleBias, Effect::SubstrateTilt];
+
+const POWER_PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "curing_shrinkage",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.01, 0.02"),
+        doc: "Strengths of curing_shrinkage (fraction of each fresh layer lost), comma-separated; empty for none.",
+    },
+    ParamSpec {
+        name: "volume_drift",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.0005, 0.001"),
+        doc: "Strengths of volume_drift (relative droplet-volume change per layer, sign drawn per print), comma-separated.",
+    },
+    ParamSpec {
+        name: "levelling_flow",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.015, 0.03"),
+        doc: "Strengths of levelling_flow (diffusion number of the fresh layer), comma-separated.",
+    },
+    ParamSpec {
+        name: "nozzle_bias",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.01, 0.02"),
+        doc: "Strengths of nozzle_bias (std of the per-nozzle volume factor), comma-separated.",
+    },
+    ParamSpec {
+        name: "substrate_tilt",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("5"),
+        doc: "Strengths of substrate_tilt (µm per mm, sign drawn; invisible layer to layer, no candidate), comma-separated.",
+    },
+    ParamSpec {
+        name: "draws",
+        ty: ParamType::Int { min: 1, max: 100_000 },
+        default: ParamDefault::Int(10),
+        doc: "Prints per effect and strength.",
+    },
+    ParamSpec {
+        name: "null_draws",
+        ty: ParamType::Int { min: 0, max: 100_000 },
+        default: ParamDefault::Int(20),
+        doc: "Prints with no effect.",
+    },
+    ParamSpec {
+        name: "radius_cells",
+        ty: ParamType::Int { min: 3, max: 40 },
+        default: ParamDefault::Int(10),
+        doc: "Radius of each print's cylinder, droplet spacings (paper 002's Sec. V-A part, smaller: the paper gives no diameter).",
+    },
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 3, max: 1000 },
+        default: ParamDefault::Int(40),
+        doc: "Open-loop layers of each print.",
+    },
+    ParamSpec {
+        name: "variation_pct",
+        ty: ParamType::Float { min: 0.0, max: 100.0 },
+        default: ParamDefault::Float(20.0),
+        doc: "Largest droplet-volume shortfall p in percent (the paper's [0 20%]).",
+    },
+    LAYERS_PER_GROUP,
+    ALPHA,
+    MAX_ROUNDS,
+    ParamSpec {
+        name: "bootstrap_draws",
+        ty: ParamType::Int { min: 100, max: 100_000 },
+        default: ParamDefault::Int(200),
+        doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
+    },
+];
+
+impl StageKind for DiscoveryPowerStage {
+    fn name(&self) -> &'static str {
+        "inkjet.discovery_power"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Power study of the discrepancy engine on virtual ink-jet prints: each effect hidden at a grid of strengths, plus null prints, scored against the printer's truth → power.parquet, power_draws.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 (tests that hide an effect and require finding it), on paper 002's layer-to-layer model"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        POWER_PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(0)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let design = power_design(ctx)?;
+        let results = run_draws(&design).map_err(StageError::domain)?;
+        let base = format!("cylinder r{} × {} layers", design.print.radius_cells, design.print.layers);
+        let scores: Vec<_> = results.iter().map(DrawResult::score).collect();
+        let mut power = power_frame(&base, &summarize(&scores))?;
+        ctx.write_table("power", &mut power)?;
+        let mut draws = draws_frame(&base, &results)?;
+        ctx.write_table("power_draws", &mut draws)?;
+        Ok(())
+    }
+}
+
+fn power_design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
+    let p = &ctx.params;
+    let mut cells = Vec::new();
+    for effect in STUDIED {
+        for strength in strengths(ctx, effect)? {
+            cells.push((effect, strength));
+        }
+    }
+    Ok(PowerDesign {
+        print: PrintDesign {
+            radius_cells: p.i64("radius_cells") as usize,
+            layers: p.i64("layers") as usize,
+            max_shortfall: p.f64("variation_pct") / 100.0,
+            layers_per_group: p.i64("layers_per_group") as usize,
+        },
+        cells,
+        draws_per_cell: p.i64("draws") as usize,
+        null_draws: p.i64("null_draws") as usize,
+        seed: ctx.seed,
+        engine: Settings {
+            alpha: p.f64("alpha"),
+            max_rounds: p.i64("max_rounds") as usize,
+            bootstrap_draws: p.i64("bootstrap_draws") as usize,
+            ..Settings::standard(ctx.seed)
+        },
+    })
+}
+
+/// The strengths listed for `effect`, each a magnitude within the effect's range.
+fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
+    let (lo, hi, unit) = effect.range();
+    let top = hi.max(-lo);
+    ctx.params
+        .str(effect.name())
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            let bad = |why: String| StageError::Params {
+                stage: ctx.stage.clone(),
+                message: format!("{}: `{s}` {why}", effect.name()),
+            };
+            let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
+            if x > 0.0 && x <= top {
+                Ok(x)
+            } else {
+                Err(bad(format!("is outside (0, {top}] ({unit})")))
+            }
+        })
+        .collect()
+}
+
+fn power_frame(base: &str, rows: &[PowerRow]) -> Result<polars::prelude::DataFrame, StageError> {
+    let n = rows.len();
+    let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|r| f(r) as i64).collect::<Vec<i64>>();
+    frame(vec![
+        str_col("base", vec![base.to_string(); n]),
+        str_col("noise", vec!["virtual".to_string(); n]),
+        str_col("own_causes", vec!["none".to_string(); n]),
+        str_col("effect", rows.iter().map(|r| r.effect.to_string()).collect()),
+        f64_col("strength", col(&|r| r.strength)),
+        i64_col("draws", int(&|r| r.draws)),
+        i64_col("correct", int(&|r| r.correct)),
+        i64_col("wrong", int(&|r| r.wrong)),
+        i64_col("none", int(&|r| r.none)),
+        f64_col("correct_rate", col(&|r| r.correct_rate.0)),
+        f64_col("correct_ci_lo", col(&|r| r.correct_rate.1)),
+        f64_col("correct_ci_hi", col(&|r| r.correct_rate.2)),
+        f64_col("false_alarm_rate", col(&|r| r.false_alarm_rate.0)),
+        f64_col("false_alarm_ci_lo", col(&|r| r.false_alarm_rate.1)),
+        f64_col("false_alarm_ci_hi", col(&|r| r.false_alarm_rate.2)),
+        i64_col("covered", int(&|r| r.covered.0)),
+        i64_col("with_interval", int(&|r| r.covered.1)),
+        f64_col("coverage_rate", col(&|r| r.coverage_rate().0)),
+        f64_col("coverage_ci_lo", col(&|r| r.coverage_rate().1)),
+        f64_col("coverage_ci_hi", col(&|r| r.coverage_rate().2)),
+    ])
+}
+
+fn draws_frame(base: &str, draws: &[DrawResult]) -> Result<polars::prelude::DataFrame, StageError> {
+    let n = draws.len();
+    let fitted = |k: usize| draws.iter().map(|d| d.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect();
+    let mut columns = vec![
+        str_col("base", vec![base.to_string(); n]),
+        str_col("effect", draws.iter().map(|d| d.effect_name().to_string()).collect()),
+        f64_col("strength", draws.iter().map(|d| d.strength).collect()),
+        i64_col("draw", draws.iter().map(|d| d.draw as i64).collect()),
+        str_col("seed", draws.iter().map(|d| format!("{:016x}", d.seed)).collect()),
+        f64_col("injected", draws.iter().map(|d| d.truth).collect()),
+        str_col("named", draws.iter().map(|d| names(&d.named)).collect()),
+        str_col("outcome", draws.iter().map(|d| d.outcome.label().to_string()).collect()),
+        f64_col("estimate", fitted(0)),
+        f64_col("ci_lo", fitted(1)),
+        f64_col("ci_hi", fitted(2)),
+    ];
+    for (c, candidate) in CANDIDATES.iter().enumerate() {
+        use discrepancy::Mechanism;
+        let name = format!("p_{}", candidate.name());
+        columns.push(f64_col(&name, draws.iter().map(|d| d.first_round_p[c]).collect()));
+    }
+    frame(columns)
+}
