@@ -14,8 +14,9 @@
 //! scans `k − 1` and `k`, so neighbouring layers share a scan and their residuals are
 //! correlated; in blocks only the one scan at each boundary is shared, a small part of
 //! a block's evidence, and the sign-flip test's exchangeability holds closely enough
-//! that its p-values on null prints are uniform (tested with a KS test over null prints
-//! in [`power`]). Parameters are shared by all blocks of the print (the printhead's
+//! that its p-values on null prints are valid: nowhere significantly below the uniform
+//! (a one-sided KS test over null prints in [`power`]'s tests; they lean towards 1,
+//! since a candidate fitted to noise loses on held-out blocks). Parameters are shared by all blocks of the print (the printhead's
 //! nozzle factors included), none belongs to one block, so no cross-fitting is needed.
 //!
 //! **Candidates** ([`mechanisms`]): curing shrinkage, volume drift, levelling flow and
