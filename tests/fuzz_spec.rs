@@ -58,10 +58,17 @@ const TOKENS: &[&str] = &[
     "seed = ",
 ];
 
+/// Every shipped spec: `specs/*.toml` (run by `make run`) and `specs/studies/*.toml`
+/// (the large studies).
 fn shipped_specs() -> Vec<String> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs");
-    let mut names: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("specs");
+    let mut names: Vec<_> = [root.clone(), root.join("studies")]
+        .iter()
+        .flat_map(|dir| std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
     names.sort();
+    assert!(names.iter().any(|p| p.parent().is_some_and(|d| d.ends_with("studies"))), "the studies are checked too");
     names.iter().map(|p| std::fs::read_to_string(p).unwrap()).collect()
 }
 
