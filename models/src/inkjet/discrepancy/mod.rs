@@ -194,7 +194,7 @@ fn edge_distances_mm(grid: Grid, footprint: &[bool]) -> Vec<f64> {
 /// flag is `target` (0 on such cells); with no such cell, to the ring just outside the
 /// grid (a footprint filling the grid has its edge at the grid's).
 fn chamfer_cells(grid: Grid, footprint: &[bool], target: bool) -> Vec<f64> {
-    let any = footprint.iter().any(|&f| f == target);
+    let any = footprint.contains(&target);
     let on_border = |c: usize| {
         let (i, j) = grid.coords(c);
         i == 0 || j == 0 || i + 1 == grid.m_x || j + 1 == grid.m_y
