@@ -6,10 +6,26 @@
 //! with jackknife intervals) and `gain.parquet` (held-out RMSE before and after). The
 //! columns are declared once, below, with the domain's set column and unit filled in.
 
-use discrepancy::{Discovery, Model, VariableKind, Verdict};
+use discrepancy::{Discovery, Model, Settings, VariableKind, Verdict};
 use pipeline::{StageContext, StageError};
 
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+
+/// The engine's settings from a discrepancy stage's parameters (`alpha`, `max_rounds`,
+/// `bins`, `bootstrap_draws`) and seed, checked.
+pub(crate) fn engine_settings(ctx: &StageContext) -> Result<Settings, StageError> {
+    let p = &ctx.params;
+    let settings = Settings {
+        alpha: p.f64("alpha"),
+        max_rounds: p.i64("max_rounds") as usize,
+        bins: p.i64("bins") as usize,
+        bootstrap_draws: p.i64("bootstrap_draws") as usize,
+        level: 0.95,
+        seed: ctx.seed,
+    };
+    settings.check().map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
+    Ok(settings)
+}
 
 /// The name of a mechanism of the model (`None`: the baseline).
 fn mechanism_name<M: Model>(model: &M, mechanism: Option<usize>) -> String {

@@ -12,7 +12,7 @@
 //! `gain.parquet` (held-out RMSE before and after) and `predictions.parquet` (each
 //! line's held-out predictions before and after, for the figures).
 
-use discrepancy::{discover, Discovery, Settings};
+use discrepancy::{discover, Discovery};
 use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
@@ -20,7 +20,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::discrepancy_tables::{DiscrepancyTables, Domain, Kind, Table, Value};
+use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain, Kind, Table, Value};
 use crate::fdm::lines::PrinterLines;
 
 /// The `fdm.discrepancy` stage kind.
@@ -145,21 +145,6 @@ pub(crate) fn read_printers(ctx: &StageContext) -> Result<Vec<(String, Vec<FdmLi
         }
     }
     Ok(printers)
-}
-
-/// The engine's settings from the stage's parameters and seed.
-pub(crate) fn engine_settings(ctx: &StageContext) -> Result<Settings, StageError> {
-    let p = &ctx.params;
-    let settings = Settings {
-        alpha: p.f64("alpha"),
-        max_rounds: p.i64("max_rounds") as usize,
-        bins: p.i64("bins") as usize,
-        bootstrap_draws: p.i64("bootstrap_draws") as usize,
-        level: 0.95,
-        seed: ctx.seed,
-    };
-    settings.check().map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
-    Ok(settings)
 }
 
 /// An engine failure as a stage error naming the printer.

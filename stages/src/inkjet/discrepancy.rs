@@ -27,7 +27,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::discrepancy_tables::{DiscrepancyTables, Domain};
+use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain};
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
@@ -94,16 +94,8 @@ impl StageKind for DiscrepancyStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let p = &ctx.params;
-        let settings = Settings {
-            alpha: p.f64("alpha"),
-            max_rounds: p.i64("max_rounds") as usize,
-            bins: p.i64("bins") as usize,
-            bootstrap_draws: p.i64("bootstrap_draws") as usize,
-            level: 0.95,
-            seed: ctx.seed,
-        };
-        let per_group = p.i64("layers_per_group") as usize;
+        let settings = engine_settings(ctx)?;
+        let per_group = ctx.params.i64("layers_per_group") as usize;
         let mut tables = DiscrepancyTables::new(INKJET, settings.alpha);
         for input in &ctx.inputs {
             let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
