@@ -1,5 +1,8 @@
 //! The `effects` parameter of the virtual-printer stages: `name=strength` pairs
-//! separated by commas, each domain checking the names and strengths itself.
+//! separated by commas, each domain checking the names and strengths itself; and the
+//! power studies' per-effect strength lists.
+
+use pipeline::{StageContext, StageError};
 
 /// Parses `name=strength, name=strength` (empty: none) into pairs.
 pub fn pairs(text: &str) -> Result<Vec<(&str, f64)>, String> {
@@ -13,4 +16,26 @@ pub fn pairs(text: &str) -> Result<Vec<(&str, f64)>, String> {
         pairs.push((name.trim(), strength));
     }
     Ok(pairs)
+}
+
+/// The strengths listed in the text parameter `name` (comma-separated; empty: none),
+/// each a magnitude in `(0, top]`; a bad one is a parameter error naming it, with
+/// `range_note` after the range.
+pub fn strength_list(ctx: &StageContext, name: &str, top: f64, range_note: &str) -> Result<Vec<f64>, StageError> {
+    ctx.params
+        .str(name)
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            let bad =
+                |why: String| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: `{s}` {why}") };
+            let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
+            if x > 0.0 && x <= top {
+                Ok(x)
+            } else {
+                Err(bad(format!("is outside (0, {top}]{range_note}")))
+            }
+        })
+        .collect()
 }

@@ -18,6 +18,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
+use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
 use crate::table::{f64_col, frame, i64_col, str_col};
 
@@ -154,24 +155,8 @@ fn design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
 
 /// The strengths listed for `effect`, each checked against the effect's range.
 fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
-    let raw = ctx.params.str(effect.name());
     let (lo, hi) = effect.strength_range();
-    raw.split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            let bad = |why: String| StageError::Params {
-                stage: ctx.stage.clone(),
-                message: format!("{}: `{s}` {why}", effect.name()),
-            };
-            let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
-            if x > 0.0 && x <= hi.max(-lo) {
-                Ok(x)
-            } else {
-                Err(bad(format!("is outside (0, {}]", hi.max(-lo))))
-            }
-        })
-        .collect()
+    strength_list(ctx, effect.name(), hi.max(-lo), "")
 }
 
 /// Columns of `power.parquet`.

@@ -28,6 +28,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain};
+use crate::effects::strength_list;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
@@ -277,25 +278,7 @@ fn power_design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
 /// The strengths listed for `effect`, each a magnitude within the effect's range.
 fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
     let (lo, hi, unit) = effect.range();
-    let top = hi.max(-lo);
-    ctx.params
-        .str(effect.name())
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            let bad = |why: String| StageError::Params {
-                stage: ctx.stage.clone(),
-                message: format!("{}: `{s}` {why}", effect.name()),
-            };
-            let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
-            if x > 0.0 && x <= top {
-                Ok(x)
-            } else {
-                Err(bad(format!("is outside (0, {top}] ({unit})")))
-            }
-        })
-        .collect()
+    strength_list(ctx, effect.name(), hi.max(-lo), &format!(" ({unit})"))
 }
 
 fn power_frame(base: &str, rows: &[PowerRow]) -> Result<polars::prelude::DataFrame, StageError> {

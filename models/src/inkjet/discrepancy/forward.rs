@@ -193,34 +193,34 @@ impl Spot {
     }
 }
 
-/// Calls `emit(cell, weight)` for the cells whose pre-levelling increment makes up the
-/// measured increment at `q`: the spot over the levelling stencil.
-#[inline]
-pub fn for_each_source(grid: Grid, q: usize, scalars: &Scalars, spot: &Spot, mut emit: impl FnMut(usize, f64)) {
-    spot.for_each_cell(grid, q, |n, ws| levelling_stencil(grid, n, scalars, |m, wl| emit(m, ws * wl)));
-}
-
-/// The measured increment at `q`: the spot over levelling and shrinkage of the
-/// pre-levelling increments of `maps` with column factors `bias`.
-#[inline]
-pub fn increment_um(
-    maps: &ColumnMaps,
-    grid: Grid,
-    q: usize,
-    scalars: &Scalars,
-    spot: &Spot,
-    bias: Option<&[f64]>,
-) -> f64 {
-    let mut sum = 0.0;
-    for_each_source(grid, q, scalars, spot, |n, w| sum += w * maps.increment_at(grid, n, bias));
-    sum
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::inkjet::height_model::{deposit_layer_into, uniform_coeffs};
     use crate::inkjet::printer::diffuse_once;
+
+    /// The composition [`super::filter::Track`] evaluates over whole fields, one cell at a
+    /// time: the reference its tests compare against.
+    /// Calls `emit(cell, weight)` for the cells whose pre-levelling increment makes up the
+    /// measured increment at `q`: the spot over the levelling stencil.
+    fn for_each_source(grid: Grid, q: usize, scalars: &Scalars, spot: &Spot, mut emit: impl FnMut(usize, f64)) {
+        spot.for_each_cell(grid, q, |n, ws| levelling_stencil(grid, n, scalars, |m, wl| emit(m, ws * wl)));
+    }
+
+    /// The measured increment at `q`: the spot over levelling and shrinkage of the
+    /// pre-levelling increments of `maps` with column factors `bias`.
+    fn increment_um(
+        maps: &ColumnMaps,
+        grid: Grid,
+        q: usize,
+        scalars: &Scalars,
+        spot: &Spot,
+        bias: Option<&[f64]>,
+    ) -> f64 {
+        let mut sum = 0.0;
+        for_each_source(grid, q, scalars, spot, |n, w| sum += w * maps.increment_at(grid, n, bias));
+        sum
+    }
 
     fn setup() -> (Grid, Vec<f64>, Vec<bool>, Vec<DropletCoeffs>) {
         let grid = Grid::new(9, 8, 263.0).unwrap();
@@ -248,6 +248,30 @@ mod tests {
         let flowed = diffuse_once(grid, &increment, 0.2);
         for (q, want) in flowed.iter().enumerate() {
             assert!((increment_um(&maps, grid, q, &s, &point, None) - 0.9 * want).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_filter_predicts_the_reference_composition() {
+        use crate::inkjet::discrepancy::filter::{Noise, Track, TrackInput};
+        let (grid, before, droplet, coeffs) = setup();
+        let s = Scalars { levelling: 0.1, shrinkage: 0.05, split: 0.2, anisotropy: 0.1, drift_per_layer: 0.0 };
+        let spot = Spot::new(grid, 120.0);
+        let (droplets, layer_coeffs) = (vec![droplet.clone()], vec![coeffs.clone()]);
+        let noise = Noise::new(grid, &droplets, &layer_coeffs, 0.05, 1.0);
+        let scans = vec![before.clone(), before.clone()];
+        let input =
+            TrackInput { grid, scans: &scans, droplets: &droplets, coeffs: &layer_coeffs, spot: &spot, noise: &noise };
+        let mut track = Track::default();
+        track.run(&input, &s, None, None, false);
+        let layer = LayerInput { grid, before_um: &before, droplet: &droplet, coeffs: &coeffs, layer_index: 0 };
+        let mut maps = ColumnMaps::default();
+        maps.fill(&layer, &s, None);
+        for q in 0..grid.len() {
+            let mut seen_before = 0.0;
+            spot.for_each_cell(grid, q, |n, w| seen_before += w * before[n]);
+            let want = seen_before + increment_um(&maps, grid, q, &s, &spot, None);
+            assert!((track.prior[0][q] - want).abs() < 1e-12, "cell {q}");
         }
     }
 
