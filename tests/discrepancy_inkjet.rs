@@ -2,8 +2,9 @@
 //! prints three cylinders on the virtual printer (the paper's physics only, curing
 //! shrinkage hidden, nozzle bias hidden) and the engine, reading only the
 //! inkjet-scans format, names nothing on the first and the hidden cause on the others,
-//! with a strength interval and a held-out gain; the study spec runs with a cut power
-//! study; a print with too few layers for the test is refused with a clear message.
+//! with a strength interval and a held-out gain; printers calibrated by the engine
+//! print in closed loop with the paper's and the extended model, with intervals over
+//! printers; the study spec runs with a cut power study; a print with too few layers for the test is refused with a clear message.
 
 mod common;
 
@@ -52,9 +53,27 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
             assert!(*lo > 1.0, "{d}: gain interval from {lo} %");
         }
     }
+    // The control gain: three controller models per effect, each over the same three
+    // printers, intervals around every mean, the paper's controller against itself 0.
+    let control = read(&out.join("inkjet_control_gain.parquet"));
+    assert_eq!(control.height(), 9);
+    let (controller, printers) = (strings(&control, "controller"), control.column("printers").unwrap().i64().unwrap());
+    assert!(printers.iter().all(|n| n == Some(3)));
+    let (rmsd, lo, hi) = (floats(&control, "rmsd_um"), floats(&control, "rmsd_ci_lo"), floats(&control, "rmsd_ci_hi"));
+    let vs_paper = floats(&control, "rmsd_vs_paper_um");
+    for i in 0..control.height() {
+        assert!(lo[i] <= rmsd[i] && rmsd[i] <= hi[i] && rmsd[i] > 0.0, "row {i}");
+        assert_eq!(vs_paper[i] == 0.0, controller[i] == "paper", "row {i}");
+    }
+    let trials = read(&out.join("inkjet_control_trials.parquet"));
+    assert_eq!(trials.height(), 27);
     let section = std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_inkjet/report/section.html")).unwrap();
     assert!(
         section.contains("curing shrinkage") && section.contains("nozzle bias") && section.contains("layer blocks")
+    );
+    assert!(
+        section.contains("Does the extended model print better?")
+            && section.contains("the extended controller's RMSD is")
     );
 }
 
@@ -65,13 +84,20 @@ fn the_power_study_spec_runs_cut_to_a_few_prints() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/studies/discrepancy_inkjet_power.toml"),
     )
     .unwrap();
-    let study = "null_draws = 200, draws = 40";
-    assert!(shipped.contains(study), "the shipped study changed; update this test");
+    let (study, control) = (
+        "null_draws = 200, draws = 40",
+        "printers = 20, curing_shrinkage = \"0.05\", volume_drift = \"0.002\", nozzle_bias = \"0.05\"",
+    );
+    assert!(shipped.contains(study) && shipped.contains(control), "the shipped study changed; update this test");
     let cut = shipped
         .replace(study, "null_draws = 2, draws = 1, radius_cells = 6, layers = 24, layers_per_group = 3")
         .replace(
             "inputs = [\"print_paper_physics\", \"print_curing_shrinkage\", \"print_nozzle_bias\"]",
             "inputs = [\"print_curing_shrinkage\"]",
+        )
+        .replace(
+            control,
+            "printers = 2, radius_cells = 6, calibration_layers = 24, layers_per_group = 3, curing_shrinkage = \"0.05\", volume_drift = \"\", nozzle_bias = \"\"",
         );
     let spec = tmp.path().join("study.toml");
     std::fs::write(&spec, cut).unwrap();
@@ -86,6 +112,9 @@ fn the_power_study_spec_runs_cut_to_a_few_prints() {
     let section =
         std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_inkjet_power/report/section.html")).unwrap();
     assert!(section.contains("How often is a hidden effect named?"));
+    let control = read(&tmp.path().join("out/discrepancy/inkjet_control_gain.parquet"));
+    assert_eq!(strings(&control, "controller"), ["paper", "mean_droplet", "extended"]);
+    assert!(section.contains("Does the extended model print better?"));
 }
 
 #[test]

@@ -255,6 +255,24 @@ pub fn run_print(
     rng: &mut impl Rng,
     record: bool,
 ) -> Result<(PrintOutcome, Option<PrintRecording>), InkjetError> {
+    run_print_predicting(scenario, law, rng, record, None)
+}
+
+/// The per-cell coefficients a closed-loop controller predicts layer `layer` with,
+/// given the nominal ones of each cell's material.
+pub type PredictCoeffs<'a> = &'a dyn Fn(usize, &[DropletCoeffs]) -> Vec<DropletCoeffs>;
+
+/// [`run_print`] whose closed-loop controller predicts with `predict` (`None`: the
+/// nominal coefficients of each cell's material, as the paper's controller does). The
+/// printer always prints the nominal droplets of the material chosen; only the
+/// controller's model changes.
+pub fn run_print_predicting(
+    scenario: &Scenario,
+    law: ControlLaw,
+    rng: &mut impl Rng,
+    record: bool,
+    predict: Option<PredictCoeffs<'_>>,
+) -> Result<(PrintOutcome, Option<PrintRecording>), InkjetError> {
     scenario.model.check()?;
     let grid = scenario.target.grid();
     let mut run = scenario.truth.start(grid, rng);
@@ -288,7 +306,9 @@ pub fn run_print(
                 }
                 let measured = run.measure();
                 let (materials, coeffs) = scenario.layer_coeffs(&measured);
-                let decision = controller.next_pattern(&measured, &scenario.target, &coeffs, rng)?;
+                let predicted = predict.map(|f| f(layer, &coeffs));
+                let decision =
+                    controller.next_pattern(&measured, &scenario.target, predicted.as_ref().unwrap_or(&coeffs), rng)?;
                 if decision.is_finished() {
                     break;
                 }

@@ -4,9 +4,11 @@
 //! named (DESIGN §7). Every number is read from the tables of `inkjet.discrepancy` and
 //! `inkjet.discovery_power`.
 //!
-//! Inputs: the `inkjet.discrepancy` stage, then optionally `inkjet.discovery_power`.
+//! Inputs: the `inkjet.discrepancy` stage, then optionally `inkjet.discovery_power`
+//! and `inkjet.control_gain` (recognised by their tables), in any order.
 
 use std::fmt::Write as _;
+use std::path::Path;
 
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
@@ -14,6 +16,7 @@ use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 use super::discrepancy_fdm::{causes_table, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow};
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
+use crate::read::{f64s, ints, read_parquet, strs};
 
 /// The ink-jet tables: one discovery per dataset, heights in µm, a group is a block of
 /// consecutive layers.
@@ -27,7 +30,7 @@ impl StageKind for DiscrepancyInkjetSection {
         "report.discrepancy_inkjet"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "What the layer-to-layer model gets wrong on ink-jet scans, the cause named, the extension and its gain, and (with a power study) how often hidden effects are named → section.html, comparison.parquet"
@@ -55,8 +58,13 @@ impl StageKind for DiscrepancyInkjetSection {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows);
         }
         for input in &ctx.inputs[1..] {
-            let power = PowerRow::read(&input.dir.join("power.parquet"))?;
-            html += &power_part(&power, &input.name, &mut rows);
+            let control = input.dir.join("control_gain.parquet");
+            if control.is_file() {
+                html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);
+            } else {
+                let power = PowerRow::read(&input.dir.join("power.parquet"))?;
+                html += &power_part(&power, &input.name, &mut rows);
+            }
         }
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
@@ -173,6 +181,129 @@ and nothing else, wrong when it names anything else. A nozzle bias's truth is th
     let _ = writeln!(
         html,
         "<p class=\"run\">Stage {stage} (inkjet.discovery_power): tables out/discrepancy/inkjet_power.parquet and inkjet_power_draws.parquet (one row per print, with each candidate's first-round p-value). Intervals of rates are Clopper–Pearson.</p>"
+    );
+    html
+}
+
+/// One row of `control_gain.parquet`: an effect, a strength and a controller model.
+struct ControlRow {
+    effect: String,
+    strength: f64,
+    controller: String,
+    printers: i64,
+    desired_um: f64,
+    mean_error: (f64, f64, f64),
+    rmsd: (f64, f64, f64),
+    height: (f64, f64, f64),
+    rmsd_vs_paper: (f64, f64, f64),
+}
+
+impl ControlRow {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let triple = |name: &str, lo: &str, hi: &str| -> Result<Vec<(f64, f64, f64)>, StageError> {
+            let (m, l, h) = (f64s(&df, name, path)?, f64s(&df, lo, path)?, f64s(&df, hi, path)?);
+            Ok((0..m.len()).map(|i| (m[i], l[i], h[i])).collect())
+        };
+        let (effect, controller) = (strs(&df, "effect", path)?, strs(&df, "controller", path)?);
+        let (strength, desired, printers) =
+            (f64s(&df, "strength", path)?, f64s(&df, "desired_um", path)?, ints(&df, "printers", path)?);
+        let mean_error = triple("mean_error_um", "mean_error_ci_lo", "mean_error_ci_hi")?;
+        let rmsd = triple("rmsd_um", "rmsd_ci_lo", "rmsd_ci_hi")?;
+        let height = triple("average_height_um", "average_height_ci_lo", "average_height_ci_hi")?;
+        let vs_paper = triple("rmsd_vs_paper_um", "rmsd_vs_paper_ci_lo", "rmsd_vs_paper_ci_hi")?;
+        Ok((0..df.height())
+            .map(|i| Self {
+                effect: effect[i].clone(),
+                strength: strength[i],
+                controller: controller[i].clone(),
+                printers: printers[i],
+                desired_um: desired[i],
+                mean_error: mean_error[i],
+                rmsd: rmsd[i],
+                height: height[i],
+                rmsd_vs_paper: vs_paper[i],
+            })
+            .collect())
+    }
+}
+
+/// `value (lo to hi)` with three significant digits.
+fn with_interval((value, lo, hi): (f64, f64, f64)) -> String {
+    format!("{} ({} to {})", format_sig(value), format_sig(lo), format_sig(hi))
+}
+
+/// What the paired interval of a difference to the paper's controller says, in words.
+fn difference_words((d, lo, hi): (f64, f64, f64)) -> String {
+    let interval = format!("95 % interval {} to {} µm", format_sig(lo), format_sig(hi));
+    if lo > 0.0 {
+        format!("higher than the paper controller's by {} µm ({interval})", format_sig(d))
+    } else if hi < 0.0 {
+        format!("lower than the paper controller's by {} µm ({interval})", format_sig(-d))
+    } else {
+        format!("not resolved from the paper controller's (a difference of {} µm, {interval})", format_sig(d))
+    }
+}
+
+fn control_part(control: &[ControlRow], stage: &str, rows: &mut Vec<Row>) -> String {
+    let desired = control.first().map_or(f64::NAN, |r| r.desired_um);
+    let mut html = format!(
+        "<h4>Does the extended model print better?</h4>\n<p>Each printer (one seed, one effect at the given strength) first prints an open-loop calibration \
+cylinder; the engine reads its scans, told nothing, and names and fits an extension. The same printer — the same printhead and droplets — then prints the {} µm \
+cylinder of Figs 11-12 in closed loop three times, the controller solving eq. 8 before every layer with a different height model: the paper's nominal droplets \
+(<i>paper</i>), the engine's baseline, the nominal droplets at the mean of the recorded variation (<i>mean_droplet</i>), and that baseline extended by what the engine \
+named (<i>extended</i>). An extension enters eq. 8 as per-cell droplet coefficients for the next layer (shrinkage as a volume factor on the coefficients rather than on the \
+cured layer; levelling flow and an anisotropic spread, which eq. 8's predictor cannot express, would be left out). Mean error and RMSD are of the true top surface over \
+the footprint, as in Figs 11-12 and Table II; intervals are 95 % Student-t over printers, and the difference to the paper's controller is paired by printer.</p>\n",
+        format_sig(desired)
+    );
+    html += "<table><tr><th class=\"t\">printers' effect</th><th>strength</th><th class=\"t\">controller's model</th><th>printers</th><th>mean error (µm)</th><th>RMSD (µm)</th><th>average height (µm)</th><th>RMSD minus the paper controller's (µm)</th></tr>\n";
+    for r in control {
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\">{}</td><td>{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&r.effect.replace('_', " ")),
+            format_sig(r.strength),
+            escape(&r.controller.replace('_', " ")),
+            r.printers,
+            with_interval(r.mean_error),
+            with_interval(r.rmsd),
+            with_interval(r.height),
+            if r.controller == "paper" { "—".to_string() } else { with_interval(r.rmsd_vs_paper) },
+        );
+        rows.push(Row {
+            section: "discrepancy_inkjet",
+            item: format!("closed-loop rmsd, {} {}, {} controller", r.effect, r.strength, r.controller),
+            paper: None,
+            ours: r.rmsd.0,
+            unit: "um",
+            source: format!("out/discrepancy/inkjet_control_gain.parquet (stage {stage}, inkjet.control_gain)"),
+        });
+    }
+    html += "</table>\n<p>";
+    for r in control.iter().filter(|r| r.controller == "extended") {
+        let _ = write!(
+            html,
+            "With a {} of {}, the extended controller's RMSD is {}. ",
+            escape(&r.effect.replace('_', " ")),
+            format_sig(r.strength),
+            difference_words(r.rmsd_vs_paper)
+        );
+    }
+    let lowest = control.iter().map(|r| r.height.1).fold(f64::INFINITY, f64::min);
+    if lowest > desired {
+        let highest = control.iter().map(|r| r.height.0).fold(f64::NEG_INFINITY, f64::max);
+        let _ = write!(
+            html,
+            "Every controller's part ends above the desired {} µm: its average height's interval lies above it in every row (means up to {} µm).",
+            format_sig(desired),
+            format_sig(highest)
+        );
+    }
+    html += "</p>\n";
+    let _ = writeln!(
+        html,
+        "<p class=\"run\">Stage {stage} (inkjet.control_gain): tables out/discrepancy/inkjet_control_gain.parquet and inkjet_control_trials.parquet (one row per production print, with what the engine named).</p>"
     );
     html
 }

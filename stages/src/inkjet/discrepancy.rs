@@ -34,19 +34,19 @@ use crate::table::{f64_col, frame, i64_col, str_col};
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
 const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
 
-const LAYERS_PER_GROUP: ParamSpec = ParamSpec {
+pub(super) const LAYERS_PER_GROUP: ParamSpec = ParamSpec {
     name: "layers_per_group",
     ty: ParamType::Int { min: 1, max: 100 },
     default: ParamDefault::Int(4),
     doc: "Consecutive layers per group: blocks share only their boundary scan, so held-out blocks are close to independent (at least 3 groups are needed; 8 or more before anything can be named at α = 0.05 over 6 candidates).",
 };
-const ALPHA: ParamSpec = ParamSpec {
+pub(super) const ALPHA: ParamSpec = ParamSpec {
     name: "alpha",
     ty: ParamType::Float { min: 0.001, max: 0.5 },
     default: ParamDefault::Float(0.05),
     doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
 };
-const MAX_ROUNDS: ParamSpec = ParamSpec {
+pub(super) const MAX_ROUNDS: ParamSpec = ParamSpec {
     name: "max_rounds",
     ty: ParamType::Int { min: 1, max: 6 },
     default: ParamDefault::Int(3),
@@ -276,7 +276,7 @@ fn power_design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
 }
 
 /// The strengths listed for `effect`, each a magnitude within the effect's range.
-fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
+pub(super) fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
     let (lo, hi, unit) = effect.range();
     strength_list(ctx, effect.name(), hi.max(-lo), &format!(" ({unit})"))
 }

@@ -6,11 +6,13 @@
 //! the layer-to-layer model against them. The numerics live in
 //! [`models::inkjet::experiments`]; these stages only run them and write tables.
 
+mod control;
 mod discrepancy;
 mod print;
 mod recovery;
 mod scans;
 
+pub use control::ControlGainStage;
 pub use discrepancy::{print_of, DiscoveryPowerStage, DiscrepancyStage};
 pub use print::{height_map_frame, summary_frame, PrintExperimentStage};
 pub use recovery::{recovery_frame, RecoveryStage};
@@ -26,4 +28,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(ScanResidualsStage));
     registry.register(Box::new(DiscrepancyStage));
     registry.register(Box::new(DiscoveryPowerStage));
+    registry.register(Box::new(ControlGainStage));
 }

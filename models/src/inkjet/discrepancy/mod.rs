@@ -26,6 +26,7 @@
 //! (variable projection), the scalar parameters by the engine's bounded
 //! Levenberg–Marquardt solver.
 
+pub mod control;
 pub mod filter;
 pub mod forward;
 pub mod mechanisms;
