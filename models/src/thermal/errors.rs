@@ -53,6 +53,16 @@ pub enum ThermalError {
         /// Number of free control values.
         unknowns: usize,
     },
+    /// An input that cannot be used, with the reason.
+    #[error("{name} = {value}: {reason}")]
+    InvalidParameter {
+        /// What was given.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// What was expected.
+        reason: &'static str,
+    },
     /// Two samples of a trajectory table disagree in length or spacing.
     #[error("trajectory table: {message}")]
     BadTrajectory {

@@ -23,6 +23,7 @@
 pub mod compensation;
 pub mod dda;
 pub mod deposit;
+pub mod discrepancy;
 pub mod dynamics;
 pub mod errors;
 pub mod geometry;

@@ -20,7 +20,21 @@ use crate::read::{f64s, ints, read_parquet, strs};
 
 /// The ink-jet tables: one discovery per dataset, heights in µm, a group is a block of
 /// consecutive layers.
-const INKJET: Names = Names { set: "dataset", unit: "um", unit_label: "µm", groups: "layer blocks" };
+const INKJET: DatasetText = DatasetText {
+    names: Names { set: "dataset", unit: "um", unit_label: "µm", groups: "layer blocks" },
+    section: "discrepancy_inkjet",
+    kind: "inkjet.discrepancy",
+    prefix: "inkjet",
+};
+
+/// What a domain's per-dataset parts call things: its tables' names, its report section,
+/// its stage kind, the prefix of its published tables (`out/discrepancy/{prefix}_gain.parquet`).
+pub(super) struct DatasetText {
+    pub(super) names: Names,
+    pub(super) section: &'static str,
+    pub(super) kind: &'static str,
+    pub(super) prefix: &'static str,
+}
 
 /// The `report.discrepancy_inkjet` stage kind.
 pub struct DiscrepancyInkjetSection;
@@ -48,14 +62,14 @@ impl StageKind for DiscrepancyInkjetSection {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let dir = &ctx.inputs[0].dir;
         let stage = ctx.inputs[0].name.clone();
-        let causes = Cause::read(&dir.join("causes.parquet"), &INKJET)?;
-        let params = Param::read(&dir.join("extension.parquet"), &INKJET)?;
-        let gains = GainRow::read(&dir.join("gain.parquet"), &INKJET)?;
+        let causes = Cause::read(&dir.join("causes.parquet"), &INKJET.names)?;
+        let params = Param::read(&dir.join("extension.parquet"), &INKJET.names)?;
+        let gains = GainRow::read(&dir.join("gain.parquet"), &INKJET.names)?;
         let mut rows = Vec::new();
         let mut html = String::from("<h3>What the layer-to-layer model gets wrong, and why</h3>\n");
         html += &method(&causes);
         for g in &gains {
-            html += &dataset_part(g, &causes, &params, &stage, &mut rows);
+            html += &dataset_part(g, &causes, &params, &stage, &mut rows, &INKJET);
         }
         for input in &ctx.inputs[1..] {
             let control = input.dir.join("control_gain.parquet");
@@ -88,7 +102,16 @@ the measured surface, which already contains the tilt. Parameter intervals are d
     )
 }
 
-fn dataset_part(g: &GainRow, causes: &[Cause], params: &[Param], stage: &str, rows: &mut Vec<Row>) -> String {
+/// One dataset's verdict, causes, parameters and gain, with its comparison rows.
+pub(super) fn dataset_part(
+    g: &GainRow,
+    causes: &[Cause],
+    params: &[Param],
+    stage: &str,
+    rows: &mut Vec<Row>,
+    text: &DatasetText,
+) -> String {
+    let (names, prefix) = (&text.names, text.prefix);
     let dataset = &g.printer;
     let mine: Vec<&Cause> = causes.iter().filter(|c| &c.printer == dataset).collect();
     let named: Vec<String> = mine.iter().filter(|c| c.named).map(|c| c.mechanism.replace('_', " ")).collect();
@@ -96,39 +119,42 @@ fn dataset_part(g: &GainRow, causes: &[Cause], params: &[Param], stage: &str, ro
     let verdict = if named.is_empty() {
         let too_few = mine.iter().any(|c| c.verdict == "too_few_groups");
         if too_few {
-            "there are too few layer blocks for any candidate to reach significance, so nothing is named".to_string()
+            format!("there are too few {} for any candidate to reach significance, so nothing is named", names.groups)
         } else {
             "no candidate is significant: the model stays as it is".to_string()
         }
     } else {
         format!(
-            "named: <b>{}</b>; the held-out RMSE falls from {} to {} µm, a gain of {} % (95 % interval {} to {} %)",
+            "named: <b>{}</b>; the held-out RMSE falls from {} to {} {}, a gain of {} % (95 % interval {} to {} %)",
             named.join("</b>, then <b>"),
             format_sig(g.before),
             format_sig(g.after),
+            names.unit_label,
             percent(g.gain.0 / 100.0),
             percent(g.gain.1 / 100.0),
             percent(g.gain.2 / 100.0)
         )
     };
-    let _ = writeln!(html, "<p>{} layer blocks; {verdict}.</p>", g.groups);
-    html += &causes_table(&mine, &INKJET);
+    let _ = writeln!(html, "<p>{} {}; {verdict}.</p>", g.groups, names.groups);
+    html += &causes_table(&mine, names);
     let fitted: Vec<&Param> = params.iter().filter(|p| &p.printer == dataset).collect();
     if !fitted.is_empty() {
         html += &parameter_table(fitted.into_iter());
     }
     let _ = writeln!(
         html,
-        "<p class=\"run\">Run discrepancy_inkjet, stage {stage} (inkjet.discrepancy): tables out/discrepancy/inkjet_causes.parquet, inkjet_extension.parquet, inkjet_gain.parquet, inkjet_residuals.parquet.</p>"
+        "<p class=\"run\">Run {section}, stage {stage} ({kind}): tables out/discrepancy/{prefix}_causes.parquet, {prefix}_extension.parquet, {prefix}_gain.parquet, {prefix}_residuals.parquet.</p>",
+        section = text.section,
+        kind = text.kind,
     );
-    let source = format!("out/discrepancy/inkjet_gain.parquet (stage {stage}, inkjet.discrepancy)");
+    let source = format!("out/discrepancy/{prefix}_gain.parquet (stage {stage}, {})", text.kind);
     for (item, value, unit) in [
-        ("held-out rmse, layer model", g.before, "um"),
-        ("held-out rmse, extended model", g.after, "um"),
+        ("held-out rmse, baseline", g.before, names.unit),
+        ("held-out rmse, extended model", g.after, names.unit),
         ("held-out gain", g.gain.0, "%"),
     ] {
         rows.push(Row {
-            section: "discrepancy_inkjet",
+            section: text.section,
             item: format!("{dataset} {item} ({})", g.extended),
             paper: None,
             ours: value,

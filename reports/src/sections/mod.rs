@@ -5,6 +5,7 @@
 mod chen2024;
 mod discrepancy_fdm;
 mod discrepancy_inkjet;
+mod discrepancy_thermal;
 mod fdm_virtual;
 mod lu2015;
 mod ren2021;
@@ -12,6 +13,7 @@ mod ren2021;
 pub use chen2024::Chen2024Section;
 pub use discrepancy_fdm::DiscrepancyFdmSection;
 pub use discrepancy_inkjet::DiscrepancyInkjetSection;
+pub use discrepancy_thermal::DiscrepancyThermalSection;
 pub use fdm_virtual::FdmVirtualSection;
 pub use lu2015::Lu2015Section;
 
@@ -27,6 +29,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(Chen2024Section));
     registry.register(Box::new(DiscrepancyFdmSection));
     registry.register(Box::new(DiscrepancyInkjetSection));
+    registry.register(Box::new(DiscrepancyThermalSection));
     registry.register(Box::new(FdmVirtualSection));
 }
 

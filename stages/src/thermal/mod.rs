@@ -10,11 +10,14 @@
 //! - [`reprint`]: `thermal.reprint_evaluate`, re-print with and without it and measure
 //!   eqs 40-41 (evaluation: uses the virtual printer's effects).
 //! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`.
+//! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time and layer
+//!   models get wrong about the monitor's measurements, and why (DESIGN §7).
 //! - [`common`]: what the stages share (reading a sequence, the trajectory, the camera).
 
 pub mod accuracy;
 pub mod common;
 pub mod compensate;
+pub mod discrepancy;
 pub mod generate;
 pub mod localise;
 pub mod monitor;
@@ -29,4 +32,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(compensate::CompensateStage));
     registry.register(Box::new(reprint::ReprintEvaluateStage));
     registry.register(Box::new(accuracy::AccuracyEvaluateStage));
+    registry.register(Box::new(discrepancy::DiscrepancyStage));
 }

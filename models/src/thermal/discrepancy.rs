@@ -1,0 +1,689 @@
+//! What paper 003's models get wrong about what the thermal monitor measures, and why:
+//! the thermal domain of the discrepancy engine (DESIGN §7).
+//!
+//! **What is observed.** Two of the monitor's measurements, per filmed layer:
+//! - each localised frame's *capture offset* `t̂_c − t_r`, its capture time estimated by
+//!   eq. 30 minus its recorded time (frames whose estimate sits at the edge of eq. 30's
+//!   search window are censored and left out, and so are repeated images);
+//! - each trajectory sample's *centre temperature*: the bead's temperature on the path
+//!   in the frame its width is read from (at the monitor's measuring age).
+//!
+//! **Baseline.** Paper 003 as the project uses it: eq. 28, `t_c = t_r + t_f` with small
+//! zero-mean fluctuations, so the expected offset is 0; and, as the paper prints and
+//! measures every layer the same way (one identified τ, one threshold contour, the
+//! substrate at the bed temperature), every layer's centre temperatures are the same
+//! profile along the path, estimated from the training layers at each sample.
+//!
+//! **Candidates** (each a small parametric extension with its physics):
+//! - `camera_latency`: a constant delay between the recorded and the true capture time,
+//!   offset = `d` (the printer's effect).
+//! - `clock_rate`: the camera's clock runs at a slightly different rate from the
+//!   printer's, offset = `r·t_r` within a layer (the printer does not have it).
+//! - `layer_heat_accumulation`: a fraction `f` of a layer's residual heat is carried
+//!   into the next layer's substrate (the printer's effect). The substrate's excess over
+//!   the bed then follows `s_0 = 0`, `s_n = f·(s_{n−1} + (T_noz − T_bed − s_{n−1})·g)`,
+//!   where `g` is the layer's mean residual excess when the next starts, as a fraction of
+//!   the nozzle-to-substrate difference. A bead on a substrate `s` warmer reads
+//!   `T = c + s·(T_noz − c)/(T_noz − T_bed)` where layer 0 reads `c`: the bead's excess
+//!   over its substrate decays by the same factor whatever the substrate's temperature.
+//! - `bed_warming`: the substrate warms by a fixed amount every layer (a heated chamber
+//!   or bed still settling), `s_n = w·n`, read through the same relation (the printer
+//!   does not have it).
+//!
+//! The thermal effects that change the deposited width (`tau_mismatch`,
+//! `heat_diffusion_widening`, `melt_squeeze_out`) have no candidate here: even on a
+//! print with none of them, the threshold contour of a cooling bead differs near every
+//! corner from the widths of eqs 5-11 with the nominal τ by more than they change it,
+//! so a width discrepancy needs a model of the contour first. On prints with them the
+//! engine should stay silent, and the shipped spec prints one to show it.
+//!
+//! **Groups** are whole layers, each with the frames recorded while it was printed.
+//! Not blocks of a layer: a layer carries its own random state (the virtual printer
+//! draws a flow factor per layer, a real one has its own), which every block of the
+//! layer shares, so a mechanism fitted to the other blocks of a held-out block's layer
+//! learns that layer's offset, and on a print with heat carried over the blocks named a
+//! linear warming as a second cause (measured with four blocks per layer). Held-out
+//! layers share nothing but the trajectory: each frame's fluctuation is its own, a
+//! temperature's noise belongs to the frame it is read in, and a layer's baseline
+//! profile comes from the other layers' readings of the same samples. An exact
+//! sign-flip test over G layers cannot reach p below 2^−G, so eight or more filmed
+//! layers are needed before anything can be named at α = 0.05 over four candidates.
+//!
+//! **Scales.** A group's squared error adds offsets (s) and temperatures (°C), so every
+//! observation is divided by its kind's noise scale, estimated robustly from
+//! differences no candidate can explain: successive frames' offsets within a layer,
+//! and the same sample's temperature in consecutive layers after removing each layer
+//! pair's median difference.
+
+use ::discrepancy::least_squares::{minimize, LmSettings};
+use ::discrepancy::{Group, Mechanism, Model, ModelError, Parameter, Scale, Variable, VariableKind};
+
+use super::errors::ThermalError;
+
+/// One localised frame's capture offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameObservation {
+    /// 0-based layer.
+    pub layer: usize,
+    /// Recorded time from the layer's start, s.
+    pub recorded_time_s: f64,
+    /// Estimated capture time (eq. 30) minus recorded time, s.
+    pub offset_s: f64,
+}
+
+/// One trajectory sample's centre temperature in one layer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TemperatureObservation {
+    /// 0-based layer.
+    pub layer: usize,
+    /// Trajectory sample index.
+    pub sample: usize,
+    /// Its time on the trajectory, s.
+    pub t_s: f64,
+    /// The bead's temperature on the path at the measuring age, °C.
+    pub temp_c: f64,
+}
+
+/// What one filmed print gives the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThermalRecord {
+    frames: Vec<FrameObservation>,
+    temps: Vec<TemperatureObservation>,
+    layers: usize,
+    samples: usize,
+    layer_duration_s: f64,
+    nozzle_temp_c: f64,
+    bed_temp_c: f64,
+    scales: Scales,
+}
+
+/// The noise scale of each kind of observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scales {
+    /// Capture offsets, s.
+    pub offset_s: f64,
+    /// Centre temperatures, °C.
+    pub temp_c: f64,
+}
+
+/// The parts of a [`ThermalRecord`].
+#[derive(Debug, Clone, Copy)]
+pub struct RecordParts<'a> {
+    /// Frame offsets (finite, uncensored).
+    pub frames: &'a [FrameObservation],
+    /// Centre temperatures (finite).
+    pub temps: &'a [TemperatureObservation],
+    /// Trajectory samples per layer.
+    pub samples: usize,
+    /// Duration of one layer's trajectory, s.
+    pub layer_duration_s: f64,
+    /// Nozzle temperature, °C.
+    pub nozzle_temp_c: f64,
+    /// Bed temperature, °C.
+    pub bed_temp_c: f64,
+}
+
+fn invalid(name: &'static str, value: f64, reason: &'static str) -> ThermalError {
+    ThermalError::InvalidParameter { name, value, reason }
+}
+
+impl ThermalRecord {
+    /// Checks the parts, keeps the temperatures of samples read in at least two layers
+    /// (a sample read once has no other layer to predict it from) and estimates the scales.
+    pub fn new(parts: RecordParts<'_>) -> Result<Self, ThermalError> {
+        if !(parts.nozzle_temp_c.is_finite() && parts.bed_temp_c.is_finite() && parts.nozzle_temp_c > parts.bed_temp_c)
+        {
+            return Err(invalid("nozzle_temp_c", parts.nozzle_temp_c, "must be finite and above the bed temperature"));
+        }
+        if !(parts.layer_duration_s.is_finite() && parts.layer_duration_s > 0.0) {
+            return Err(invalid("layer_duration_s", parts.layer_duration_s, "must be positive"));
+        }
+        let frames: Vec<FrameObservation> = parts.frames.to_vec();
+        if let Some(f) = frames.iter().find(|f| !(f.offset_s.is_finite() && f.recorded_time_s.is_finite())) {
+            return Err(invalid("offset_s", f.offset_s, "every frame offset and recorded time must be finite"));
+        }
+        if let Some(t) = parts.temps.iter().find(|t| !t.temp_c.is_finite() || t.sample >= parts.samples) {
+            return Err(invalid("temp_c", t.temp_c, "temperatures must be finite, at samples of the trajectory"));
+        }
+        let layers =
+            frames.iter().map(|f| f.layer).chain(parts.temps.iter().map(|t| t.layer)).max().map_or(0, |l| l + 1);
+        let mut seen = vec![0usize; parts.samples];
+        parts.temps.iter().for_each(|t| seen[t.sample] += 1);
+        let temps: Vec<TemperatureObservation> = parts.temps.iter().filter(|t| seen[t.sample] >= 2).copied().collect();
+        if layers < 2 {
+            return Err(invalid("layers", layers as f64, "at least two filmed layers are needed"));
+        }
+        let scales = Scales { offset_s: offset_scale(&frames, layers), temp_c: temperature_scale(&temps, layers) };
+        Ok(Self {
+            frames,
+            temps,
+            layers,
+            samples: parts.samples,
+            layer_duration_s: parts.layer_duration_s,
+            nozzle_temp_c: parts.nozzle_temp_c,
+            bed_temp_c: parts.bed_temp_c,
+            scales,
+        })
+    }
+
+    /// Filmed layers.
+    pub fn layers(&self) -> usize {
+        self.layers
+    }
+
+    /// The noise scales.
+    pub fn scales(&self) -> Scales {
+        self.scales
+    }
+
+    /// The groups: one per filmed layer, with its frames and temperatures.
+    pub fn layer_groups(&self) -> Vec<ThermalBlock> {
+        let mut out: Vec<ThermalBlock> = (0..self.layers)
+            .map(|layer| ThermalBlock { layer, frames: vec![], temps: vec![], observed: vec![] })
+            .collect();
+        for (i, f) in self.frames.iter().enumerate() {
+            out[f.layer].frames.push(i);
+        }
+        for (i, t) in self.temps.iter().enumerate() {
+            out[t.layer].temps.push(i);
+        }
+        for g in &mut out {
+            g.observed = g.frames.iter().map(|&i| self.frames[i].offset_s / self.scales.offset_s).collect();
+            g.observed.extend(g.temps.iter().map(|&i| self.temps[i].temp_c / self.scales.temp_c));
+        }
+        out.retain(|g| !g.observed.is_empty());
+        out
+    }
+
+    /// The substrate's excess over the bed in each layer under `heat` (`f`, `g`) and
+    /// `warming_c_per_layer`; `None` when it reaches the nozzle temperature.
+    fn substrate_excess_c(&self, heat: Option<(f64, f64)>, warming_c_per_layer: f64) -> Option<Vec<f64>> {
+        let span_c = self.nozzle_temp_c - self.bed_temp_c;
+        let mut carried = 0.0;
+        let mut out = Vec::with_capacity(self.layers);
+        for n in 0..self.layers {
+            if n > 0 {
+                if let Some((f, g)) = heat {
+                    carried = f * (carried + (span_c - carried) * g);
+                }
+            }
+            let s = carried + warming_c_per_layer * n as f64;
+            if s >= span_c || !s.is_finite() {
+                return None;
+            }
+            out.push(s);
+        }
+        Some(out)
+    }
+
+    /// The layer-0 equivalent of a reading `temp_c` on a substrate `s` warmer:
+    /// the inverse of `T = c + s·(T_noz − c)/span`.
+    fn layer0_equivalent(&self, temp_c: f64, s: f64) -> f64 {
+        let span = self.nozzle_temp_c - self.bed_temp_c;
+        (temp_c - s * self.nozzle_temp_c / span) / (1.0 - s / span)
+    }
+
+    fn reading(&self, c: f64, s: f64) -> f64 {
+        c + s * (self.nozzle_temp_c - c) / (self.nozzle_temp_c - self.bed_temp_c)
+    }
+}
+
+/// Robust std of the frame offsets' fluctuations: MAD of successive differences within
+/// a layer over √2 (a constant or slowly drifting offset cancels).
+fn offset_scale(frames: &[FrameObservation], layers: usize) -> f64 {
+    let mut diffs = Vec::new();
+    for layer in 0..layers {
+        let mut these: Vec<&FrameObservation> = frames.iter().filter(|f| f.layer == layer).collect();
+        these.sort_by(|a, b| a.recorded_time_s.total_cmp(&b.recorded_time_s));
+        diffs.extend(these.windows(2).map(|w| w[1].offset_s - w[0].offset_s));
+    }
+    robust_scale(diffs, 1e-4)
+}
+
+/// Robust std of a temperature reading: the same sample in consecutive layers, each
+/// layer pair's median difference removed, MAD over √2.
+fn temperature_scale(temps: &[TemperatureObservation], layers: usize) -> f64 {
+    let samples = temps.iter().map(|t| t.sample).max().map_or(0, |s| s + 1);
+    let mut by_layer = vec![vec![f64::NAN; samples]; layers];
+    temps.iter().for_each(|t| by_layer[t.layer][t.sample] = t.temp_c);
+    let mut all = Vec::new();
+    for pair in by_layer.windows(2) {
+        let mut d: Vec<f64> = pair[0].iter().zip(&pair[1]).map(|(a, b)| b - a).filter(|d| d.is_finite()).collect();
+        let median = median_of(&mut d);
+        all.extend(d.iter().map(|x| x - median));
+    }
+    robust_scale(all, 1e-3)
+}
+
+fn median_of(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+/// 1.4826·median|x − median|/√2, at least `floor` (noiseless data).
+fn robust_scale(mut diffs: Vec<f64>, floor: f64) -> f64 {
+    let median = median_of(&mut diffs);
+    let mut dev: Vec<f64> = diffs.iter().map(|d| (d - median).abs()).collect();
+    (1.4826 * median_of(&mut dev) / std::f64::consts::SQRT_2).max(floor)
+}
+
+/// A group: one filmed layer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThermalBlock {
+    /// 0-based layer.
+    pub layer: usize,
+    frames: Vec<usize>,
+    temps: Vec<usize>,
+    observed: Vec<f64>,
+}
+
+impl Group for ThermalBlock {
+    fn observed(&self) -> &[f64] {
+        &self.observed
+    }
+}
+
+/// Candidate indices.
+pub const CAMERA_LATENCY: usize = 0;
+/// See [`CAMERA_LATENCY`].
+pub const CLOCK_RATE: usize = 1;
+/// See [`CAMERA_LATENCY`].
+pub const LAYER_HEAT_ACCUMULATION: usize = 2;
+/// See [`CAMERA_LATENCY`].
+pub const BED_WARMING: usize = 3;
+
+/// A thermal candidate.
+#[derive(Debug)]
+pub struct Candidate {
+    name: &'static str,
+    physics: &'static str,
+    params: &'static [Parameter],
+}
+
+impl Mechanism for Candidate {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+    fn physics(&self) -> &'static str {
+        self.physics
+    }
+    fn params(&self) -> &'static [Parameter] {
+        self.params
+    }
+}
+
+const fn linear(name: &'static str, unit: &'static str, lo: f64, hi: f64, meaning: &'static str) -> Parameter {
+    Parameter { name, unit, lo, hi, meaning, scale: Scale::Linear }
+}
+
+static LATENCY: [Parameter; 1] =
+    [linear("latency_s", "s", -0.1, 0.5, "constant delay of the true capture time after the recorded one")];
+static RATE: [Parameter; 1] =
+    [linear("clock_rate", "1", -0.01, 0.01, "relative rate error of the camera's clock against the printer's")];
+static HEAT: [Parameter; 2] = [
+    linear(
+        "carried_fraction",
+        "1",
+        0.0,
+        1.0,
+        "fraction of a layer's residual heat carried into the next layer's substrate",
+    ),
+    linear(
+        "residual_fraction",
+        "1",
+        0.0,
+        1.0,
+        "a layer's mean residual excess when the next starts, as a fraction of the nozzle-to-substrate difference",
+    ),
+];
+static WARMING: [Parameter; 1] =
+    [linear("warming_c_per_layer", "degC", -20.0, 20.0, "substrate warming per layer, whatever was printed")];
+
+/// Every candidate, in index order.
+pub static CANDIDATES: [Candidate; 4] = [
+    Candidate {
+        name: "camera_latency",
+        physics: "every frame is captured a fixed time after its recorded time stamp (eq. 28 with a non-zero mean t_f)",
+        params: &LATENCY,
+    },
+    Candidate {
+        name: "clock_rate",
+        physics: "the camera's clock runs at a slightly different rate from the printer's: the capture offset grows linearly through a layer",
+        params: &RATE,
+    },
+    Candidate {
+        name: "layer_heat_accumulation",
+        physics: "a fraction of each layer's residual heat warms the next layer's substrate, so later layers cool from a warmer base (saturating over layers)",
+        params: &HEAT,
+    },
+    Candidate {
+        name: "bed_warming",
+        physics: "the substrate warms by a fixed amount every layer whatever was printed (a chamber or bed still settling)",
+        params: &WARMING,
+    },
+];
+
+/// The candidates as the engine sees them.
+pub static MECHANISMS: [&dyn Mechanism; 4] = [&CANDIDATES[0], &CANDIDATES[1], &CANDIDATES[2], &CANDIDATES[3]];
+
+/// The candidate called `name`, by index.
+pub fn candidate_index(name: &str) -> Option<usize> {
+    CANDIDATES.iter().position(|c| c.name == name)
+}
+
+/// The variables the residuals are shown against.
+pub static VARIABLES: [Variable; 3] = [
+    Variable { name: "layer", unit: "", kind: VariableKind::Continuous },
+    Variable { name: "time_in_layer_s", unit: "s", kind: VariableKind::Continuous },
+    Variable {
+        name: "observation",
+        unit: "",
+        kind: VariableKind::Categorical(&["capture_offset", "centre_temperature"]),
+    },
+];
+
+/// The temperature part of a fit.
+struct SubstrateFit {
+    heat: Option<(f64, f64)>,
+    warming_c_per_layer: f64,
+    profile_c: Vec<f64>,
+}
+
+/// The paper's models of one filmed print, extendable by the candidates.
+#[derive(Debug, Clone)]
+pub struct ThermalModel {
+    record: ThermalRecord,
+}
+
+/// A fitted model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThermalFit {
+    /// Active mechanisms.
+    pub active: Vec<usize>,
+    /// Capture delay, s.
+    pub latency_s: f64,
+    /// Clock rate error.
+    pub clock_rate: f64,
+    /// Heat carried (`f`, `g`), when active.
+    pub heat: Option<(f64, f64)>,
+    /// Substrate warming per layer, °C.
+    pub warming_c_per_layer: f64,
+    /// Each sample's layer-0 centre temperature from the training layers (NaN: unseen).
+    pub profile_c: Vec<f64>,
+}
+
+impl ThermalModel {
+    /// The model of `record`.
+    pub fn new(record: ThermalRecord) -> Self {
+        Self { record }
+    }
+
+    /// The record.
+    pub fn record(&self) -> &ThermalRecord {
+        &self.record
+    }
+
+    fn frame_fit(&self, active: &[usize], train: &[&ThermalBlock]) -> Result<(f64, f64), ModelError> {
+        let (lat, rate) = (active.contains(&CAMERA_LATENCY), active.contains(&CLOCK_RATE));
+        let frames = train.iter().flat_map(|b| b.frames.iter().map(|&i| &self.record.frames[i]));
+        let (mut n, mut st, mut stt, mut sy, mut sty) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for f in frames {
+            let t = f.recorded_time_s;
+            n += 1.0;
+            st += t;
+            stt += t * t;
+            sy += f.offset_s;
+            sty += t * f.offset_s;
+        }
+        match (lat, rate) {
+            (false, false) => Ok((0.0, 0.0)),
+            _ if n == 0.0 => Err(ModelError::Fit("no frame offsets to fit a camera mechanism to".into())),
+            (true, false) => Ok((sy / n, 0.0)),
+            (false, true) if stt > 0.0 => Ok((0.0, sty / stt)),
+            (true, true) if n * stt - st * st > 0.0 => {
+                let det = n * stt - st * st;
+                Ok(((stt * sy - st * sty) / det, (n * sty - st * sy) / det))
+            }
+            _ => Err(ModelError::Fit("the frames' recorded times do not determine a clock rate".into())),
+        }
+    }
+
+    /// The layer-0 profile from `train`'s temperatures under the substrate excesses `s`.
+    fn profile(&self, train: &[&ThermalBlock], s: &[f64]) -> Vec<f64> {
+        let (mut sum, mut count) = (vec![0.0; self.record.samples], vec![0u32; self.record.samples]);
+        for t in train.iter().flat_map(|b| b.temps.iter().map(|&i| &self.record.temps[i])) {
+            sum[t.sample] += self.record.layer0_equivalent(t.temp_c, s[t.layer]);
+            count[t.sample] += 1;
+        }
+        sum.iter().zip(&count).map(|(s, &c)| if c > 0 { s / f64::from(c) } else { f64::NAN }).collect()
+    }
+
+    fn temperature_fit(
+        &self,
+        active: &[usize],
+        train: &[&ThermalBlock],
+        warm: Option<&ThermalFit>,
+    ) -> Result<SubstrateFit, ModelError> {
+        let (heat, warming) = (active.contains(&LAYER_HEAT_ACCUMULATION), active.contains(&BED_WARMING));
+        let unpack = |x: &[f64]| -> (Option<(f64, f64)>, f64) {
+            let h = heat.then(|| (x[0], x[1]));
+            (h, if warming { x[x.len() - 1] } else { 0.0 })
+        };
+        if !heat && !warming {
+            let s = vec![0.0; self.record.layers];
+            return Ok(SubstrateFit { heat: None, warming_c_per_layer: 0.0, profile_c: self.profile(train, &s) });
+        }
+        let (mut x0, mut lo, mut hi) = (Vec::new(), Vec::new(), Vec::new());
+        if heat {
+            let (f, g) = warm.and_then(|w| w.heat).unwrap_or((0.3, 0.3));
+            x0.extend([f, g]);
+            lo.extend([0.0, 0.0]);
+            hi.extend([1.0, 1.0]);
+        }
+        if warming {
+            x0.push(warm.map_or(0.0, |w| w.warming_c_per_layer));
+            lo.push(WARMING[0].lo);
+            hi.push(WARMING[0].hi);
+        }
+        let temps: Vec<&TemperatureObservation> =
+            train.iter().flat_map(|b| b.temps.iter().map(|&i| &self.record.temps[i])).collect();
+        if temps.is_empty() {
+            return Err(ModelError::Fit("no centre temperatures to fit a substrate mechanism to".into()));
+        }
+        let scale = self.record.scales.temp_c;
+        let residuals = |x: &[f64], r: &mut [f64]| -> bool {
+            let (h, w) = unpack(x);
+            let Some(s) = self.record.substrate_excess_c(h, w) else { return false };
+            let profile = self.profile(train, &s);
+            for (ri, t) in r.iter_mut().zip(&temps) {
+                *ri = (t.temp_c - self.record.reading(profile[t.sample], s[t.layer])) / scale;
+            }
+            true
+        };
+        let solution = minimize(residuals, &x0, &lo, &hi, temps.len(), &LmSettings::default())
+            .ok_or_else(|| ModelError::Fit("the substrate mechanism cannot start from its initial values".into()))?;
+        let (h, w) = unpack(&solution.x);
+        let s = self.record.substrate_excess_c(h, w).expect("the solution was evaluated");
+        Ok(SubstrateFit { heat: h, warming_c_per_layer: w, profile_c: self.profile(train, &s) })
+    }
+}
+
+impl Model for ThermalModel {
+    type Group = ThermalBlock;
+    type Fit = ThermalFit;
+
+    fn name(&self) -> &'static str {
+        "capture_and_layer_model"
+    }
+    fn params(&self) -> &'static [Parameter] {
+        &[]
+    }
+    fn candidates(&self) -> &[&'static dyn Mechanism] {
+        &MECHANISMS
+    }
+    fn variables(&self) -> &[Variable] {
+        &VARIABLES
+    }
+
+    fn variable_values(&self, group: &ThermalBlock, variable: usize) -> Vec<f64> {
+        let r = &self.record;
+        let frames = group.frames.iter().map(|&i| &r.frames[i]);
+        let temps = group.temps.iter().map(|&i| &r.temps[i]);
+        match variable {
+            0 => vec![group.layer as f64; group.observed.len()],
+            1 => frames.map(|f| f.recorded_time_s).chain(temps.map(|t| t.t_s)).collect(),
+            _ => frames.map(|_| 0.0).chain(temps.map(|_| 1.0)).collect(),
+        }
+    }
+
+    fn fit(
+        &self,
+        active: &[usize],
+        train: &[&ThermalBlock],
+        warm: Option<&ThermalFit>,
+    ) -> Result<ThermalFit, ModelError> {
+        let (latency_s, clock_rate) = self.frame_fit(active, train)?;
+        let SubstrateFit { heat, warming_c_per_layer, profile_c } = self.temperature_fit(active, train, warm)?;
+        Ok(ThermalFit { active: active.to_vec(), latency_s, clock_rate, heat, warming_c_per_layer, profile_c })
+    }
+
+    fn predict(
+        &self,
+        fit: &ThermalFit,
+        group: &ThermalBlock,
+        _calibrate: Option<&[bool]>,
+    ) -> Result<Vec<f64>, ModelError> {
+        let r = &self.record;
+        let s = r
+            .substrate_excess_c(fit.heat, fit.warming_c_per_layer)
+            .ok_or_else(|| ModelError::Predict("the fitted substrate reaches the nozzle temperature".into()))?;
+        let mut out: Vec<f64> = group
+            .frames
+            .iter()
+            .map(|&i| (fit.latency_s + fit.clock_rate * r.frames[i].recorded_time_s) / r.scales.offset_s)
+            .collect();
+        for &i in &group.temps {
+            let t = &r.temps[i];
+            let c = fit.profile_c[t.sample];
+            if !c.is_finite() {
+                return Err(ModelError::Predict(format!("sample {} has no reading in the training layers", t.sample)));
+            }
+            out.push(r.reading(c, s[t.layer]) / r.scales.temp_c);
+        }
+        Ok(out)
+    }
+
+    fn estimates(&self, fit: &ThermalFit) -> Vec<f64> {
+        let mut out = Vec::new();
+        for &m in &fit.active {
+            match m {
+                CAMERA_LATENCY => out.push(fit.latency_s),
+                CLOCK_RATE => out.push(fit.clock_rate),
+                LAYER_HEAT_ACCUMULATION => {
+                    let (f, g) = fit.heat.unwrap_or((0.0, 0.0));
+                    out.extend([f, g]);
+                }
+                _ => out.push(fit.warming_c_per_layer),
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ::discrepancy::{discover, Settings};
+
+    /// A noiseless synthetic print in the model's own terms: `layers` layers of
+    /// `samples` samples, a bumpy layer-0 profile, frames every 0.125 s.
+    fn synthetic(layers: usize, latency_s: f64, rate: f64, heat: Option<(f64, f64)>, warming: f64) -> ThermalRecord {
+        let (samples, duration) = (400, 8.0);
+        let (nozzle, bed) = (215.0, 60.0);
+        let probe = ThermalRecord {
+            frames: vec![],
+            temps: vec![],
+            layers,
+            samples,
+            layer_duration_s: duration,
+            nozzle_temp_c: nozzle,
+            bed_temp_c: bed,
+            scales: Scales { offset_s: 1.0, temp_c: 1.0 },
+        };
+        let s = probe.substrate_excess_c(heat, warming).unwrap();
+        let mut frames = vec![];
+        let mut temps = vec![];
+        for (n, &s_n) in s.iter().enumerate() {
+            for i in 0..64 {
+                let t = i as f64 * 0.125;
+                // A small zero-mean deterministic wobble so the scales are not at their floor.
+                let wobble = 1e-3 * (((i * 7 + n * 3) % 5) as f64 - 2.0);
+                frames.push(FrameObservation { layer: n, recorded_time_s: t, offset_s: latency_s + rate * t + wobble });
+            }
+            for k in 0..samples {
+                let c = 180.0 + 10.0 * (k as f64 * 0.05).sin() + 0.02 * ((k * 13 + n * 5) % 7) as f64;
+                let t_s = k as f64 * duration / samples as f64;
+                temps.push(TemperatureObservation { layer: n, sample: k, t_s, temp_c: probe.reading(c, s_n) });
+            }
+        }
+        ThermalRecord::new(RecordParts {
+            frames: &frames,
+            temps: &temps,
+            samples,
+            layer_duration_s: duration,
+            nozzle_temp_c: nozzle,
+            bed_temp_c: bed,
+        })
+        .unwrap()
+    }
+
+    fn fit_all(record: ThermalRecord, active: &[usize]) -> ThermalFit {
+        let model = ThermalModel::new(record);
+        let blocks = model.record().layer_groups();
+        let all: Vec<&ThermalBlock> = blocks.iter().collect();
+        model.fit(active, &all, None).unwrap()
+    }
+
+    #[test]
+    fn each_mechanism_recovers_its_parameters_from_noiseless_data() {
+        let fit = fit_all(synthetic(8, 0.02, 0.0, None, 0.0), &[CAMERA_LATENCY]);
+        assert!((fit.latency_s - 0.02).abs() < 2e-3, "{}", fit.latency_s);
+        let fit = fit_all(synthetic(8, 0.0, 0.002, None, 0.0), &[CLOCK_RATE]);
+        assert!((fit.clock_rate - 0.002).abs() < 2e-4, "{}", fit.clock_rate);
+        let fit = fit_all(synthetic(8, 0.0, 0.0, Some((0.5, 0.3)), 0.0), &[LAYER_HEAT_ACCUMULATION]);
+        let (f, g) = fit.heat.unwrap();
+        assert!((f - 0.5).abs() < 0.01 && (g - 0.3).abs() < 0.01, "{f} {g}");
+        let fit = fit_all(synthetic(8, 0.0, 0.0, None, 1.5), &[BED_WARMING]);
+        assert!((fit.warming_c_per_layer - 1.5).abs() < 0.01, "{}", fit.warming_c_per_layer);
+    }
+
+    #[test]
+    fn the_reading_and_its_inverse_agree_and_layer_zero_is_the_profile() {
+        let r = synthetic(3, 0.0, 0.0, Some((0.4, 0.2)), 0.0);
+        for (c, s) in [(180.0, 0.0), (150.0, 12.0), (200.0, 40.0)] {
+            assert!((r.layer0_equivalent(r.reading(c, s), s) - c).abs() < 1e-9);
+        }
+        // A bead at the nozzle temperature reads it whatever the substrate.
+        assert!((r.reading(215.0, 30.0) - 215.0).abs() < 1e-12);
+        let s = r.substrate_excess_c(Some((0.4, 0.2)), 0.0).unwrap();
+        assert_eq!(s[0], 0.0);
+        assert!((s[1] - 0.4 * 155.0 * 0.2).abs() < 1e-12);
+        assert!((s[2] - 0.4 * (s[1] + (155.0 - s[1]) * 0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_engine_names_the_hidden_mechanism_and_nothing_on_the_baseline() {
+        let settings = Settings { bootstrap_draws: 100, max_rounds: 2, ..Settings::standard(3) };
+        let run = |record: ThermalRecord| {
+            let model = ThermalModel::new(record);
+            let blocks = model.record().layer_groups();
+            discover(&model, &blocks, &[], &settings).unwrap().named
+        };
+        assert_eq!(run(synthetic(8, 0.0, 0.0, None, 0.0)), Vec::<usize>::new());
+        assert_eq!(run(synthetic(8, 0.01, 0.0, None, 0.0)), [CAMERA_LATENCY]);
+        assert_eq!(run(synthetic(8, 0.0, 0.0, Some((0.5, 0.3)), 0.0)), [LAYER_HEAT_ACCUMULATION]);
+    }
+}
