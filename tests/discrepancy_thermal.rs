@@ -89,3 +89,58 @@ inputs = ["print", "monitor", "other_print"]
     let err = fails(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
     assert!(err.contains("(sequence, monitor) pairs") && err.contains("3 inputs"), "{err}");
 }
+
+#[test]
+fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
+    let tmp = tempfile::tempdir().unwrap();
+    let shipped = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/studies/discrepancy_thermal_power.toml"),
+    )
+    .unwrap();
+    let study = "null_draws = 200, draws = 40, camera_latency = \"0.005, 0.01\", layer_heat_accumulation = \"0.3, 0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"1\", melt_squeeze_out = \"0.2\"";
+    assert!(shipped.contains(study), "the shipped study changed; update this test");
+    // Six null prints, two of each effect a candidate describes at the larger strength,
+    // two with a τ error no candidate describes.
+    let cut = shipped.replace(
+        study,
+        "null_draws = 6, draws = 2, camera_latency = \"0.01\", layer_heat_accumulation = \"0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"\", melt_squeeze_out = \"\"",
+    );
+    let spec = tmp.path().join("study.toml");
+    std::fs::write(&spec, cut).unwrap();
+    ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
+    let power = read(&tmp.path().join("out/discrepancy/thermal_power.parquet"));
+    let effects = strings(&power, "effect");
+    assert_eq!(effects, ["none", "camera_latency", "layer_heat_accumulation", "tau_mismatch"]);
+    let ints = |c: &str| -> Vec<i64> { power.column(c).unwrap().i64().unwrap().iter().map(|x| x.unwrap()).collect() };
+    let (draws, correct, wrong) = (ints("draws"), ints("correct"), ints("wrong"));
+    assert_eq!(draws, [6, 2, 2, 2]);
+    // Null: false alarms not significantly above 5 % (the Clopper–Pearson lower bound).
+    assert!(floats(&power, "false_alarm_ci_lo")[0] <= 0.05, "{} of 6", wrong[0]);
+    // The effects a candidate describes: named in ≥ 95 % and wrong in ≤ 2 %, each not
+    // significantly violated (pooled over the two cells: 4 draws).
+    let (named, wrongs) = (correct[1] + correct[2], wrong[1] + wrong[2]);
+    assert!(named >= 3, "named {named} of 4");
+    assert_eq!(wrongs, 0, "wrong {wrongs} of 4");
+    // The τ error has no candidate: nothing is named on it, or it is a wrong cause.
+    assert_eq!(correct[3], 0);
+    // Coverage of the strength intervals not significantly below 90 %: with four
+    // intervals, the Clopper–Pearson upper bound reaches 0.9 from two covered on.
+    let (covered, with) = (ints("covered"), ints("with_interval"));
+    assert!(2 * (covered[1] + covered[2]) >= with[1] + with[2], "{covered:?} of {with:?}");
+    // The null's first-round p-values are valid: nowhere significantly above the
+    // uniform (one-sided Kolmogorov–Smirnov, p > 1 %).
+    let draws_table = read(&tmp.path().join("out/discrepancy/thermal_power_draws.parquet"));
+    assert_eq!(draws_table.height(), 12);
+    let null: Vec<usize> = (0..12).filter(|&i| strings(&draws_table, "effect")[i] == "none").collect();
+    for candidate in ["camera_latency", "clock_rate", "layer_heat_accumulation", "bed_warming"] {
+        let all = floats(&draws_table, &format!("p_{candidate}"));
+        let mut p: Vec<f64> = null.iter().map(|&i| all[i]).collect();
+        p.sort_by(f64::total_cmp);
+        let n = p.len() as f64;
+        let d_plus = p.iter().enumerate().map(|(i, &x)| (i + 1) as f64 / n - x).fold(0.0f64, f64::max);
+        assert!((-2.0 * n * d_plus * d_plus).exp() > 0.01, "{candidate}: D+ = {d_plus}");
+    }
+    let section =
+        std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_thermal_power/report/section.html")).unwrap();
+    assert!(section.contains("How often is a hidden effect named?"));
+}

@@ -6,8 +6,10 @@
 //! with jackknife intervals) and `gain.parquet` (held-out RMSE before and after). The
 //! columns are declared once, below, with the domain's set column and unit filled in.
 
+use discrepancy::power::{Outcome, PowerRow};
 use discrepancy::{Discovery, Model, Settings, VariableKind, Verdict};
 use pipeline::{StageContext, StageError};
+use polars::prelude::DataFrame;
 
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
@@ -325,4 +327,74 @@ impl DiscrepancyTables {
 /// `lag_model` or `lag_model + width_cap + …`.
 fn base_label<M: Model>(model: &M, extensions: &[String]) -> String {
     std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
+}
+
+/// A power study's summary (`power.parquet`): one row per effect and strength.
+pub(crate) fn power_frame(base: &str, rows: &[PowerRow]) -> Result<DataFrame, StageError> {
+    let n = rows.len();
+    let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|r| f(r) as i64).collect::<Vec<i64>>();
+    frame(vec![
+        str_col("base", vec![base.to_string(); n]),
+        str_col("noise", vec!["virtual".to_string(); n]),
+        str_col("own_causes", vec!["none".to_string(); n]),
+        str_col("effect", rows.iter().map(|r| r.effect.to_string()).collect()),
+        f64_col("strength", col(&|r| r.strength)),
+        i64_col("draws", int(&|r| r.draws)),
+        i64_col("correct", int(&|r| r.correct)),
+        i64_col("wrong", int(&|r| r.wrong)),
+        i64_col("none", int(&|r| r.none)),
+        f64_col("correct_rate", col(&|r| r.correct_rate.0)),
+        f64_col("correct_ci_lo", col(&|r| r.correct_rate.1)),
+        f64_col("correct_ci_hi", col(&|r| r.correct_rate.2)),
+        f64_col("false_alarm_rate", col(&|r| r.false_alarm_rate.0)),
+        f64_col("false_alarm_ci_lo", col(&|r| r.false_alarm_rate.1)),
+        f64_col("false_alarm_ci_hi", col(&|r| r.false_alarm_rate.2)),
+        i64_col("covered", int(&|r| r.covered.0)),
+        i64_col("with_interval", int(&|r| r.covered.1)),
+        f64_col("coverage_rate", col(&|r| r.coverage_rate().0)),
+        f64_col("coverage_ci_lo", col(&|r| r.coverage_rate().1)),
+        f64_col("coverage_ci_hi", col(&|r| r.coverage_rate().2)),
+    ])
+}
+
+/// One draw of a power study, as `power_draws.parquet` stores it.
+pub(crate) struct DrawRow<'a> {
+    pub(crate) effect: &'a str,
+    pub(crate) strength: f64,
+    pub(crate) draw: usize,
+    pub(crate) seed: u64,
+    /// The strength the draw carries (signed).
+    pub(crate) injected: f64,
+    /// Mechanisms named, `+`-joined (`none`).
+    pub(crate) named: String,
+    pub(crate) outcome: Outcome,
+    /// Fitted strength with its interval, when correct.
+    pub(crate) fitted: Option<(f64, f64, f64)>,
+    /// Each candidate's first-round p-value, in `candidates` order.
+    pub(crate) first_round_p: &'a [f64],
+}
+
+/// `power_draws.parquet`: one row per draw, with each candidate's first-round p-value
+/// as `p_<candidate>`.
+pub(crate) fn draws_frame(base: &str, draws: &[DrawRow<'_>], candidates: &[&str]) -> Result<DataFrame, StageError> {
+    let n = draws.len();
+    let fitted = |k: usize| draws.iter().map(|d| d.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect();
+    let mut columns = vec![
+        str_col("base", vec![base.to_string(); n]),
+        str_col("effect", draws.iter().map(|d| d.effect.to_string()).collect()),
+        f64_col("strength", draws.iter().map(|d| d.strength).collect()),
+        i64_col("draw", draws.iter().map(|d| d.draw as i64).collect()),
+        str_col("seed", draws.iter().map(|d| format!("{:016x}", d.seed)).collect()),
+        f64_col("injected", draws.iter().map(|d| d.injected).collect()),
+        str_col("named", draws.iter().map(|d| d.named.clone()).collect()),
+        str_col("outcome", draws.iter().map(|d| d.outcome.label().to_string()).collect()),
+        f64_col("estimate", fitted(0)),
+        f64_col("ci_lo", fitted(1)),
+        f64_col("ci_hi", fitted(2)),
+    ];
+    for (c, candidate) in candidates.iter().enumerate() {
+        columns.push(f64_col(&format!("p_{candidate}"), draws.iter().map(|d| d.first_round_p[c]).collect()));
+    }
+    frame(columns)
 }

@@ -24,6 +24,7 @@ const INKJET: DatasetText = DatasetText {
     names: Names { set: "dataset", unit: "um", unit_label: "µm", groups: "layer blocks" },
     section: "discrepancy_inkjet",
     kind: "inkjet.discrepancy",
+    power_kind: "inkjet.discovery",
     prefix: "inkjet",
 };
 
@@ -33,6 +34,8 @@ pub(super) struct DatasetText {
     pub(super) names: Names,
     pub(super) section: &'static str,
     pub(super) kind: &'static str,
+    /// The power study's stage kind without its `_power` suffix.
+    pub(super) power_kind: &'static str,
     pub(super) prefix: &'static str,
 }
 
@@ -172,7 +175,14 @@ with one effect at the given strength (the sign drawn for the tilt and the drift
 and nothing else, wrong when it names anything else. A nozzle bias's truth is the spread of the nozzle factors the print actually drew. A tilted substrate has no candidate \
 (see above): its draws show how often the engine stays silent when the model has nothing to learn.</p>\n",
     );
-    html += "<table><tr><th class=\"t\">print</th><th class=\"t\">hidden effect</th><th>strength</th><th>draws</th><th>named (%)</th><th>95 % interval (%)</th><th>wrong cause (%)</th><th>strength interval covers the truth</th></tr>\n";
+    html += &power_table(power, stage, rows, &INKJET);
+    html
+}
+
+/// The power table of a study, its comparison rows and where it came from.
+pub(super) fn power_table(power: &[PowerRow], stage: &str, rows: &mut Vec<Row>, text: &DatasetText) -> String {
+    let source = format!("out/discrepancy/{}_power.parquet (stage {stage}, {}_power)", text.prefix, text.power_kind);
+    let mut html = String::from("<table><tr><th class=\"t\">print</th><th class=\"t\">hidden effect</th><th>strength</th><th>draws</th><th>named (%)</th><th>95 % interval (%)</th><th>wrong cause (%)</th><th>strength interval covers the truth</th></tr>\n");
     for r in power {
         let null = r.effect == "none";
         let named = if null { "—".to_string() } else { format!("{:.0}", 100.0 * r.correct.0) };
@@ -194,19 +204,14 @@ and nothing else, wrong when it names anything else. A nozzle bias's truth is th
         } else {
             (format!("{} {} {} correct rate", r.base, r.effect, r.strength), r.correct.0)
         };
-        rows.push(Row {
-            section: "discrepancy_inkjet",
-            item,
-            paper: None,
-            ours: value,
-            unit: "1",
-            source: format!("out/discrepancy/inkjet_power.parquet (stage {stage}, inkjet.discovery_power)"),
-        });
+        rows.push(Row { section: text.section, item, paper: None, ours: value, unit: "1", source: source.clone() });
     }
     html += "</table>\n";
     let _ = writeln!(
         html,
-        "<p class=\"run\">Stage {stage} (inkjet.discovery_power): tables out/discrepancy/inkjet_power.parquet and inkjet_power_draws.parquet (one row per print, with each candidate's first-round p-value). Intervals of rates are Clopper–Pearson.</p>"
+        "<p class=\"run\">Stage {stage} ({}_power): tables out/discrepancy/{prefix}_power.parquet and {prefix}_power_draws.parquet (one row per print, with each candidate's first-round p-value). Intervals of rates are Clopper–Pearson.</p>",
+        text.power_kind,
+        prefix = text.prefix,
     );
     html
 }

@@ -1,16 +1,17 @@
 //! `report.discrepancy_thermal`: what paper 003's capture-time model (eq. 28) and its
 //! assumption that every layer prints alike get wrong about what the thermal monitor
 //! measures, the cause the discrepancy engine names, the extended model and its held-out
-//! gain (DESIGN §7). Every number is read from the tables of `thermal.discrepancy`.
+//! gain, and with a power study how often hidden effects are named (DESIGN §7). Every
+//! number is read from the tables of `thermal.discrepancy` and `thermal.discovery_power`.
 //!
-//! Input: the `thermal.discrepancy` stage.
+//! Inputs: the `thermal.discrepancy` stage, then optionally `thermal.discovery_power`.
 
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
 use super::comparison_frame;
-use super::discrepancy_fdm::{Cause, GainRow, Names, Param};
-use super::discrepancy_inkjet::{dataset_part, DatasetText};
+use super::discrepancy_fdm::{Cause, GainRow, Names, Param, PowerRow};
+use super::discrepancy_inkjet::{dataset_part, power_table, DatasetText};
 
 /// The thermal tables: one discovery per filmed print, residuals in noise standard
 /// deviations, a group is a filmed layer.
@@ -18,6 +19,7 @@ const THERMAL: DatasetText = DatasetText {
     names: Names { set: "dataset", unit: "sd", unit_label: "noise sd", groups: "layers" },
     section: "discrepancy_thermal",
     kind: "thermal.discrepancy",
+    power_kind: "thermal.discovery",
     prefix: "thermal",
 };
 
@@ -41,7 +43,7 @@ impl StageKind for DiscrepancyThermalSection {
         &[]
     }
     fn arity(&self) -> Arity {
-        Arity::exactly(1)
+        Arity { min: 1, max: 2 }
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
@@ -56,11 +58,21 @@ impl StageKind for DiscrepancyThermalSection {
         for g in &gains {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows, &THERMAL);
         }
+        if let Some(input) = ctx.inputs.get(1) {
+            let power = PowerRow::read(&input.dir.join("power.parquet"))?;
+            html += POWER_INTRO;
+            html += &power_table(&power, &input.name, &mut rows, &THERMAL);
+        }
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }
+
+const POWER_INTRO: &str = "<h4>How often is a hidden effect named?</h4>\n<p>Each draw prints and films the corner test part on the virtual printer \
+(the Lepton's habits on) with one effect at the given strength or none; the monitor measures it as above and the engine, told nothing, is scored: correct when it names \
+the printed effect and nothing else, wrong when it names anything else. The three width effects have no candidate (see above): their draws show how often the engine \
+stays silent when its model has nothing to learn.</p>\n";
 
 fn method(causes: &[Cause]) -> String {
     let alpha = causes.first().map_or(f64::NAN, |c| c.alpha);

@@ -16,7 +16,7 @@
 //! with each candidate's first-round p-value).
 
 use datasets::inkjet::InkjetScans;
-use discrepancy::power::{summarize, PowerRow};
+use discrepancy::power::summarize;
 use discrepancy::{discover, Settings};
 use models::inkjet::discrepancy::mechanisms::CANDIDATES;
 use models::inkjet::discrepancy::power::{names, run_draws, DrawResult, PowerDesign, PrintDesign};
@@ -27,9 +27,10 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain};
+use crate::discrepancy_tables::{
+    draws_frame as shared_draws_frame, engine_settings, power_frame, DiscrepancyTables, Domain, DrawRow,
+};
 use crate::effects::strength_list;
-use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
 const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
@@ -281,54 +282,21 @@ pub(super) fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, 
     strength_list(ctx, effect.name(), hi.max(-lo), &format!(" ({unit})"))
 }
 
-fn power_frame(base: &str, rows: &[PowerRow]) -> Result<polars::prelude::DataFrame, StageError> {
-    let n = rows.len();
-    let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
-    let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|r| f(r) as i64).collect::<Vec<i64>>();
-    frame(vec![
-        str_col("base", vec![base.to_string(); n]),
-        str_col("noise", vec!["virtual".to_string(); n]),
-        str_col("own_causes", vec!["none".to_string(); n]),
-        str_col("effect", rows.iter().map(|r| r.effect.to_string()).collect()),
-        f64_col("strength", col(&|r| r.strength)),
-        i64_col("draws", int(&|r| r.draws)),
-        i64_col("correct", int(&|r| r.correct)),
-        i64_col("wrong", int(&|r| r.wrong)),
-        i64_col("none", int(&|r| r.none)),
-        f64_col("correct_rate", col(&|r| r.correct_rate.0)),
-        f64_col("correct_ci_lo", col(&|r| r.correct_rate.1)),
-        f64_col("correct_ci_hi", col(&|r| r.correct_rate.2)),
-        f64_col("false_alarm_rate", col(&|r| r.false_alarm_rate.0)),
-        f64_col("false_alarm_ci_lo", col(&|r| r.false_alarm_rate.1)),
-        f64_col("false_alarm_ci_hi", col(&|r| r.false_alarm_rate.2)),
-        i64_col("covered", int(&|r| r.covered.0)),
-        i64_col("with_interval", int(&|r| r.covered.1)),
-        f64_col("coverage_rate", col(&|r| r.coverage_rate().0)),
-        f64_col("coverage_ci_lo", col(&|r| r.coverage_rate().1)),
-        f64_col("coverage_ci_hi", col(&|r| r.coverage_rate().2)),
-    ])
-}
-
 fn draws_frame(base: &str, draws: &[DrawResult]) -> Result<polars::prelude::DataFrame, StageError> {
-    let n = draws.len();
-    let fitted = |k: usize| draws.iter().map(|d| d.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect();
-    let mut columns = vec![
-        str_col("base", vec![base.to_string(); n]),
-        str_col("effect", draws.iter().map(|d| d.effect_name().to_string()).collect()),
-        f64_col("strength", draws.iter().map(|d| d.strength).collect()),
-        i64_col("draw", draws.iter().map(|d| d.draw as i64).collect()),
-        str_col("seed", draws.iter().map(|d| format!("{:016x}", d.seed)).collect()),
-        f64_col("injected", draws.iter().map(|d| d.truth).collect()),
-        str_col("named", draws.iter().map(|d| names(&d.named)).collect()),
-        str_col("outcome", draws.iter().map(|d| d.outcome.label().to_string()).collect()),
-        f64_col("estimate", fitted(0)),
-        f64_col("ci_lo", fitted(1)),
-        f64_col("ci_hi", fitted(2)),
-    ];
-    for (c, candidate) in CANDIDATES.iter().enumerate() {
-        use discrepancy::Mechanism;
-        let name = format!("p_{}", candidate.name());
-        columns.push(f64_col(&name, draws.iter().map(|d| d.first_round_p[c]).collect()));
-    }
-    frame(columns)
+    let rows: Vec<DrawRow<'_>> = draws
+        .iter()
+        .map(|d| DrawRow {
+            effect: d.effect_name(),
+            strength: d.strength,
+            draw: d.draw,
+            seed: d.seed,
+            injected: d.truth,
+            named: names(&d.named),
+            outcome: d.outcome,
+            fitted: d.fitted,
+            first_round_p: &d.first_round_p,
+        })
+        .collect();
+    let candidates: Vec<&str> = CANDIDATES.iter().map(discrepancy::Mechanism::name).collect();
+    shared_draws_frame(base, &rows, &candidates)
 }

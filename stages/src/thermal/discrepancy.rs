@@ -14,6 +14,7 @@
 
 use std::path::Path;
 
+use datasets::thermal::ThermalSequence;
 use discrepancy::discover;
 use models::thermal::discrepancy::{
     FrameObservation, RecordParts, TemperatureObservation, ThermalModel, ThermalRecord,
@@ -21,6 +22,7 @@ use models::thermal::discrepancy::{
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use polars::prelude::DataFrame;
 
 use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
 use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain};
@@ -111,9 +113,22 @@ impl StageKind for DiscrepancyStage {
 /// frame offsets and centre temperatures.
 pub fn record_of(sequence_dir: &Path, monitor_dir: &Path) -> Result<ThermalRecord, StageError> {
     let seq = open_sequence(sequence_dir)?;
-    let trajectory = trajectory_of(&seq)?;
-    let frames = frame_offsets(monitor_dir)?;
-    let temps = centre_temperatures(monitor_dir)?;
+    let frames = read_table(monitor_dir, "frames.parquet")?;
+    let widths = read_table(monitor_dir, "widths.parquet")?;
+    record_from_tables(&seq, &frames, &widths, monitor_dir)
+}
+
+/// [`record_of`] from the monitor's two tables, read from (or written for) `monitor_dir`.
+pub fn record_from_tables(
+    seq: &ThermalSequence,
+    frames: &DataFrame,
+    widths: &DataFrame,
+    monitor_dir: &Path,
+) -> Result<ThermalRecord, StageError> {
+    let trajectory = trajectory_of(seq)?;
+    let frame_file = monitor_dir.join("frames.parquet");
+    let frames = frame_offsets(frames, &frame_file)?;
+    let temps = centre_temperatures(widths, &monitor_dir.join("widths.parquet"))?;
     ThermalRecord::new(RecordParts {
         frames: &frames,
         temps: &temps,
@@ -123,23 +138,20 @@ pub fn record_of(sequence_dir: &Path, monitor_dir: &Path) -> Result<ThermalRecor
         bed_temp_c: seq.process.bed_temp_c,
     })
     .map_err(|e| StageError::BadInput {
-        file: monitor_dir.join("frames.parquet"),
+        file: frame_file,
         location: None,
         expected: format!("a monitored print the discrepancy model can use: {e}"),
     })
 }
 
 /// Localised, uncensored, non-repeated frames with a capture-time estimate.
-fn frame_offsets(monitor_dir: &Path) -> Result<Vec<FrameObservation>, StageError> {
-    let file = monitor_dir.join("frames.parquet");
-    let df = read_table(monitor_dir, "frames.parquet")?;
+fn frame_offsets(df: &DataFrame, file: &Path) -> Result<Vec<FrameObservation>, StageError> {
     let (layer, repeat, edge) = (
-        i64_column(&df, &file, "layer")?,
-        i64_column(&df, &file, "repeat_of_frame")?,
-        i64_column(&df, &file, "at_window_edge")?,
+        i64_column(df, file, "layer")?,
+        i64_column(df, file, "repeat_of_frame")?,
+        i64_column(df, file, "at_window_edge")?,
     );
-    let (recorded, estimated) =
-        (f64_column(&df, &file, "recorded_time_s")?, f64_column(&df, &file, "estimated_time_s")?);
+    let (recorded, estimated) = (f64_column(df, file, "recorded_time_s")?, f64_column(df, file, "estimated_time_s")?);
     Ok((0..df.height())
         .filter(|&i| estimated[i].is_finite() && repeat[i] < 0 && edge[i] == 0 && layer[i] >= 0)
         .map(|i| FrameObservation {
@@ -151,11 +163,9 @@ fn frame_offsets(monitor_dir: &Path) -> Result<Vec<FrameObservation>, StageError
 }
 
 /// Every sample's finite centre temperature.
-fn centre_temperatures(monitor_dir: &Path) -> Result<Vec<TemperatureObservation>, StageError> {
-    let file = monitor_dir.join("widths.parquet");
-    let df = read_table(monitor_dir, "widths.parquet")?;
-    let (layer, sample) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "sample")?);
-    let (t, temp) = (f64_column(&df, &file, "t_s")?, f64_column(&df, &file, "temp_c")?);
+fn centre_temperatures(df: &DataFrame, file: &Path) -> Result<Vec<TemperatureObservation>, StageError> {
+    let (layer, sample) = (i64_column(df, file, "layer")?, i64_column(df, file, "sample")?);
+    let (t, temp) = (f64_column(df, file, "t_s")?, f64_column(df, file, "temp_c")?);
     Ok((0..df.height())
         .filter(|&i| temp[i].is_finite() && layer[i] >= 0 && sample[i] >= 0)
         .map(|i| TemperatureObservation {

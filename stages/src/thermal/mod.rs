@@ -11,12 +11,14 @@
 //!   eqs 40-41 (evaluation: uses the virtual printer's effects).
 //! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`.
 //! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time and layer
-//!   models get wrong about the monitor's measurements, and why (DESIGN §7).
+//!   models get wrong about the monitor's measurements, and why (DESIGN §7);
+//!   [`discovery_power`]: `thermal.discovery_power`, its power study on virtual prints.
 //! - [`common`]: what the stages share (reading a sequence, the trajectory, the camera).
 
 pub mod accuracy;
 pub mod common;
 pub mod compensate;
+pub mod discovery_power;
 pub mod discrepancy;
 pub mod generate;
 pub mod localise;
@@ -33,4 +35,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(reprint::ReprintEvaluateStage));
     registry.register(Box::new(accuracy::AccuracyEvaluateStage));
     registry.register(Box::new(discrepancy::DiscrepancyStage));
+    registry.register(Box::new(discovery_power::DiscoveryPowerStage));
 }

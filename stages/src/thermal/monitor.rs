@@ -154,7 +154,7 @@ impl StageKind for MonitorStage {
         let (with_dda, without_dda) = deposition_directions(&seq, &trajectory, &setup)?;
         let mut directions = directions_frame(&trajectory, &with_dda, &without_dda, &setup)?;
         ctx.write_table("directions", &mut directions)?;
-        let settings = Settings::from_params(ctx);
+        let settings = Settings::from_params(&ctx.params);
         let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, settings)?;
         let (frames, mounts) = analysis.localiser.run(ctx.seed, settings.localisation)?;
         let widths = analysis.widths(&frames);
@@ -164,6 +164,29 @@ impl StageKind for MonitorStage {
         ctx.write_table("widths", &mut table)?;
         write_figure_tables(ctx, &seq, &analysis, &frames)
     }
+}
+
+/// `frames.parquet` and `widths.parquet` of `seq` as [`MonitorStage`] writes them, with
+/// its parameters `params` (checked against its declarations) and localisation seed
+/// `seed`, without a stage: for studies that monitor many sequences.
+pub fn frames_and_widths(
+    seq: &datasets::thermal::ThermalSequence,
+    params: &pipeline::params::Params,
+    seed: u64,
+) -> Result<(polars::prelude::DataFrame, polars::prelude::DataFrame), StageError> {
+    let setup = seq.process.print_setup();
+    let trajectory = trajectory_of(seq)?;
+    let (with_dda, _) = deposition_directions(seq, &trajectory, &setup)?;
+    let settings = Settings::from_params(params);
+    let analysis = Analysis::new(seq, &trajectory, &with_dda, &setup, settings)?;
+    let (frames, _) = analysis.localiser.run(seed, settings.localisation)?;
+    let widths = analysis.widths(&frames);
+    Ok((frames_frame(&frames, settings.localisation)?, widths_frame(&trajectory, &with_dda, &setup, &widths)?))
+}
+
+/// The monitor's parameter declarations (for [`frames_and_widths`]).
+pub fn params() -> &'static [ParamSpec] {
+    PARAMS
 }
 
 /// The checked parameters.
@@ -181,8 +204,7 @@ struct Settings {
 }
 
 impl Settings {
-    fn from_params(ctx: &StageContext) -> Self {
-        let p = &ctx.params;
+    fn from_params(p: &pipeline::params::Params) -> Self {
         Self {
             measure_age_s: p.f64("measure_age_s"),
             calibrate: p.bool("calibrate_threshold"),
@@ -509,13 +531,8 @@ fn widths_frame(
     ])
 }
 
-/// `frames.parquet` and `detections.parquet`.
-fn write_frame_tables(
-    ctx: &mut StageContext,
-    undistorter: &Undistorter,
-    frames: &[FrameOutcome],
-    method: Localisation,
-) -> Result<(), StageError> {
+/// `frames.parquet`: one row per frame, both localisations' capture times.
+fn frames_frame(frames: &[FrameOutcome], method: Localisation) -> Result<polars::prelude::DataFrame, StageError> {
     let located = |f: &FrameOutcome| f.located().copied();
     let homography_cols: Vec<_> = (0..9)
         .map(|i| {
@@ -554,7 +571,17 @@ fn write_frame_tables(
         f64_col("dlt_time_s", frames.iter().map(|f| time_of(&f.dlt)).collect()),
         f64_col("rigid_mount_time_s", frames.iter().map(|f| time_of(&f.rigid)).collect()),
     ]);
-    ctx.write_table("frames", &mut frame(columns)?)?;
+    frame(columns)
+}
+
+/// `frames.parquet` and `detections.parquet`.
+fn write_frame_tables(
+    ctx: &mut StageContext,
+    undistorter: &Undistorter,
+    frames: &[FrameOutcome],
+    method: Localisation,
+) -> Result<(), StageError> {
+    ctx.write_table("frames", &mut frames_frame(frames, method)?)?;
     let rows: Vec<(&FrameOutcome, &DetectionRow)> =
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
     let raw: Vec<[f64; 2]> = rows.iter().map(|(_, d)| undistorter.distort_px(d.1)).collect();

@@ -1,0 +1,321 @@
+//! `thermal.discovery_power`: the thermal power study (DESIGN §7). Each draw prints and
+//! films the corner test part on the virtual printer (`thermal.generate_sequence`'s
+//! generator, the Lepton's habits on) with one effect hidden at a given strength, or
+//! none; the monitor (`thermal.monitor`'s code, with this stage's monitor parameters)
+//! measures it, and the engine (`thermal.discrepancy`'s model), told nothing, is scored
+//! against what the printer did. An evaluation stage: it knows the truth because it
+//! printed it. Draws run in parallel; each one's dataset lives in a scratch folder of
+//! the stage's output and is removed once measured.
+//!
+//! The width effects (`tau_mismatch`, `heat_diffusion_widening`, `melt_squeeze_out`)
+//! have no candidate (`models::thermal::discrepancy`): their draws can only come out
+//! *none* or *wrong*, and the study reports how often the engine stays silent.
+//!
+//! Outputs (docs/OUTPUTS.md): `power.parquet` (the columns of `fdm.discovery_power`'s)
+//! and `power_draws.parquet` (one row per draw, with each candidate's first-round
+//! p-value).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
+use discrepancy::power::{summarize, DrawScore, Outcome};
+use discrepancy::stats::mix_seed;
+use discrepancy::{discover, Mechanism, Settings};
+use models::thermal::discrepancy::{candidate_index, ThermalModel, CANDIDATES};
+use pipeline::params::{ParamDefault, Params};
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use rayon::prelude::*;
+
+use super::common::open_sequence;
+use super::discrepancy::record_from_tables;
+use super::monitor;
+use crate::discrepancy_tables::{draws_frame, power_frame, DrawRow};
+use crate::effects::strength_list;
+
+/// The `thermal.discovery_power` stage kind.
+pub struct DiscoveryPowerStage;
+
+/// The effects the study can hide, each with its strengths' parameter, largest
+/// strength and unit (the printer's ranges, `datasets::thermal::effects`).
+const STUDIED: [(&str, f64, &str); 5] = [
+    ("camera_latency", 0.5, "s"),
+    ("layer_heat_accumulation", 1.0, "fraction"),
+    ("tau_mismatch", 10.0, "relative"),
+    ("heat_diffusion_widening", 20.0, "relative"),
+    ("melt_squeeze_out", 1.0, "fraction"),
+];
+
+/// The monitor's parameters this stage sets (the others keep the monitor's defaults).
+const MONITOR_PARAMS: [&str; 4] = ["band_low_c", "band_high_c", "max_corner_age_s", "window_s"];
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "camera_latency",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.005, 0.01"),
+        doc: "Strengths of camera_latency (capture delay, s), comma-separated; empty for none.",
+    },
+    ParamSpec {
+        name: "layer_heat_accumulation",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.3, 0.6"),
+        doc: "Strengths of layer_heat_accumulation (fraction of a layer's residual heat carried into the next layer's substrate), comma-separated.",
+    },
+    ParamSpec {
+        name: "tau_mismatch",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.3"),
+        doc: "Strengths of tau_mismatch (relative error of the flow's τ; no candidate describes it), comma-separated.",
+    },
+    ParamSpec {
+        name: "heat_diffusion_widening",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("1"),
+        doc: "Strengths of heat_diffusion_widening (relative increase of the lateral diffusivity; no candidate), comma-separated.",
+    },
+    ParamSpec {
+        name: "melt_squeeze_out",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.2"),
+        doc: "Strengths of melt_squeeze_out (fraction of the volume squeezed out; no candidate), comma-separated.",
+    },
+    ParamSpec {
+        name: "draws",
+        ty: ParamType::Int { min: 1, max: 100_000 },
+        default: ParamDefault::Int(4),
+        doc: "Prints per effect and strength.",
+    },
+    ParamSpec {
+        name: "null_draws",
+        ty: ParamType::Int { min: 0, max: 100_000 },
+        default: ParamDefault::Int(8),
+        doc: "Prints with no effect.",
+    },
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 2, max: 20 },
+        default: ParamDefault::Int(8),
+        doc: "Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 4 candidates).",
+    },
+    ParamSpec {
+        name: "alpha",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
+    },
+    ParamSpec {
+        name: "max_rounds",
+        ty: ParamType::Int { min: 1, max: 4 },
+        default: ParamDefault::Int(2),
+        doc: "Most causes named per draw.",
+    },
+    ParamSpec {
+        name: "band_low_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(90.0),
+        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
+    },
+    ParamSpec {
+        name: "band_high_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(220.0),
+        doc: "The monitor's band_high_c.",
+    },
+    ParamSpec {
+        name: "max_corner_age_s",
+        ty: ParamType::Float { min: 0.1, max: 100.0 },
+        default: ParamDefault::Float(0.8),
+        doc: "The monitor's max_corner_age_s.",
+    },
+    ParamSpec {
+        name: "window_s",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
+    },
+];
+
+impl StageKind for DiscoveryPowerStage {
+    fn name(&self) -> &'static str {
+        "thermal.discovery_power"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(0)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let design = Design::from_params(ctx)?;
+        let scratch = ctx.output_dir().join("scratch");
+        let draws: Vec<Draw> = design
+            .jobs()
+            .par_iter()
+            .map(|job| design.draw(job, &scratch.join(format!("draw_{}_{}", job.cell, job.draw))))
+            .collect::<Result<_, _>>()?;
+        std::fs::remove_dir_all(&scratch).ok();
+        let base = format!("corner test part × {} layers", design.layers);
+        let scores: Vec<DrawScore> = draws.iter().map(Draw::score).collect();
+        ctx.write_table("power", &mut power_frame(&base, &summarize(&scores))?)?;
+        let rows: Vec<DrawRow<'_>> = draws.iter().map(Draw::row).collect();
+        let candidates: Vec<&str> = CANDIDATES.iter().map(Mechanism::name).collect();
+        ctx.write_table("power_draws", &mut draws_frame(&base, &rows, &candidates)?)?;
+        Ok(())
+    }
+}
+
+/// The checked study.
+struct Design {
+    cells: Vec<(&'static str, f64)>,
+    draws: usize,
+    null_draws: usize,
+    layers: usize,
+    seed: u64,
+    engine: Settings,
+    monitor: Params,
+}
+
+/// One print to make.
+struct Job {
+    cell: usize,
+    effect: Option<&'static str>,
+    strength: f64,
+    draw: usize,
+}
+
+/// One print and what the engine made of it.
+struct Draw {
+    effect: Option<&'static str>,
+    strength: f64,
+    draw: usize,
+    seed: u64,
+    named: Vec<usize>,
+    outcome: Outcome,
+    fitted: Option<(f64, f64, f64)>,
+    first_round_p: Vec<f64>,
+}
+
+impl Design {
+    fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
+        let p = &ctx.params;
+        let mut cells = Vec::new();
+        for (effect, top, unit) in STUDIED {
+            cells.extend(strength_list(ctx, effect, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
+        }
+        let raw: BTreeMap<String, toml::Value> =
+            MONITOR_PARAMS.iter().map(|name| (name.to_string(), toml::Value::Float(p.f64(name)))).collect();
+        let monitor = Params::check(monitor::params(), &raw).map_err(|(name, why)| StageError::Params {
+            stage: ctx.stage.clone(),
+            message: format!("{name}: {why}"),
+        })?;
+        Ok(Self {
+            cells,
+            draws: p.i64("draws") as usize,
+            null_draws: p.i64("null_draws") as usize,
+            layers: p.i64("layers") as usize,
+            seed: ctx.seed,
+            engine: Settings {
+                alpha: p.f64("alpha"),
+                max_rounds: p.i64("max_rounds") as usize,
+                bootstrap_draws: 100,
+                ..Settings::standard(ctx.seed)
+            },
+            monitor,
+        })
+    }
+
+    /// Null draws first (cell 0), then each cell's draws.
+    fn jobs(&self) -> Vec<Job> {
+        let mut jobs: Vec<Job> =
+            (0..self.null_draws).map(|draw| Job { cell: 0, effect: None, strength: 0.0, draw }).collect();
+        for (c, &(effect, strength)) in self.cells.iter().enumerate() {
+            jobs.extend((0..self.draws).map(|draw| Job { cell: c + 1, effect: Some(effect), strength, draw }));
+        }
+        jobs
+    }
+
+    /// Prints, films and monitors one job in `scratch`, runs the engine, scores it.
+    fn draw(&self, job: &Job, scratch: &Path) -> Result<Draw, StageError> {
+        let seed = mix_seed(self.seed, job.cell as u64, job.draw as u64);
+        let effects = match job.effect {
+            Some(name) => Effects::from_pairs([(name, job.strength)]).map_err(StageError::domain)?,
+            None => Effects::none(),
+        };
+        let habits = LeptonHabits { repeated_frames: true, shutter_freeze: true };
+        let config = GenerateConfig { seed, layers: self.layers, effects, lepton_habits: habits };
+        std::fs::create_dir_all(scratch).map_err(|e| StageError::Io { path: scratch.to_path_buf(), source: e })?;
+        generate_into(&config, scratch).map_err(StageError::domain)?;
+        let seq = open_sequence(scratch)?;
+        let (frames, widths) = monitor::frames_and_widths(&seq, &self.monitor, seed)?;
+        let record = record_from_tables(&seq, &frames, &widths, scratch)?;
+        std::fs::remove_dir_all(scratch).ok();
+        let model = ThermalModel::new(record);
+        let groups = model.record().layer_groups();
+        let found = discover(&model, &groups, &[], &Settings { seed, ..self.engine }).map_err(|e| {
+            StageError::Domain(format!("discrepancy engine on power draw {} (seed {seed:016x}): {e}", job.draw).into())
+        })?;
+        let target = job.effect.and_then(candidate_index);
+        let outcome = Outcome::of(&found.named, target);
+        let fitted = (outcome == Outcome::Correct)
+            .then(|| found.extension.iter().find(|e| e.mechanism == target).map(|e| (e.estimate, e.ci_lo, e.ci_hi)))
+            .flatten();
+        let mut first_round_p = vec![f64::NAN; CANDIDATES.len()];
+        if let Some(round) = found.rounds.first() {
+            for c in &round.candidates {
+                first_round_p[c.mechanism] = c.p_value;
+            }
+        }
+        Ok(Draw {
+            effect: job.effect,
+            strength: job.strength,
+            draw: job.draw,
+            seed,
+            named: found.named,
+            outcome,
+            fitted,
+            first_round_p,
+        })
+    }
+}
+
+impl Draw {
+    fn effect_name(&self) -> &'static str {
+        self.effect.unwrap_or("none")
+    }
+
+    fn score(&self) -> DrawScore {
+        let covered = self.fitted.map(|(_, lo, hi)| lo <= self.strength && self.strength <= hi);
+        DrawScore { effect: self.effect_name(), strength: self.strength, outcome: self.outcome, covered }
+    }
+
+    fn row(&self) -> DrawRow<'_> {
+        let named = if self.named.is_empty() {
+            "none".to_string()
+        } else {
+            self.named.iter().map(|&m| CANDIDATES[m].name()).collect::<Vec<_>>().join("+")
+        };
+        DrawRow {
+            effect: self.effect_name(),
+            strength: self.strength,
+            draw: self.draw,
+            seed: self.seed,
+            injected: self.strength,
+            named,
+            outcome: self.outcome,
+            fitted: self.fitted,
+            first_round_p: &self.first_round_p,
+        }
+    }
+}
