@@ -11,19 +11,6 @@ mod common;
 use std::path::Path;
 
 use common::*;
-use polars::prelude::{DataFrame, ParquetReader, SerReader};
-
-fn read(path: &Path) -> DataFrame {
-    ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
-}
-
-fn strings(df: &DataFrame, column: &str) -> Vec<String> {
-    df.column(column).unwrap().str().unwrap().iter().map(|s| s.unwrap_or_default().to_string()).collect()
-}
-
-fn floats(df: &DataFrame, column: &str) -> Vec<f64> {
-    df.column(column).unwrap().f64().unwrap().iter().map(|x| x.unwrap_or(f64::NAN)).collect()
-}
 
 #[test]
 fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() {
@@ -31,7 +18,7 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
     let spec = shipped_spec(tmp.path(), "discrepancy_inkjet", tmp.path());
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
     let out = tmp.path().join("out/discrepancy");
-    let causes = read(&out.join("inkjet_causes.parquet"));
+    let causes = read_table(&out.join("inkjet_causes.parquet"));
     let (dataset, mechanism) = (strings(&causes, "dataset"), strings(&causes, "mechanism"));
     let named: Vec<bool> = causes.column("named").unwrap().bool().unwrap().iter().map(|b| b.unwrap()).collect();
     let named_in = |d: &str| -> Vec<&str> {
@@ -41,12 +28,12 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
     assert_eq!(named_in("print_curing_shrinkage"), ["curing_shrinkage"]);
     assert_eq!(named_in("print_nozzle_bias"), ["nozzle_bias"]);
     // The shrinkage's interval covers what the printer did (0.03).
-    let extension = read(&out.join("inkjet_extension.parquet"));
+    let extension = read_table(&out.join("inkjet_extension.parquet"));
     let (mech, lo, hi) = (strings(&extension, "mechanism"), floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));
     let k = mech.iter().position(|m| m == "curing_shrinkage").unwrap();
     assert!(lo[k] <= 0.03 && 0.03 <= hi[k], "[{}, {}]", lo[k], hi[k]);
     // The extended models predict held-out layer blocks better, with intervals above 0.
-    let gain = read(&out.join("inkjet_gain.parquet"));
+    let gain = read_table(&out.join("inkjet_gain.parquet"));
     let (sets, ci_lo) = (strings(&gain, "dataset"), floats(&gain, "gain_ci_lo_pct"));
     for (d, lo) in sets.iter().zip(&ci_lo) {
         if d != "print_paper_physics" {
@@ -55,7 +42,7 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
     }
     // The control gain: three controller models per effect, each over the same three
     // printers, intervals around every mean, the paper's controller against itself 0.
-    let control = read(&out.join("inkjet_control_gain.parquet"));
+    let control = read_table(&out.join("inkjet_control_gain.parquet"));
     assert_eq!(control.height(), 9);
     let (controller, printers) = (strings(&control, "controller"), control.column("printers").unwrap().i64().unwrap());
     assert!(printers.iter().all(|n| n == Some(3)));
@@ -65,7 +52,7 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
         assert!(lo[i] <= rmsd[i] && rmsd[i] <= hi[i] && rmsd[i] > 0.0, "row {i}");
         assert_eq!(vs_paper[i] == 0.0, controller[i] == "paper", "row {i}");
     }
-    let trials = read(&out.join("inkjet_control_trials.parquet"));
+    let trials = read_table(&out.join("inkjet_control_trials.parquet"));
     assert_eq!(trials.height(), 27);
     let section = std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_inkjet/report/section.html")).unwrap();
     assert!(
@@ -102,17 +89,17 @@ fn the_power_study_spec_runs_cut_to_a_few_prints() {
     let spec = tmp.path().join("study.toml");
     std::fs::write(&spec, cut).unwrap();
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
-    let power = read(&tmp.path().join("out/discrepancy/inkjet_power.parquet"));
+    let power = read_table(&tmp.path().join("out/discrepancy/inkjet_power.parquet"));
     let effects = strings(&power, "effect");
     assert_eq!(effects.iter().filter(|e| *e == "none").count(), 1);
     assert!(effects.contains(&"nozzle_bias".to_string()) && effects.contains(&"substrate_tilt".to_string()));
-    let draws = read(&tmp.path().join("out/discrepancy/inkjet_power_draws.parquet"));
+    let draws = read_table(&tmp.path().join("out/discrepancy/inkjet_power_draws.parquet"));
     assert_eq!(draws.height(), 2 + 9);
     assert!(draws.column("p_coefficient_split").is_ok());
     let section =
         std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_inkjet_power/report/section.html")).unwrap();
     assert!(section.contains("How often is a hidden effect named?"));
-    let control = read(&tmp.path().join("out/discrepancy/inkjet_control_gain.parquet"));
+    let control = read_table(&tmp.path().join("out/discrepancy/inkjet_control_gain.parquet"));
     assert_eq!(strings(&control, "controller"), ["paper", "mean_droplet", "extended"]);
     assert!(section.contains("Does the extended model print better?"));
 }

@@ -10,19 +10,6 @@ mod common;
 use std::path::Path;
 
 use common::*;
-use polars::prelude::{DataFrame, ParquetReader, SerReader};
-
-fn read(path: &Path) -> DataFrame {
-    ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
-}
-
-fn strings(df: &DataFrame, column: &str) -> Vec<String> {
-    df.column(column).unwrap().str().unwrap().iter().map(|s| s.unwrap_or_default().to_string()).collect()
-}
-
-fn floats(df: &DataFrame, column: &str) -> Vec<f64> {
-    df.column(column).unwrap().f64().unwrap().iter().map(|x| x.unwrap_or(f64::NAN)).collect()
-}
 
 #[test]
 fn the_shipped_spec_names_the_camera_latency_and_nothing_wrong() {
@@ -30,7 +17,7 @@ fn the_shipped_spec_names_the_camera_latency_and_nothing_wrong() {
     let spec = shipped_spec(tmp.path(), "discrepancy_thermal", tmp.path());
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
     let out = tmp.path().join("out/discrepancy");
-    let causes = read(&out.join("thermal_causes.parquet"));
+    let causes = read_table(&out.join("thermal_causes.parquet"));
     let (dataset, mechanism) = (strings(&causes, "dataset"), strings(&causes, "mechanism"));
     let named: Vec<bool> = causes.column("named").unwrap().bool().unwrap().iter().map(|b| b.unwrap()).collect();
     let named_in = |d: &str| -> Vec<&str> {
@@ -45,11 +32,11 @@ fn the_shipped_spec_names_the_camera_latency_and_nothing_wrong() {
     let groups = causes.column("groups").unwrap().i64().unwrap();
     assert!(groups.iter().all(|g| g == Some(8)));
     // The latency's interval covers what the camera did (10 ms).
-    let extension = read(&out.join("thermal_extension.parquet"));
+    let extension = read_table(&out.join("thermal_extension.parquet"));
     let (param, lo, hi) = (strings(&extension, "parameter"), floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));
     let k = param.iter().position(|p| p == "latency_s").unwrap();
     assert!(lo[k] <= 0.01 && 0.01 <= hi[k], "[{}, {}]", lo[k], hi[k]);
-    let gain = read(&out.join("thermal_gain.parquet"));
+    let gain = read_table(&out.join("thermal_gain.parquet"));
     let (sets, ci_lo) = (strings(&gain, "dataset"), floats(&gain, "gain_ci_lo_pct"));
     let latency = sets.iter().position(|d| d == "print_camera_latency").unwrap();
     assert!(ci_lo[latency] > 0.0, "the extension predicts held-out layers better");
@@ -108,7 +95,7 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     let spec = tmp.path().join("study.toml");
     std::fs::write(&spec, cut).unwrap();
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
-    let power = read(&tmp.path().join("out/discrepancy/thermal_power.parquet"));
+    let power = read_table(&tmp.path().join("out/discrepancy/thermal_power.parquet"));
     let effects = strings(&power, "effect");
     assert_eq!(effects, ["none", "camera_latency", "layer_heat_accumulation", "tau_mismatch"]);
     let ints = |c: &str| -> Vec<i64> { power.column(c).unwrap().i64().unwrap().iter().map(|x| x.unwrap()).collect() };
@@ -129,7 +116,7 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     assert!(2 * (covered[1] + covered[2]) >= with[1] + with[2], "{covered:?} of {with:?}");
     // The null's first-round p-values are valid: nowhere significantly above the
     // uniform (one-sided Kolmogorov–Smirnov, p > 1 %).
-    let draws_table = read(&tmp.path().join("out/discrepancy/thermal_power_draws.parquet"));
+    let draws_table = read_table(&tmp.path().join("out/discrepancy/thermal_power_draws.parquet"));
     assert_eq!(draws_table.height(), 12);
     let null: Vec<usize> = (0..12).filter(|&i| strings(&draws_table, "effect")[i] == "none").collect();
     for candidate in ["camera_latency", "clock_rate", "layer_heat_accumulation", "bed_warming"] {

@@ -44,6 +44,6 @@ mod testing;
 pub use engine::{
     discover, discover_warm, CandidateScore, Discovery, EngineError, Estimate, Gain, HeldOut, Round, Settings, Verdict,
 };
-pub use mechanism::{Mechanism, Nuisance, Parameter, Scale};
+pub use mechanism::{Candidate, Mechanism, Nuisance, Parameter, Scale};
 pub use model::{Group, Model, ModelError, Variable, VariableKind};
 pub use show::{BinStat, VariableStructure};

@@ -20,6 +20,13 @@ pub struct Parameter {
     pub scale: Scale,
 }
 
+impl Parameter {
+    /// A parameter whose interval is symmetric on its value.
+    pub const fn linear(name: &'static str, unit: &'static str, lo: f64, hi: f64, meaning: &'static str) -> Self {
+        Self { name, unit, lo, hi, meaning, scale: Scale::Linear }
+    }
+}
+
 /// The scale on which a parameter's interval is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Scale {
@@ -51,5 +58,33 @@ pub trait Mechanism: Send + Sync {
     /// Whether it has per-group nuisance parameters.
     fn nuisance(&self) -> Nuisance {
         Nuisance::None
+    }
+}
+
+/// A mechanism that is fully described by its name, physics and shared parameters (no
+/// per-group nuisance): most domains' candidates, declared as statics.
+#[derive(Debug)]
+pub struct Candidate {
+    name: &'static str,
+    physics: &'static str,
+    params: &'static [Parameter],
+}
+
+impl Candidate {
+    /// A candidate called `name`.
+    pub const fn new(name: &'static str, physics: &'static str, params: &'static [Parameter]) -> Self {
+        Self { name, physics, params }
+    }
+}
+
+impl Mechanism for Candidate {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+    fn physics(&self) -> &'static str {
+        self.physics
+    }
+    fn params(&self) -> &'static [Parameter] {
+        self.params
     }
 }

@@ -5,7 +5,37 @@
 //! (effect, strength) cell the rates carry Clopper–Pearson intervals, and the correct
 //! draws' strength intervals are checked against the injected strength.
 
+use crate::engine::Discovery;
 use crate::stats::clopper_pearson;
+
+/// What a power study keeps of one draw's discovery against its `target` (the injected
+/// mechanism, `None` for a null draw or an effect no candidate describes).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DrawVerdict {
+    /// The verdict.
+    pub outcome: Outcome,
+    /// When correct: the target's first fitted parameter with its interval.
+    pub fitted: Option<(f64, f64, f64)>,
+    /// Each of the `candidates` candidates' raw first-round p-value (NaN: not scored).
+    pub first_round_p: Vec<f64>,
+}
+
+impl DrawVerdict {
+    /// Scores `found` against `target`.
+    pub fn of<F>(found: &Discovery<F>, target: Option<usize>, candidates: usize) -> Self {
+        let outcome = Outcome::of(&found.named, target);
+        let fitted = (outcome == Outcome::Correct)
+            .then(|| found.extension.iter().find(|e| e.mechanism == target).map(|e| (e.estimate, e.ci_lo, e.ci_hi)))
+            .flatten();
+        let mut first_round_p = vec![f64::NAN; candidates];
+        if let Some(round) = found.rounds.first() {
+            for c in &round.candidates {
+                first_round_p[c.mechanism] = c.p_value;
+            }
+        }
+        Self { outcome, fitted, first_round_p }
+    }
+}
 
 /// How one draw came out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

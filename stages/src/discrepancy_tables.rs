@@ -8,10 +8,45 @@
 
 use discrepancy::power::{Outcome, PowerRow};
 use discrepancy::{Discovery, Model, Settings, VariableKind, Verdict};
-use pipeline::{StageContext, StageError};
+use pipeline::params::ParamDefault;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError};
 use polars::prelude::DataFrame;
 
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+
+/// The family-wise false-alarm rate, as every discrepancy stage declares it.
+pub(crate) const ALPHA: ParamSpec = ParamSpec {
+    name: "alpha",
+    ty: ParamType::Float { min: 0.001, max: 0.5 },
+    default: ParamDefault::Float(0.05),
+    doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
+};
+
+/// The bins of `residuals.parquet`.
+pub(crate) const BINS: ParamSpec = ParamSpec {
+    name: "bins",
+    ty: ParamType::Int { min: 2, max: 60 },
+    default: ParamDefault::Int(12),
+    doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
+};
+
+/// The bootstrap draws of every gain interval.
+pub(crate) const BOOTSTRAP_DRAWS: ParamSpec = ParamSpec {
+    name: "bootstrap_draws",
+    ty: ParamType::Int { min: 100, max: 100_000 },
+    default: ParamDefault::Int(2000),
+    doc: "Bootstrap draws over groups of every gain interval.",
+};
+
+/// The most rounds for a domain with `candidates` candidates, `default` by default.
+pub(crate) const fn max_rounds(candidates: i64, default: i64) -> ParamSpec {
+    ParamSpec {
+        name: "max_rounds",
+        ty: ParamType::Int { min: 1, max: candidates },
+        default: ParamDefault::Int(default),
+        doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
+    }
+}
 
 /// The engine's settings from a discrepancy stage's parameters (`alpha`, `max_rounds`,
 /// `bins`, `bootstrap_draws`) and seed, checked.

@@ -135,3 +135,19 @@ pub fn parquet_rows(path: &Path) -> usize {
     use polars::prelude::{ParquetReader, SerReader};
     ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap().height()
 }
+
+/// A Parquet file as a DataFrame.
+pub fn read_table(path: &Path) -> polars::prelude::DataFrame {
+    use polars::prelude::{ParquetReader, SerReader};
+    ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
+}
+
+/// A string column (nulls as empty strings).
+pub fn strings(df: &polars::prelude::DataFrame, column: &str) -> Vec<String> {
+    df.column(column).unwrap().str().unwrap().iter().map(|s| s.unwrap_or_default().to_string()).collect()
+}
+
+/// A float column (nulls as NaN).
+pub fn floats(df: &polars::prelude::DataFrame, column: &str) -> Vec<f64> {
+    df.column(column).unwrap().f64().unwrap().iter().map(|x| x.unwrap_or(f64::NAN)).collect()
+}

@@ -56,7 +56,7 @@
 //! pair's median difference.
 
 use ::discrepancy::least_squares::{minimize, LmSettings};
-use ::discrepancy::{Group, Mechanism, Model, ModelError, Parameter, Scale, Variable, VariableKind};
+use ::discrepancy::{Candidate, Group, Mechanism, Model, ModelError, Parameter, Variable, VariableKind};
 
 use super::errors::ThermalError;
 
@@ -295,28 +295,8 @@ pub const LAYER_HEAT_ACCUMULATION: usize = 2;
 /// See [`CAMERA_LATENCY`].
 pub const BED_WARMING: usize = 3;
 
-/// A thermal candidate.
-#[derive(Debug)]
-pub struct Candidate {
-    name: &'static str,
-    physics: &'static str,
-    params: &'static [Parameter],
-}
-
-impl Mechanism for Candidate {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-    fn physics(&self) -> &'static str {
-        self.physics
-    }
-    fn params(&self) -> &'static [Parameter] {
-        self.params
-    }
-}
-
 const fn linear(name: &'static str, unit: &'static str, lo: f64, hi: f64, meaning: &'static str) -> Parameter {
-    Parameter { name, unit, lo, hi, meaning, scale: Scale::Linear }
+    Parameter::linear(name, unit, lo, hi, meaning)
 }
 
 static LATENCY: [Parameter; 1] =
@@ -344,26 +324,26 @@ static WARMING: [Parameter; 1] =
 
 /// Every candidate, in index order.
 pub static CANDIDATES: [Candidate; 4] = [
-    Candidate {
-        name: "camera_latency",
-        physics: "every frame is captured a fixed time after its recorded time stamp (eq. 28 with a non-zero mean t_f)",
-        params: &LATENCY,
-    },
-    Candidate {
-        name: "clock_rate",
-        physics: "the camera's clock runs at a slightly different rate from the printer's: the capture offset grows linearly through a layer",
-        params: &RATE,
-    },
-    Candidate {
-        name: "layer_heat_accumulation",
-        physics: "a fraction of each layer's residual heat warms the next layer's substrate, so later layers cool from a warmer base (saturating over layers)",
-        params: &HEAT,
-    },
-    Candidate {
-        name: "bed_warming",
-        physics: "the substrate warms by a fixed amount every layer whatever was printed (a chamber or bed still settling)",
-        params: &WARMING,
-    },
+    Candidate::new(
+        "camera_latency",
+        "every frame is captured a fixed time after its recorded time stamp (eq. 28 with a non-zero mean t_f)",
+        &LATENCY,
+    ),
+    Candidate::new(
+        "clock_rate",
+        "the camera's clock runs at a slightly different rate from the printer's: the capture offset grows linearly through a layer",
+        &RATE,
+    ),
+    Candidate::new(
+        "layer_heat_accumulation",
+        "a fraction of each layer's residual heat warms the next layer's substrate, so later layers cool from a warmer base (saturating over layers)",
+        &HEAT,
+    ),
+    Candidate::new(
+        "bed_warming",
+        "the substrate warms by a fixed amount every layer whatever was printed (a chamber or bed still settling)",
+        &WARMING,
+    ),
 ];
 
 /// The candidates as the engine sees them.
@@ -371,7 +351,7 @@ pub static MECHANISMS: [&dyn Mechanism; 4] = [&CANDIDATES[0], &CANDIDATES[1], &C
 
 /// The candidate called `name`, by index.
 pub fn candidate_index(name: &str) -> Option<usize> {
-    CANDIDATES.iter().position(|c| c.name == name)
+    CANDIDATES.iter().position(|c| c.name() == name)
 }
 
 /// The variables the residuals are shown against.

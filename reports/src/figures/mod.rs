@@ -7,6 +7,7 @@ mod inkjet_height_maps;
 mod inkjet_model_vs_scan;
 mod inkjet_pipe_junction;
 mod loo_predictions;
+mod power_by_effect;
 mod r_surface;
 mod segment_accuracy;
 #[cfg(test)]
@@ -29,6 +30,7 @@ pub use inkjet_height_maps::InkjetHeightMapsFigure;
 pub use inkjet_model_vs_scan::InkjetModelVsScanFigure;
 pub use inkjet_pipe_junction::InkjetPipeJunctionFigure;
 pub use loo_predictions::LooPredictionsFigure;
+pub use power_by_effect::DiscoveryPowerByEffectFigure;
 pub use r_surface::RSurfaceFigure;
 pub use segment_accuracy::SegmentAccuracyFigure;
 pub use thermal_contour_error::ThermalContourErrorFigure;
@@ -52,6 +54,7 @@ use crate::style::house_mesh;
 pub fn register(registry: &mut Registry) {
     registry.register(Box::new(WidthProfilesFigure));
     registry.register(Box::new(LooPredictionsFigure));
+    registry.register(Box::new(DiscoveryPowerByEffectFigure));
     registry.register(Box::new(RSurfaceFigure));
     registry.register(Box::new(TransferCvFigure));
     registry.register(Box::new(InfillFigure));

@@ -20,7 +20,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain, Kind, Table, Value};
+use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain, Kind, Table, Value, ALPHA, BINS};
 use crate::fdm::lines::PrinterLines;
 
 /// The `fdm.discrepancy` stage kind.
@@ -40,24 +40,14 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(0.02),
         doc: "With the piecewise baseline: step of its r_a, r_F grid over [0.9, 1.1] (paper 000: 0.01; every fold and candidate fits it again, so the default is coarser).",
     },
-    ParamSpec {
-        name: "alpha",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
-    },
+    ALPHA,
     ParamSpec {
         name: "max_rounds",
         ty: ParamType::Int { min: 0, max: 7 },
         default: ParamDefault::Int(3),
         doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
     },
-    ParamSpec {
-        name: "bins",
-        ty: ParamType::Int { min: 2, max: 60 },
-        default: ParamDefault::Int(12),
-        doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
-    },
+    BINS,
     SMOOTHING,
     ParamSpec {
         name: "bootstrap_draws",

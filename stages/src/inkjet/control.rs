@@ -20,7 +20,8 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use super::discrepancy::{strengths, ALPHA, LAYERS_PER_GROUP, MAX_ROUNDS};
+use super::discrepancy::{strengths, LAYERS_PER_GROUP, MAX_ROUNDS};
+use crate::discrepancy_tables::ALPHA;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.control_gain` stage kind.

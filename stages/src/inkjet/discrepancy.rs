@@ -28,7 +28,8 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, engine_settings, power_frame, DiscrepancyTables, Domain, DrawRow,
+    draws_frame as shared_draws_frame, engine_settings, max_rounds, power_frame, DiscrepancyTables, Domain, DrawRow,
+    ALPHA, BINS, BOOTSTRAP_DRAWS,
 };
 use crate::effects::strength_list;
 
@@ -41,39 +42,13 @@ pub(super) const LAYERS_PER_GROUP: ParamSpec = ParamSpec {
     default: ParamDefault::Int(4),
     doc: "Consecutive layers per group: blocks share only their boundary scan, so held-out blocks are close to independent (at least 3 groups are needed; 8 or more before anything can be named at α = 0.05 over 6 candidates).",
 };
-pub(super) const ALPHA: ParamSpec = ParamSpec {
-    name: "alpha",
-    ty: ParamType::Float { min: 0.001, max: 0.5 },
-    default: ParamDefault::Float(0.05),
-    doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
-};
-pub(super) const MAX_ROUNDS: ParamSpec = ParamSpec {
-    name: "max_rounds",
-    ty: ParamType::Int { min: 1, max: 6 },
-    default: ParamDefault::Int(3),
-    doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
-};
+/// The most rounds over the six candidates.
+pub(super) const MAX_ROUNDS: ParamSpec = max_rounds(6, 3);
 
 /// The `inkjet.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-const PARAMS: &[ParamSpec] = &[
-    LAYERS_PER_GROUP,
-    ALPHA,
-    MAX_ROUNDS,
-    ParamSpec {
-        name: "bins",
-        ty: ParamType::Int { min: 2, max: 60 },
-        default: ParamDefault::Int(12),
-        doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
-    },
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(2000),
-        doc: "Bootstrap draws over groups of every gain interval.",
-    },
-];
+const PARAMS: &[ParamSpec] = &[LAYERS_PER_GROUP, ALPHA, MAX_ROUNDS, BINS, BOOTSTRAP_DRAWS];
 
 impl StageKind for DiscrepancyStage {
     fn name(&self) -> &'static str {

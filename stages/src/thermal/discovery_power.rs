@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
-use discrepancy::power::{summarize, DrawScore, Outcome};
+use discrepancy::power::{summarize, DrawScore, DrawVerdict, Outcome};
 use discrepancy::stats::mix_seed;
 use discrepancy::{discover, Mechanism, Settings};
 use models::thermal::discrepancy::{candidate_index, ThermalModel, CANDIDATES};
@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use super::common::open_sequence;
 use super::discrepancy::record_from_tables;
 use super::monitor;
-use crate::discrepancy_tables::{draws_frame, power_frame, DrawRow};
+use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, DrawRow, ALPHA};
 use crate::effects::strength_list;
 
 /// The `thermal.discovery_power` stage kind.
@@ -99,18 +99,8 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(8),
         doc: "Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 4 candidates).",
     },
-    ParamSpec {
-        name: "alpha",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
-    },
-    ParamSpec {
-        name: "max_rounds",
-        ty: ParamType::Int { min: 1, max: 4 },
-        default: ParamDefault::Int(2),
-        doc: "Most causes named per draw.",
-    },
+    ALPHA,
+    max_rounds(4, 2),
     ParamSpec {
         name: "band_low_c",
         ty: ParamType::Float { min: 0.0, max: 300.0 },
@@ -266,17 +256,8 @@ impl Design {
         let found = discover(&model, &groups, &[], &Settings { seed, ..self.engine }).map_err(|e| {
             StageError::Domain(format!("discrepancy engine on power draw {} (seed {seed:016x}): {e}", job.draw).into())
         })?;
-        let target = job.effect.and_then(candidate_index);
-        let outcome = Outcome::of(&found.named, target);
-        let fitted = (outcome == Outcome::Correct)
-            .then(|| found.extension.iter().find(|e| e.mechanism == target).map(|e| (e.estimate, e.ci_lo, e.ci_hi)))
-            .flatten();
-        let mut first_round_p = vec![f64::NAN; CANDIDATES.len()];
-        if let Some(round) = found.rounds.first() {
-            for c in &round.candidates {
-                first_round_p[c.mechanism] = c.p_value;
-            }
-        }
+        let DrawVerdict { outcome, fitted, first_round_p } =
+            DrawVerdict::of(&found, job.effect.and_then(candidate_index), CANDIDATES.len());
         Ok(Draw {
             effect: job.effect,
             strength: job.strength,

@@ -19,13 +19,12 @@ use discrepancy::discover;
 use models::thermal::discrepancy::{
     FrameObservation, RecordParts, TemperatureObservation, ThermalModel, ThermalRecord,
 };
-use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 use polars::prelude::DataFrame;
 
 use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
-use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain};
+use crate::discrepancy_tables::{engine_settings, max_rounds, DiscrepancyTables, Domain, ALPHA, BINS, BOOTSTRAP_DRAWS};
 
 /// The thermal tables' names: one discovery per dataset, residuals in noise std's.
 const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
@@ -33,32 +32,7 @@ const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
 /// The `thermal.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "alpha",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
-    },
-    ParamSpec {
-        name: "max_rounds",
-        ty: ParamType::Int { min: 1, max: 4 },
-        default: ParamDefault::Int(3),
-        doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
-    },
-    ParamSpec {
-        name: "bins",
-        ty: ParamType::Int { min: 2, max: 60 },
-        default: ParamDefault::Int(12),
-        doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
-    },
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(2000),
-        doc: "Bootstrap draws over groups of every gain interval.",
-    },
-];
+const PARAMS: &[ParamSpec] = &[ALPHA, max_rounds(4, 3), BINS, BOOTSTRAP_DRAWS];
 
 impl StageKind for DiscrepancyStage {
     fn name(&self) -> &'static str {

@@ -12,7 +12,8 @@
 //!   shrinkage (both scale the fresh layer), so [`CURING_SHRINKAGE`] stands for both;
 //!   its physics line says so.
 
-use ::discrepancy::{Mechanism, Parameter, Scale};
+pub use ::discrepancy::Candidate;
+use ::discrepancy::{Mechanism, Parameter};
 
 /// Index of curing shrinkage among the candidates.
 pub const CURING_SHRINKAGE: usize = 0;
@@ -27,32 +28,12 @@ pub const COEFFICIENT_SPLIT: usize = 4;
 /// Index of anisotropic spread (not in the virtual printer).
 pub const ANISOTROPIC_SPREAD: usize = 5;
 
-/// A candidate with one parameter.
-#[derive(Debug)]
-pub struct Candidate {
-    name: &'static str,
-    physics: &'static str,
-    params: &'static [Parameter],
-}
-
-impl Mechanism for Candidate {
-    fn name(&self) -> &'static str {
-        self.name
-    }
-    fn physics(&self) -> &'static str {
-        self.physics
-    }
-    fn params(&self) -> &'static [Parameter] {
-        self.params
-    }
-}
-
 const fn one(name: &'static str, physics: &'static str, params: &'static [Parameter]) -> Candidate {
-    Candidate { name, physics, params }
+    Candidate::new(name, physics, params)
 }
 
 const fn linear(name: &'static str, unit: &'static str, lo: f64, hi: f64, meaning: &'static str) -> Parameter {
-    Parameter { name, unit, lo, hi, meaning, scale: Scale::Linear }
+    Parameter::linear(name, unit, lo, hi, meaning)
 }
 
 static SHRINKAGE: [Parameter; 1] = [linear(
@@ -111,5 +92,5 @@ pub static MECHANISMS: [&dyn Mechanism; 6] =
 
 /// The candidate called `name`, by index.
 pub fn candidate_index(name: &str) -> Option<usize> {
-    CANDIDATES.iter().position(|c| c.name == name)
+    CANDIDATES.iter().position(|c| c.name() == name)
 }

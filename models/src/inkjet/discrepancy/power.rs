@@ -14,7 +14,7 @@
 //! `substrate_tilt` has no candidate ([`super::mechanisms`]): its draws can only come
 //! out *none* or *wrong*, and the study reports how often the engine stays silent.
 
-use ::discrepancy::power::{DrawScore, Outcome};
+use ::discrepancy::power::{DrawScore, DrawVerdict, Outcome};
 use ::discrepancy::stats::mix_seed;
 use ::discrepancy::{discover, EngineError, Mechanism, Settings};
 use rand::SeedableRng;
@@ -178,16 +178,7 @@ fn one_draw(
     let blocks = model.print().blocks(design.print.layers_per_group);
     let found = discover(&model, &blocks, &[], &Settings { seed, ..design.engine })?;
     let target = effect.and_then(|e| candidate_index(e.name()));
-    let outcome = Outcome::of(&found.named, target);
-    let fitted = (outcome == Outcome::Correct)
-        .then(|| found.extension.iter().find(|e| e.mechanism == target).map(|e| (e.estimate, e.ci_lo, e.ci_hi)))
-        .flatten();
-    let mut first_round_p = vec![f64::NAN; CANDIDATES.len()];
-    if let Some(round) = found.rounds.first() {
-        for c in &round.candidates {
-            first_round_p[c.mechanism] = c.p_value;
-        }
-    }
+    let DrawVerdict { outcome, fitted, first_round_p } = DrawVerdict::of(&found, target, CANDIDATES.len());
     Ok(DrawResult { effect, strength, draw, seed, truth, named: found.named, outcome, fitted, first_round_p })
 }
 
