@@ -48,6 +48,19 @@ pub(crate) const fn max_rounds(candidates: i64, default: i64) -> ParamSpec {
     }
 }
 
+/// The engine's settings for a study stage (a power or control study) from its `alpha`
+/// and `max_rounds` and seed, with `bootstrap_draws` draws of each gain interval (the
+/// studies use the fits, not those intervals) and the default bins.
+pub(crate) fn study_settings(ctx: &StageContext, bootstrap_draws: usize) -> Settings {
+    let p = &ctx.params;
+    Settings {
+        alpha: p.f64("alpha"),
+        max_rounds: p.i64("max_rounds") as usize,
+        bootstrap_draws,
+        ..Settings::standard(ctx.seed)
+    }
+}
+
 /// The engine's settings from a discrepancy stage's parameters (`alpha`, `max_rounds`,
 /// `bins`, `bootstrap_draws`) and seed, checked.
 pub(crate) fn engine_settings(ctx: &StageContext) -> Result<Settings, StageError> {

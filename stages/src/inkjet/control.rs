@@ -12,7 +12,6 @@
 //! paper's controller with its interval) and `control_trials.parquet` (one row per
 //! production print).
 
-use discrepancy::Settings;
 use models::inkjet::discrepancy::control::{run_trials, summarize, ControlDesign, ControlRow, ControlSummary};
 use models::inkjet::discrepancy::power::PrintDesign;
 use models::inkjet::printer::Effect;
@@ -21,7 +20,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use super::discrepancy::{strengths, LAYERS_PER_GROUP, MAX_ROUNDS};
-use crate::discrepancy_tables::ALPHA;
+use crate::discrepancy_tables::{study_settings, ALPHA};
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.control_gain` stage kind.
@@ -125,13 +124,7 @@ fn design(ctx: &StageContext) -> Result<ControlDesign, StageError> {
         cells,
         seeds: p.i64("printers") as usize,
         seed: ctx.seed,
-        // The production prints use the fit, not the gain's interval: the fewest bootstrap draws.
-        engine: Settings {
-            alpha: p.f64("alpha"),
-            max_rounds: p.i64("max_rounds") as usize,
-            bootstrap_draws: 100,
-            ..Settings::standard(ctx.seed)
-        },
+        engine: study_settings(ctx, 100),
     })
 }
 

@@ -17,7 +17,7 @@
 
 use datasets::inkjet::InkjetScans;
 use discrepancy::power::summarize;
-use discrepancy::{discover, Settings};
+use discrepancy::discover;
 use models::inkjet::discrepancy::mechanisms::CANDIDATES;
 use models::inkjet::discrepancy::power::{names, run_draws, DrawResult, PowerDesign, PrintDesign};
 use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
@@ -28,8 +28,8 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, engine_settings, max_rounds, power_frame, DiscrepancyTables, Domain, DrawRow,
-    ALPHA, BINS, BOOTSTRAP_DRAWS,
+    draws_frame as shared_draws_frame, engine_settings, max_rounds, power_frame, study_settings, DiscrepancyTables,
+    Domain, DrawRow, ALPHA, BINS, BOOTSTRAP_DRAWS,
 };
 use crate::effects::strength_list;
 
@@ -242,12 +242,7 @@ fn power_design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
         draws_per_cell: p.i64("draws") as usize,
         null_draws: p.i64("null_draws") as usize,
         seed: ctx.seed,
-        engine: Settings {
-            alpha: p.f64("alpha"),
-            max_rounds: p.i64("max_rounds") as usize,
-            bootstrap_draws: p.i64("bootstrap_draws") as usize,
-            ..Settings::standard(ctx.seed)
-        },
+        engine: study_settings(ctx, p.i64("bootstrap_draws") as usize),
     })
 }
 

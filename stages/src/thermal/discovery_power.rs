@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use super::common::open_sequence;
 use super::discrepancy::record_from_tables;
 use super::monitor;
-use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, DrawRow, ALPHA};
+use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, study_settings, DrawRow, ALPHA};
 use crate::effects::strength_list;
 
 /// The `thermal.discovery_power` stage kind.
@@ -216,12 +216,7 @@ impl Design {
             null_draws: p.i64("null_draws") as usize,
             layers: p.i64("layers") as usize,
             seed: ctx.seed,
-            engine: Settings {
-                alpha: p.f64("alpha"),
-                max_rounds: p.i64("max_rounds") as usize,
-                bootstrap_draws: 100,
-                ..Settings::standard(ctx.seed)
-            },
+            engine: study_settings(ctx, 100),
             monitor,
         })
     }
