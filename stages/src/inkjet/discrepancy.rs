@@ -16,8 +16,8 @@
 //! with each candidate's first-round p-value).
 
 use datasets::inkjet::InkjetScans;
-use discrepancy::power::summarize;
 use discrepancy::discover;
+use discrepancy::power::summarize;
 use models::inkjet::discrepancy::mechanisms::CANDIDATES;
 use models::inkjet::discrepancy::power::{names, run_draws, DrawResult, PowerDesign, PrintDesign};
 use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
