@@ -2,8 +2,10 @@
 //! films four virtual prints (the printer's own physics, a camera latency, heat carried
 //! from layer to layer, a flow lag with a τ off the nominal) and the engine, reading
 //! only the monitor's tables and the sequence's process, names nothing on the first,
-//! the latency on the second with an interval covering what the camera did, and no
-//! wrong cause on the others; the report section is written from the tables.
+//! the latency on the second with an interval covering what the camera did, the τ
+//! error on the fourth, and no wrong cause on the third; the compensation
+//! with the fitted τ is re-printed beside the paper's; the report section is written
+//! from the tables.
 
 mod common;
 
@@ -12,7 +14,7 @@ use std::path::Path;
 use common::*;
 
 #[test]
-fn the_shipped_spec_names_the_camera_latency_and_nothing_wrong() {
+fn the_shipped_spec_names_the_camera_latency_and_the_tau_error_and_nothing_wrong() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = shipped_spec(tmp.path(), "discrepancy_thermal", tmp.path());
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
@@ -25,23 +27,58 @@ fn the_shipped_spec_names_the_camera_latency_and_nothing_wrong() {
     };
     assert_eq!(named_in("print_paper_physics"), Vec::<&str>::new());
     assert_eq!(named_in("print_camera_latency"), ["camera_latency"]);
-    assert_eq!(named_in("print_tau_mismatch"), Vec::<&str>::new(), "no candidate describes a τ error");
+    assert_eq!(named_in("print_tau_mismatch"), ["tau_mismatch"]);
     let heat = named_in("print_layer_heat");
     assert!(heat.is_empty() || heat == ["layer_heat_accumulation"], "{heat:?}");
     // Eight layers per print, each a group.
     let groups = causes.column("groups").unwrap().i64().unwrap();
     assert!(groups.iter().all(|g| g == Some(8)));
-    // The latency's interval covers what the camera did (10 ms).
+    // The latency's interval covers what the camera did (10 ms). The τ excess is found
+    // near the 30 % printed, but its interval is known not to cover it: the contour's
+    // width follows the flow with a slower tail than eq. 34's lag alone, which reads as
+    // about a quarter more τ excess than printed (the power study's coverage column).
     let extension = read_table(&out.join("thermal_extension.parquet"));
-    let (param, lo, hi) = (strings(&extension, "parameter"), floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));
+    let (param, estimate) = (strings(&extension, "parameter"), floats(&extension, "estimate"));
+    let (lo, hi) = (floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));
     let k = param.iter().position(|p| p == "latency_s").unwrap();
     assert!(lo[k] <= 0.01 && 0.01 <= hi[k], "[{}, {}]", lo[k], hi[k]);
+    let k = param.iter().position(|p| p == "tau_excess").unwrap();
+    assert!((0.2..0.45).contains(&estimate[k]) && lo[k] < estimate[k] && estimate[k] < hi[k], "{}", estimate[k]);
     let gain = read_table(&out.join("thermal_gain.parquet"));
     let (sets, ci_lo) = (strings(&gain, "dataset"), floats(&gain, "gain_ci_lo_pct"));
     let latency = sets.iter().position(|d| d == "print_camera_latency").unwrap();
     assert!(ci_lo[latency] > 0.0, "the extension predicts held-out layers better");
+    control_gain_is_tabulated_with_intervals(&out, 3);
     let section = std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_thermal/report/section.html")).unwrap();
     assert!(section.contains("camera latency") && section.contains("8 layers"), "{section}");
+    assert!(section.contains("Does the extended model compensate better?"), "{section}");
+}
+
+/// `thermal_control_gain.parquet`: the three commands of every strength, each metric's
+/// mean inside its interval, paired differences zero for the paper's own command, the
+/// engine's τ used on every print it named one; and the paper's compensation lowers
+/// the corners' overfill O_E below the uncompensated command's (paper 003 Sec. 3.3).
+fn control_gain_is_tabulated_with_intervals(out: &Path, prints: i64) {
+    let gain = read_table(&out.join("thermal_control_gain.parquet"));
+    assert_eq!(strings(&gain, "controller"), ["conventional", "paper", "extended"]);
+    let ints = |c: &str| -> Vec<i64> { gain.column(c).unwrap().i64().unwrap().iter().map(|x| x.unwrap()).collect() };
+    assert!(ints("prints").iter().all(|&p| p == prints));
+    for metric in ["mean_oe_pct", "contour_rms_mm", "contour_max_mm"] {
+        let (mean, lo, hi) = (
+            floats(&gain, metric),
+            floats(&gain, &format!("{metric}_ci_lo")),
+            floats(&gain, &format!("{metric}_ci_hi")),
+        );
+        assert!((0..3).all(|i| lo[i] <= mean[i] && mean[i] <= hi[i] && mean[i] > 0.0), "{metric}: {mean:?}");
+        assert_eq!(floats(&gain, &format!("{metric}_vs_paper"))[1], 0.0);
+    }
+    let oe = floats(&gain, "mean_oe_pct");
+    assert!(oe[1] < oe[0], "compensation lowers O_E: {oe:?}");
+    let trials = read_table(&out.join("thermal_control_trials.parquet"));
+    let (named, tau) = (strings(&trials, "named"), floats(&trials, "tau_excess"));
+    assert!((0..trials.height()).all(|i| named[i].contains("tau_mismatch") == tau[i].is_finite()));
+    let named_prints = named.iter().filter(|n| n.contains("tau_mismatch")).count() as i64 / 3;
+    assert_eq!(ints("tau_named")[2], named_prints);
 }
 
 #[test]
@@ -84,15 +121,15 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/studies/discrepancy_thermal_power.toml"),
     )
     .unwrap();
-    let study = "null_draws = 200, draws = 40, camera_latency = \"0.005, 0.01\", layer_heat_accumulation = \"0.3, 0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"1\", melt_squeeze_out = \"0.2\"";
+    let study = "null_draws = 200, draws = 40, camera_latency = \"0.005, 0.01\", layer_heat_accumulation = \"0.3, 0.6\", tau_mismatch = \"0.15, 0.3\", heat_diffusion_widening = \"1\", melt_squeeze_out = \"0.2\"";
     assert!(shipped.contains(study), "the shipped study changed; update this test");
-    // Six null prints, two of each effect a candidate describes at the larger strength,
-    // two with a τ error no candidate describes.
+    // Six null prints, two of each effect at its larger strength; two control prints.
     let cut = shipped.replace(
         study,
         "null_draws = 6, draws = 2, camera_latency = \"0.01\", layer_heat_accumulation = \"0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"\", melt_squeeze_out = \"\"",
     );
     let spec = tmp.path().join("study.toml");
+    let cut = cut.replace("prints = 20, reprint_layers = 20", "prints = 2, reprint_layers = 2");
     std::fs::write(&spec, cut).unwrap();
     ok(tmp.path(), &["run", "--out", "out", spec.to_str().unwrap()]);
     let power = read_table(&tmp.path().join("out/discrepancy/thermal_power.parquet"));
@@ -103,15 +140,14 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     assert_eq!(draws, [6, 2, 2, 2]);
     // Null: false alarms not significantly above 5 % (the Clopper–Pearson lower bound).
     assert!(floats(&power, "false_alarm_ci_lo")[0] <= 0.05, "{} of 6", wrong[0]);
-    // The effects a candidate describes: named in ≥ 95 % and wrong in ≤ 2 %, each not
-    // significantly violated (pooled over the two cells: 4 draws).
-    let (named, wrongs) = (correct[1] + correct[2], wrong[1] + wrong[2]);
-    assert!(named >= 3, "named {named} of 4");
-    assert_eq!(wrongs, 0, "wrong {wrongs} of 4");
-    // The τ error has no candidate: nothing is named on it, or it is a wrong cause.
-    assert_eq!(correct[3], 0);
-    // Coverage of the strength intervals not significantly below 90 %: with four
-    // intervals, the Clopper–Pearson upper bound reaches 0.9 from two covered on.
+    // Each effect named in ≥ 95 % and a wrong one in ≤ 2 %, neither significantly
+    // violated (pooled over the three cells: 6 draws, CP bounds at 5 and 0).
+    let (named, wrongs) = (correct[1..].iter().sum::<i64>(), wrong[1..].iter().sum::<i64>());
+    assert!(named >= 5, "named {named} of 6");
+    assert_eq!(wrongs, 0, "wrong {wrongs} of 6");
+    // Coverage of the strength intervals not significantly below 90 % for the latency
+    // and the carried heat: with four intervals, the Clopper–Pearson upper bound reaches
+    // 0.9 from two covered on. (The τ excess's intervals are known to miss: see above.)
     let (covered, with) = (ints("covered"), ints("with_interval"));
     assert!(2 * (covered[1] + covered[2]) >= with[1] + with[2], "{covered:?} of {with:?}");
     // The null's first-round p-values are valid: nowhere significantly above the
@@ -119,7 +155,7 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     let draws_table = read_table(&tmp.path().join("out/discrepancy/thermal_power_draws.parquet"));
     assert_eq!(draws_table.height(), 12);
     let null: Vec<usize> = (0..12).filter(|&i| strings(&draws_table, "effect")[i] == "none").collect();
-    for candidate in ["camera_latency", "clock_rate", "layer_heat_accumulation", "bed_warming"] {
+    for candidate in ["camera_latency", "clock_rate", "layer_heat_accumulation", "bed_warming", "tau_mismatch"] {
         let all = floats(&draws_table, &format!("p_{candidate}"));
         let mut p: Vec<f64> = null.iter().map(|&i| all[i]).collect();
         p.sort_by(f64::total_cmp);
@@ -130,4 +166,5 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     let section =
         std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_thermal_power/report/section.html")).unwrap();
     assert!(section.contains("How often is a hidden effect named?"));
+    control_gain_is_tabulated_with_intervals(&tmp.path().join("out/discrepancy"), 2);
 }

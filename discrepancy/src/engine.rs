@@ -5,7 +5,9 @@
 //! are scored by leave-one-group-out cross-validation, with per-group nuisance
 //! parameters cross-fitted on the held-out group's two halves. The evidence of group
 //! `g` is `d_g = ln(SSE_before,g / SSE_after,g)`, scale-free so that no single line
-//! dominates. A one-sided sign-flip test over the `G` groups gives each candidate a
+//! dominates (a model whose groups join kinds of observation no mechanism shares sums
+//! a candidate's squared errors over the observations it can move only,
+//! [`Model::moved_by`]). A one-sided sign-flip test over the `G` groups gives each candidate a
 //! p-value, Holm's step-down adjusts them for the `m` candidates of the round, and
 //! the cause named is the candidate with the largest held-out gain among those with
 //! adjusted p ≤ α. Why this test: it is exact under the one assumption that, with no
@@ -104,6 +106,23 @@ pub struct HeldOut<F> {
 impl<F> HeldOut<F> {
     /// Pooled held-out RMSE over all samples of all groups.
     pub fn rmse(&self) -> f64 {
+        self.errors().rmse()
+    }
+
+    fn errors(&self) -> Errors<'_> {
+        Errors { sse: &self.sse, samples: &self.samples }
+    }
+}
+
+/// Each group's held-out sum of squared errors and the samples it is over.
+#[derive(Clone, Copy)]
+struct Errors<'a> {
+    sse: &'a [f64],
+    samples: &'a [usize],
+}
+
+impl Errors<'_> {
+    fn rmse(&self) -> f64 {
         (self.sse.iter().sum::<f64>() / self.samples.iter().sum::<usize>().max(1) as f64).sqrt()
     }
 }
@@ -350,8 +369,19 @@ fn run_round<M: Model>(
             cross_validate(model, groups, &active, Some(&current.folds))
         })
         .collect();
-    let mut candidates: Vec<CandidateScore> =
-        remaining.iter().zip(&outcomes).map(|(&c, outcome)| score(c, current, outcome, index, settings)).collect();
+    let mut candidates: Vec<CandidateScore> = remaining
+        .iter()
+        .zip(&outcomes)
+        .map(|(&c, outcome)| match (outcome, moved(model, groups, c)) {
+            (Ok(after), Some(masks)) => {
+                let (before, after, samples) = restricted(groups, current, after, &masks);
+                let errors = |sse| Errors { sse, samples: &samples };
+                score(c, errors(&before), Ok(errors(&after)), index, settings)
+            }
+            (Ok(after), None) => score(c, current.errors(), Ok(after.errors()), index, settings),
+            (Err(e), _) => score(c, current.errors(), Err(e), index, settings),
+        })
+        .collect();
     let adjusted = holm(&candidates.iter().map(|c| c.p_value).collect::<Vec<_>>());
     for (c, p) in candidates.iter_mut().zip(adjusted) {
         c.p_adjusted = p;
@@ -375,10 +405,10 @@ fn run_round<M: Model>(
     (Round { index, base: current.active.clone(), candidates, verdict }, accepted)
 }
 
-fn score<F>(
+fn score(
     mechanism: usize,
-    before: &HeldOut<F>,
-    after: &Result<HeldOut<F>, ModelError>,
+    before: Errors<'_>,
+    after: Result<Errors<'_>, &ModelError>,
     round: usize,
     settings: &Settings,
 ) -> CandidateScore {
@@ -400,10 +430,10 @@ fn score<F>(
             }
         }
     };
-    let log_gains = log_gains(&before.sse, &after.sse);
+    let log_gains = log_gains(before.sse, after.sse);
     let seed = mix_seed(settings.seed, round as u64, mechanism as u64);
     let rmse_after = after.rmse();
-    let (lo, hi) = bootstrap_ratio_interval(&before.sse, &after.sse, settings.bootstrap_draws, settings.level, seed);
+    let (lo, hi) = bootstrap_ratio_interval(before.sse, after.sse, settings.bootstrap_draws, settings.level, seed);
     CandidateScore {
         mechanism,
         rmse_before,
@@ -420,6 +450,36 @@ fn score<F>(
 
 /// `ln(before/after)` per group, with a floor far below any real squared error so that
 /// a perfectly predicted group stays finite.
+/// Each group's mask of the observations `mechanism` moves ([`Model::moved_by`]), or
+/// `None` when it may move all of them.
+fn moved<M: Model>(model: &M, groups: &[M::Group], mechanism: usize) -> Option<Vec<Vec<bool>>> {
+    groups.iter().map(|g| model.moved_by(mechanism, g)).collect()
+}
+
+/// Each group's held-out squared errors, before and after, summed over the observations
+/// of its mask only, and their count.
+fn restricted<G: Group, F>(
+    groups: &[G],
+    before: &HeldOut<F>,
+    after: &HeldOut<F>,
+    masks: &[Vec<bool>],
+) -> (Vec<f64>, Vec<f64>, Vec<usize>) {
+    let (mut sse_before, mut sse_after, mut samples) = (vec![], vec![], vec![]);
+    for (g, group) in groups.iter().enumerate() {
+        let (mut b, mut a, mut n) = (0.0, 0.0, 0);
+        let observations = before.predictions[g].iter().zip(&after.predictions[g]).zip(group.observed());
+        for (((pb, pa), y), _) in observations.zip(&masks[g]).filter(|(_, &m)| m) {
+            b += (pb - y).powi(2);
+            a += (pa - y).powi(2);
+            n += 1;
+        }
+        sse_before.push(b);
+        sse_after.push(a);
+        samples.push(n);
+    }
+    (sse_before, sse_after, samples)
+}
+
 fn log_gains(before: &[f64], after: &[f64]) -> Vec<f64> {
     let floor = 1e-12 * before.iter().sum::<f64>() / before.len().max(1) as f64 + f64::MIN_POSITIVE;
     before.iter().zip(after).map(|(b, a)| ((b + floor) / (a + floor)).ln()).collect()

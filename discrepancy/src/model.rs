@@ -77,4 +77,14 @@ pub trait Model: Sync {
     /// The fitted shared parameters: the baseline's, then each active mechanism's in
     /// `active` order, as [`Model::params`] and [`Mechanism::params`] list them.
     fn estimates(&self, fit: &Self::Fit) -> Vec<f64>;
+
+    /// The observations of `group` that `mechanism` can move, when the groups join kinds
+    /// of observation that no mechanism shares (a camera's timing and a bead's width):
+    /// the candidate is then scored on those only, or one kind's residuals would dilute
+    /// another's evidence in proportion to how many there are. Default `None`: every
+    /// candidate is scored on every observation.
+    fn moved_by(&self, mechanism: usize, group: &Self::Group) -> Option<Vec<bool>> {
+        let _ = (mechanism, group);
+        None
+    }
 }

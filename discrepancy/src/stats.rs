@@ -185,6 +185,21 @@ pub fn ks_uniform(values: &[f64]) -> (f64, f64) {
     (d, p.clamp(0.0, 1.0))
 }
 
+/// Mean with a 95 % Student-t interval (NaN bounds for fewer than two values).
+pub fn t_interval(values: &[f64]) -> (f64, f64, f64) {
+    let n = values.len() as f64;
+    if values.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN);
+    }
+    let mean = values.iter().sum::<f64>() / n;
+    if values.len() < 2 {
+        return (mean, f64::NAN, f64::NAN);
+    }
+    let sd = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let half = t_quantile(0.975, n - 1.0) * sd / n.sqrt();
+    (mean, mean - half, mean + half)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -247,5 +262,16 @@ mod tests {
         assert!(ks_uniform(&shifted).1 < 1e-6);
         let even: Vec<f64> = (0..500).map(|i| (i as f64 + 0.5) / 500.0).collect();
         assert!(ks_uniform(&even).1 > 0.99);
+    }
+
+    #[test]
+    fn t_intervals_are_the_textbook_ones() {
+        // Mean 2, sd 1, n = 4: half width t(0.975, 3)·1/2 = 3.1824/2.
+        let values = [1.0, 2.0, 3.0, 2.0];
+        let sd = (2.0f64 / 3.0).sqrt();
+        let (m, lo, hi) = t_interval(&values);
+        assert!((m - 2.0).abs() < 1e-12);
+        assert!((hi - m - 3.182_446 * sd / 2.0).abs() < 1e-5 && (m - lo - (hi - m)).abs() < 1e-12);
+        assert!(t_interval(&[1.0]).1.is_nan());
     }
 }

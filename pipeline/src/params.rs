@@ -58,7 +58,7 @@ impl fmt::Display for ParamValue {
 }
 
 /// The declaration of one parameter of a stage kind.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 pub struct ParamSpec {
     /// Name as written in the spec, with its unit (`steady_from_mm`).
     pub name: &'static str,

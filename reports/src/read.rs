@@ -14,6 +14,12 @@ pub fn f64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageEr
     Ok(ca.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
 }
 
+/// Columns `mean`, `lo` and `hi` as (estimate, interval low, interval high) per row.
+pub fn f64_triples(df: &DataFrame, [mean, lo, hi]: [&str; 3], path: &Path) -> Result<Vec<(f64, f64, f64)>, StageError> {
+    let (m, l, h) = (f64s(df, mean, path)?, f64s(df, lo, path)?, f64s(df, hi, path)?);
+    Ok((0..m.len()).map(|i| (m[i], l[i], h[i])).collect())
+}
+
 /// Column `name` as strings.
 pub fn strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, StageError> {
     let bad = |e: polars::error::PolarsError| StageError::Table { path: path.to_path_buf(), source: e };

@@ -1,18 +1,32 @@
 //! What paper 003's models get wrong about what the thermal monitor measures, and why:
 //! the thermal domain of the discrepancy engine (DESIGN §7).
 //!
-//! **What is observed.** Two of the monitor's measurements, per filmed layer:
+//! **What is observed.** Three of the monitor's measurements, per filmed layer:
 //! - each localised frame's *capture offset* `t̂_c − t_r`, its capture time estimated by
 //!   eq. 30 minus its recorded time (frames whose estimate sits at the edge of eq. 30's
 //!   search window are censored and left out, and so are repeated images);
 //! - each trajectory sample's *centre temperature*: the bead's temperature on the path
-//!   in the frame its width is read from (at the monitor's measuring age).
+//!   in the frame its width is read from (at the monitor's measuring age);
+//! - each straight-run sample's *bead width* `w_l + w_r` at the threshold contour: a
+//!   sample at the feed speed, at least a clearance (the stage's `width_clearance_mm`)
+//!   from every CAD vertex, read in a frame with a capture-time estimate (a frame placed
+//!   by dead reckoning has no sub-millimetre position).
 //!
 //! **Baseline.** Paper 003 as the project uses it: eq. 28, `t_c = t_r + t_f` with small
 //! zero-mean fluctuations, so the expected offset is 0; and, as the paper prints and
 //! measures every layer the same way (one identified τ, one threshold contour, the
 //! substrate at the bed temperature), every layer's centre temperatures are the same
-//! profile along the path, estimated from the training layers at each sample.
+//! profile along the path, estimated from the training layers at each sample. Widths:
+//! on a straight run the bead is the flow that reaches the nozzle spread over the path,
+//! `w = G_τ(E)/(h·v)` (eq. 34 with the nominal τ on the commanded flow E of
+//! `trajectory.csv`; eqs 5-11 reduce to it where the path does not turn), so after
+//! every corner the bead is thin while the head accelerates and the flow still lags,
+//! and recovers over a few τ. The monitor's threshold contour is not the deposit: a
+//! thinner bead holds less heat and its contour shrinks more than its deposit, so the
+//! baseline reads the contour as `a + b·(w − w0)`, its intercept `a` and *contour gain*
+//! `b` fitted to the training layers in every fit (nuisances of the baseline, like the
+//! temperature profile); without them the τ candidate would take the contour's own
+//! amplification of the thin stretch for a longer τ.
 //!
 //! **Candidates** (each a small parametric extension with its physics):
 //! - `camera_latency`: a constant delay between the recorded and the true capture time,
@@ -30,12 +44,15 @@
 //!   or bed still settling), `s_n = w·n`, read through the same relation (the printer
 //!   does not have it).
 //!
-//! The thermal effects that change the deposited width (`tau_mismatch`,
-//! `heat_diffusion_widening`, `melt_squeeze_out`) have no candidate here: even on a
-//! print with none of them, the threshold contour of a cooling bead differs near every
-//! corner from the widths of eqs 5-11 with the nominal τ by more than they change it,
-//! so a width discrepancy needs a model of the contour first. On prints with them the
-//! engine should stay silent, and the shipped spec prints one to show it.
+//! - `tau_mismatch`: the flow reaches the nozzle with a time constant `τ0·(1 + m)`
+//!   instead of eq. 34's nominal τ0, so the thin stretch after every corner is longer or
+//!   shorter (the printer's effect); fitted with the contour line re-fitted at each `m`.
+//!
+//! The other thermal effects that change the deposit (`heat_diffusion_widening`,
+//! `melt_squeeze_out`) have no candidate: they act at the corners, where the threshold
+//! contour of a cooling bead differs from the widths of eqs 5-11 by far more than they
+//! change them, even on a print with none of them, so they need a model of the
+//! contour first. On prints with them the engine should stay silent.
 //!
 //! **Groups** are whole layers, each with the frames recorded while it was printed.
 //! Not blocks of a layer: a layer carries its own random state (the virtual printer
@@ -49,16 +66,21 @@
 //! sign-flip test over G layers cannot reach p below 2^−G, so eight or more filmed
 //! layers are needed before anything can be named at α = 0.05 over four candidates.
 //!
-//! **Scales.** A group's squared error adds offsets (s) and temperatures (°C), so every
-//! observation is divided by its kind's noise scale, estimated robustly from
-//! differences no candidate can explain: successive frames' offsets within a layer,
-//! and the same sample's temperature in consecutive layers after removing each layer
-//! pair's median difference.
+//! **Scales.** A group's squared error adds offsets (s), temperatures (°C) and widths
+//! (mm), so every observation is divided by its kind's noise scale, estimated robustly
+//! from differences no candidate can explain: successive frames' offsets within a layer,
+//! and the same sample's temperature (width) in consecutive layers after removing each
+//! layer pair's median difference. The kinds do not mix in a fit: each mechanism moves
+//! one kind's predictions only, and it is scored on the observations it moves
+//! ([`Model::moved_by`]): the thousands of widths would otherwise dilute a
+//! layer's evidence from its few hundred temperatures or frames.
 
 use ::discrepancy::least_squares::{minimize, LmSettings};
 use ::discrepancy::{Candidate, Group, Mechanism, Model, ModelError, Parameter, Variable, VariableKind};
 
+use super::dynamics::first_order_lag;
 use super::errors::ThermalError;
+use super::Trajectory;
 
 /// One localised frame's capture offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,11 +106,88 @@ pub struct TemperatureObservation {
     pub temp_c: f64,
 }
 
+/// One straight-run sample's bead width in one layer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WidthObservation {
+    /// 0-based layer.
+    pub layer: usize,
+    /// Trajectory sample index.
+    pub sample: usize,
+    /// Width at the threshold contour, `w_l + w_r`, mm.
+    pub width_mm: f64,
+}
+
+/// What the straight-run width of eq. 34 needs of the print.
+#[derive(Debug, Clone, Copy)]
+pub struct Deposition<'a> {
+    /// Commanded volumetric flow at each trajectory sample, mm³/s (`trajectory.csv`).
+    pub commanded_flow_mm3_s: &'a [f64],
+    /// Path speed at each sample, mm/s.
+    pub speed_mm_s: &'a [f64],
+    /// Sample period, s.
+    pub dt_s: f64,
+    /// Layer height h, mm.
+    pub layer_height_mm: f64,
+    /// Nominal flow time constant τ0 of eq. 34, s.
+    pub tau_s: f64,
+    /// Nominal bead width w0, mm.
+    pub bead_width_mm: f64,
+}
+
+/// The owned [`Deposition`].
+#[derive(Debug, Clone, PartialEq)]
+struct FlowModel {
+    commanded_flow_mm3_s: Vec<f64>,
+    speed_mm_s: Vec<f64>,
+    dt_s: f64,
+    layer_height_mm: f64,
+    tau_s: f64,
+    bead_width_mm: f64,
+}
+
+impl FlowModel {
+    /// Each sample's straight-run width under a flow time constant `τ0·(1 + tau_excess)`,
+    /// minus w0 (NaN where the head stands still).
+    fn width_excess_mm(&self, tau_excess: f64) -> Vec<f64> {
+        let tau_s = self.tau_s * (1.0 + tau_excess);
+        let lagged = first_order_lag(&self.commanded_flow_mm3_s, self.dt_s, tau_s, 0.0);
+        lagged
+            .iter()
+            .zip(&self.speed_mm_s)
+            .map(|(q, v)| if *v > 0.0 { q / (self.layer_height_mm * v) - self.bead_width_mm } else { f64::NAN })
+            .collect()
+    }
+}
+
+/// The samples whose bead width the model describes: at least `fraction_of_feed` of
+/// the feed speed and `clearance_mm` from every vertex of `path_mm`.
+pub fn straight_run_samples(
+    trajectory: &Trajectory,
+    path_mm: &[[f64; 2]],
+    feed_mm_s: f64,
+    clearance_mm: f64,
+) -> Vec<bool> {
+    let speed = trajectory.speed_mm_s();
+    (0..trajectory.len())
+        .map(|k| {
+            let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
+            speed[k] >= STRAIGHT_RUN_SPEED_FRACTION * feed_mm_s
+                && path_mm.iter().all(|v| (v[0] - p[0]).hypot(v[1] - p[1]) >= clearance_mm)
+        })
+        .collect()
+}
+
+/// Fraction of the feed below which a sample is in a corner's or the seam's speed
+/// ramp, where the deposit is not a straight bead.
+pub const STRAIGHT_RUN_SPEED_FRACTION: f64 = 0.95;
+
 /// What one filmed print gives the model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ThermalRecord {
     frames: Vec<FrameObservation>,
     temps: Vec<TemperatureObservation>,
+    widths: Vec<WidthObservation>,
+    flow: FlowModel,
     layers: usize,
     samples: usize,
     layer_duration_s: f64,
@@ -104,6 +203,8 @@ pub struct Scales {
     pub offset_s: f64,
     /// Centre temperatures, °C.
     pub temp_c: f64,
+    /// Bead widths, mm.
+    pub width_mm: f64,
 }
 
 /// The parts of a [`ThermalRecord`].
@@ -113,6 +214,10 @@ pub struct RecordParts<'a> {
     pub frames: &'a [FrameObservation],
     /// Centre temperatures (finite).
     pub temps: &'a [TemperatureObservation],
+    /// Straight-run bead widths (finite, at samples where the head moves).
+    pub widths: &'a [WidthObservation],
+    /// The print's flow and path, for the widths' model.
+    pub deposition: Deposition<'a>,
     /// Trajectory samples per layer.
     pub samples: usize,
     /// Duration of one layer's trajectory, s.
@@ -145,18 +250,35 @@ impl ThermalRecord {
         if let Some(t) = parts.temps.iter().find(|t| !t.temp_c.is_finite() || t.sample >= parts.samples) {
             return Err(invalid("temp_c", t.temp_c, "temperatures must be finite, at samples of the trajectory"));
         }
-        let layers =
-            frames.iter().map(|f| f.layer).chain(parts.temps.iter().map(|t| t.layer)).max().map_or(0, |l| l + 1);
+        let flow = check_deposition(&parts.deposition, parts.samples)?;
+        if let Some(w) = parts
+            .widths
+            .iter()
+            .find(|w| !w.width_mm.is_finite() || w.sample >= parts.samples || flow.speed_mm_s[w.sample] <= 0.0)
+        {
+            return Err(invalid("width_mm", w.width_mm, "widths must be finite, at samples where the head moves"));
+        }
+        let layers = (frames.iter().map(|f| f.layer))
+            .chain(parts.temps.iter().map(|t| t.layer))
+            .chain(parts.widths.iter().map(|w| w.layer))
+            .max()
+            .map_or(0, |l| l + 1);
         let mut seen = vec![0usize; parts.samples];
         parts.temps.iter().for_each(|t| seen[t.sample] += 1);
         let temps: Vec<TemperatureObservation> = parts.temps.iter().filter(|t| seen[t.sample] >= 2).copied().collect();
         if layers < 2 {
             return Err(invalid("layers", layers as f64, "at least two filmed layers are needed"));
         }
-        let scales = Scales { offset_s: offset_scale(&frames, layers), temp_c: temperature_scale(&temps, layers) };
+        let scales = Scales {
+            offset_s: offset_scale(&frames, layers),
+            temp_c: layer_pair_scale(temps.iter().map(|t| (t.layer, t.sample, t.temp_c)), layers, 1e-3),
+            width_mm: layer_pair_scale(parts.widths.iter().map(|w| (w.layer, w.sample, w.width_mm)), layers, 1e-4),
+        };
         Ok(Self {
             frames,
             temps,
+            widths: parts.widths.to_vec(),
+            flow,
             layers,
             samples: parts.samples,
             layer_duration_s: parts.layer_duration_s,
@@ -179,7 +301,7 @@ impl ThermalRecord {
     /// The groups: one per filmed layer, with its frames and temperatures.
     pub fn layer_groups(&self) -> Vec<ThermalBlock> {
         let mut out: Vec<ThermalBlock> = (0..self.layers)
-            .map(|layer| ThermalBlock { layer, frames: vec![], temps: vec![], observed: vec![] })
+            .map(|layer| ThermalBlock { layer, frames: vec![], temps: vec![], widths: vec![], observed: vec![] })
             .collect();
         for (i, f) in self.frames.iter().enumerate() {
             out[f.layer].frames.push(i);
@@ -187,9 +309,13 @@ impl ThermalRecord {
         for (i, t) in self.temps.iter().enumerate() {
             out[t.layer].temps.push(i);
         }
+        for (i, w) in self.widths.iter().enumerate() {
+            out[w.layer].widths.push(i);
+        }
         for g in &mut out {
             g.observed = g.frames.iter().map(|&i| self.frames[i].offset_s / self.scales.offset_s).collect();
             g.observed.extend(g.temps.iter().map(|&i| self.temps[i].temp_c / self.scales.temp_c));
+            g.observed.extend(g.widths.iter().map(|&i| self.widths[i].width_mm / self.scales.width_mm));
         }
         out.retain(|g| !g.observed.is_empty());
         out
@@ -240,19 +366,52 @@ fn offset_scale(frames: &[FrameObservation], layers: usize) -> f64 {
     robust_scale(diffs, 1e-4)
 }
 
-/// Robust std of a temperature reading: the same sample in consecutive layers, each
-/// layer pair's median difference removed, MAD over √2.
-fn temperature_scale(temps: &[TemperatureObservation], layers: usize) -> f64 {
-    let samples = temps.iter().map(|t| t.sample).max().map_or(0, |s| s + 1);
+/// Robust std of a per-sample reading `(layer, sample, value)`: the same sample in
+/// consecutive layers, each layer pair's median difference removed, MAD over √2, at
+/// least `floor`.
+fn layer_pair_scale(readings: impl Iterator<Item = (usize, usize, f64)> + Clone, layers: usize, floor: f64) -> f64 {
+    let samples = readings.clone().map(|(_, s, _)| s).max().map_or(0, |s| s + 1);
     let mut by_layer = vec![vec![f64::NAN; samples]; layers];
-    temps.iter().for_each(|t| by_layer[t.layer][t.sample] = t.temp_c);
+    readings.for_each(|(layer, sample, value)| by_layer[layer][sample] = value);
     let mut all = Vec::new();
     for pair in by_layer.windows(2) {
         let mut d: Vec<f64> = pair[0].iter().zip(&pair[1]).map(|(a, b)| b - a).filter(|d| d.is_finite()).collect();
         let median = median_of(&mut d);
         all.extend(d.iter().map(|x| x - median));
     }
-    robust_scale(all, 1e-3)
+    robust_scale(all, floor)
+}
+
+/// The checked, owned [`Deposition`].
+fn check_deposition(d: &Deposition<'_>, samples: usize) -> Result<FlowModel, ThermalError> {
+    if d.commanded_flow_mm3_s.len() != samples || d.speed_mm_s.len() != samples {
+        return Err(invalid(
+            "commanded_flow_mm3_s",
+            d.commanded_flow_mm3_s.len() as f64,
+            "one flow and speed per sample",
+        ));
+    }
+    for (name, value) in [
+        ("dt_s", d.dt_s),
+        ("layer_height_mm", d.layer_height_mm),
+        ("tau_s", d.tau_s),
+        ("bead_width_mm", d.bead_width_mm),
+    ] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(invalid(name, value, "must be positive"));
+        }
+    }
+    if let Some(q) = d.commanded_flow_mm3_s.iter().chain(d.speed_mm_s).find(|q| !q.is_finite()) {
+        return Err(invalid("commanded_flow_mm3_s", *q, "flows and speeds must be finite"));
+    }
+    Ok(FlowModel {
+        commanded_flow_mm3_s: d.commanded_flow_mm3_s.to_vec(),
+        speed_mm_s: d.speed_mm_s.to_vec(),
+        dt_s: d.dt_s,
+        layer_height_mm: d.layer_height_mm,
+        tau_s: d.tau_s,
+        bead_width_mm: d.bead_width_mm,
+    })
 }
 
 fn median_of(values: &mut [f64]) -> f64 {
@@ -277,6 +436,7 @@ pub struct ThermalBlock {
     pub layer: usize,
     frames: Vec<usize>,
     temps: Vec<usize>,
+    widths: Vec<usize>,
     observed: Vec<f64>,
 }
 
@@ -294,6 +454,8 @@ pub const CLOCK_RATE: usize = 1;
 pub const LAYER_HEAT_ACCUMULATION: usize = 2;
 /// See [`CAMERA_LATENCY`].
 pub const BED_WARMING: usize = 3;
+/// See [`CAMERA_LATENCY`].
+pub const TAU_MISMATCH: usize = 4;
 
 const fn linear(name: &'static str, unit: &'static str, lo: f64, hi: f64, meaning: &'static str) -> Parameter {
     Parameter::linear(name, unit, lo, hi, meaning)
@@ -321,9 +483,16 @@ static HEAT: [Parameter; 2] = [
 ];
 static WARMING: [Parameter; 1] =
     [linear("warming_c_per_layer", "degC", -20.0, 20.0, "substrate warming per layer, whatever was printed")];
+static TAU: [Parameter; 1] = [linear(
+    "tau_excess",
+    "1",
+    -0.5,
+    3.0,
+    "relative excess of the flow's time constant over eq. 34's nominal: τ = τ0·(1 + m)",
+)];
 
 /// Every candidate, in index order.
-pub static CANDIDATES: [Candidate; 4] = [
+pub static CANDIDATES: [Candidate; 5] = [
     Candidate::new(
         "camera_latency",
         "every frame is captured a fixed time after its recorded time stamp (eq. 28 with a non-zero mean t_f)",
@@ -344,10 +513,16 @@ pub static CANDIDATES: [Candidate; 4] = [
         "the substrate warms by a fixed amount every layer whatever was printed (a chamber or bed still settling)",
         &WARMING,
     ),
+    Candidate::new(
+        "tau_mismatch",
+        "the flow follows the command with a time constant other than eq. 34's nominal τ, so the bead after every corner thins and recovers over a different time",
+        &TAU,
+    ),
 ];
 
 /// The candidates as the engine sees them.
-pub static MECHANISMS: [&dyn Mechanism; 4] = [&CANDIDATES[0], &CANDIDATES[1], &CANDIDATES[2], &CANDIDATES[3]];
+pub static MECHANISMS: [&dyn Mechanism; 5] =
+    [&CANDIDATES[0], &CANDIDATES[1], &CANDIDATES[2], &CANDIDATES[3], &CANDIDATES[4]];
 
 /// The candidate called `name`, by index.
 pub fn candidate_index(name: &str) -> Option<usize> {
@@ -361,7 +536,7 @@ pub static VARIABLES: [Variable; 3] = [
     Variable {
         name: "observation",
         unit: "",
-        kind: VariableKind::Categorical(&["capture_offset", "centre_temperature"]),
+        kind: VariableKind::Categorical(&["capture_offset", "centre_temperature", "bead_width"]),
     },
 ];
 
@@ -393,6 +568,12 @@ pub struct ThermalFit {
     pub warming_c_per_layer: f64,
     /// Each sample's layer-0 centre temperature from the training layers (NaN: unseen).
     pub profile_c: Vec<f64>,
+    /// Relative excess of the flow's τ over the nominal (0 unless `tau_mismatch` is active).
+    pub tau_excess: f64,
+    /// The contour line `(a, b)`: a width reads `a + b·(w − w0)` (NaN: no widths).
+    pub contour_line: (f64, f64),
+    /// Each sample's straight-run width minus w0 under the fitted τ, mm.
+    pub width_excess_mm: Vec<f64>,
 }
 
 impl ThermalModel {
@@ -491,6 +672,83 @@ impl ThermalModel {
     }
 }
 
+/// The widths' part of a fit.
+struct WidthFit {
+    tau_excess: f64,
+    contour_line: (f64, f64),
+    width_excess_mm: Vec<f64>,
+}
+
+/// Least-squares line `y = a + b·x` through `(x, y)`; `None` when x does not vary.
+fn line_fit(points: impl Iterator<Item = (f64, f64)>) -> Option<(f64, f64)> {
+    let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (x, y) in points {
+        n += 1.0;
+        sx += x;
+        sy += y;
+        sxx += x * x;
+        sxy += x * y;
+    }
+    let det = n * sxx - sx * sx;
+    (det > 1e-12 * n * n.max(1.0)).then(|| {
+        let b = (n * sxy - sx * sy) / det;
+        ((sy - b * sx) / n, b)
+    })
+}
+
+impl ThermalModel {
+    /// The training layers' widths.
+    fn train_widths<'b>(&'b self, train: &'b [&ThermalBlock]) -> impl Iterator<Item = &'b WidthObservation> + Clone {
+        train.iter().flat_map(|b| b.widths.iter().map(|&i| &self.record.widths[i]))
+    }
+
+    /// The contour line through `train`'s widths against the model's `excess`.
+    fn contour_line(&self, train: &[&ThermalBlock], excess: &[f64]) -> Option<(f64, f64)> {
+        line_fit(self.train_widths(train).map(|w| (excess[w.sample], w.width_mm)))
+    }
+
+    fn width_fit(
+        &self,
+        active: &[usize],
+        train: &[&ThermalBlock],
+        warm: Option<&ThermalFit>,
+    ) -> Result<WidthFit, ModelError> {
+        let none = || WidthFit { tau_excess: 0.0, contour_line: (f64::NAN, f64::NAN), width_excess_mm: vec![] };
+        let tau_active = active.contains(&TAU_MISMATCH);
+        if self.train_widths(train).next().is_none() {
+            return if tau_active {
+                Err(ModelError::Fit("no bead widths to fit a flow τ to".into()))
+            } else {
+                Ok(none())
+            };
+        }
+        let tau_excess = if tau_active { self.fit_tau_excess(train, warm)? } else { 0.0 };
+        let width_excess_mm = self.record.flow.width_excess_mm(tau_excess);
+        let contour_line = self
+            .contour_line(train, &width_excess_mm)
+            .ok_or_else(|| ModelError::Fit("the training widths do not vary with the flow: no contour line".into()))?;
+        Ok(WidthFit { tau_excess, contour_line, width_excess_mm })
+    }
+
+    /// `m` by Levenberg-Marquardt, the contour line solved in closed form at every `m`.
+    fn fit_tau_excess(&self, train: &[&ThermalBlock], warm: Option<&ThermalFit>) -> Result<f64, ModelError> {
+        let widths: Vec<&WidthObservation> = self.train_widths(train).collect();
+        let scale = self.record.scales.width_mm;
+        let residuals = |x: &[f64], r: &mut [f64]| -> bool {
+            let excess = self.record.flow.width_excess_mm(x[0]);
+            let Some((a, b)) = self.contour_line(train, &excess) else { return false };
+            for (ri, w) in r.iter_mut().zip(&widths) {
+                *ri = (w.width_mm - a - b * excess[w.sample]) / scale;
+            }
+            true
+        };
+        let x0 = [warm.map_or(0.0, |w| w.tau_excess)];
+        let solution = minimize(residuals, &x0, &[TAU[0].lo], &[TAU[0].hi], widths.len(), &LmSettings::default())
+            .ok_or_else(|| ModelError::Fit("the flow τ cannot start from its initial value".into()))?;
+        Ok(solution.x[0])
+    }
+}
+
 impl Model for ThermalModel {
     type Group = ThermalBlock;
     type Fit = ThermalFit;
@@ -512,10 +770,13 @@ impl Model for ThermalModel {
         let r = &self.record;
         let frames = group.frames.iter().map(|&i| &r.frames[i]);
         let temps = group.temps.iter().map(|&i| &r.temps[i]);
+        let widths = group.widths.iter().map(|&i| &r.widths[i]);
         match variable {
             0 => vec![group.layer as f64; group.observed.len()],
-            1 => frames.map(|f| f.recorded_time_s).chain(temps.map(|t| t.t_s)).collect(),
-            _ => frames.map(|_| 0.0).chain(temps.map(|_| 1.0)).collect(),
+            1 => (frames.map(|f| f.recorded_time_s).chain(temps.map(|t| t.t_s)))
+                .chain(widths.map(|w| w.sample as f64 * r.flow.dt_s))
+                .collect(),
+            _ => frames.map(|_| 0.0).chain(temps.map(|_| 1.0)).chain(widths.map(|_| 2.0)).collect(),
         }
     }
 
@@ -527,7 +788,18 @@ impl Model for ThermalModel {
     ) -> Result<ThermalFit, ModelError> {
         let (latency_s, clock_rate) = self.frame_fit(active, train)?;
         let SubstrateFit { heat, warming_c_per_layer, profile_c } = self.temperature_fit(active, train, warm)?;
-        Ok(ThermalFit { active: active.to_vec(), latency_s, clock_rate, heat, warming_c_per_layer, profile_c })
+        let WidthFit { tau_excess, contour_line, width_excess_mm } = self.width_fit(active, train, warm)?;
+        Ok(ThermalFit {
+            active: active.to_vec(),
+            latency_s,
+            clock_rate,
+            heat,
+            warming_c_per_layer,
+            profile_c,
+            tau_excess,
+            contour_line,
+            width_excess_mm,
+        })
     }
 
     fn predict(
@@ -553,7 +825,22 @@ impl Model for ThermalModel {
             }
             out.push(r.reading(c, s[t.layer]) / r.scales.temp_c);
         }
+        if !group.widths.is_empty() && fit.width_excess_mm.is_empty() {
+            return Err(ModelError::Predict("the training layers have no bead widths".into()));
+        }
+        let (a, b) = fit.contour_line;
+        out.extend(group.widths.iter().map(|&i| (a + b * fit.width_excess_mm[r.widths[i].sample]) / r.scales.width_mm));
         Ok(out)
+    }
+
+    fn moved_by(&self, mechanism: usize, group: &ThermalBlock) -> Option<Vec<bool>> {
+        let kind = match mechanism {
+            CAMERA_LATENCY | CLOCK_RATE => 0,
+            LAYER_HEAT_ACCUMULATION | BED_WARMING => 1,
+            _ => 2,
+        };
+        let counts = [group.frames.len(), group.temps.len(), group.widths.len()];
+        Some((0..3).flat_map(|k| std::iter::repeat_n(k == kind, counts[k])).collect())
     }
 
     fn estimates(&self, fit: &ThermalFit) -> Vec<f64> {
@@ -566,7 +853,8 @@ impl Model for ThermalModel {
                     let (f, g) = fit.heat.unwrap_or((0.0, 0.0));
                     out.extend([f, g]);
                 }
-                _ => out.push(fit.warming_c_per_layer),
+                BED_WARMING => out.push(fit.warming_c_per_layer),
+                _ => out.push(fit.tau_excess),
             }
         }
         out
@@ -578,24 +866,65 @@ mod tests {
     use super::*;
     use ::discrepancy::{discover, Settings};
 
+    const DT_S: f64 = 0.02;
+    const H_MM: f64 = 0.25;
+    const W0_MM: f64 = 0.45;
+    const TAU_S: f64 = 0.0873;
+
+    /// A speed profile with a corner every 100 samples (a 20-sample ramp to 20 mm/s)
+    /// and its commanded flow w0·h·v.
+    fn flow_and_speed(samples: usize) -> (Vec<f64>, Vec<f64>) {
+        let speed: Vec<f64> = (0..samples).map(|k| 20.0 * ((k % 100) as f64 / 20.0).min(1.0)).collect();
+        (speed.iter().map(|v| W0_MM * H_MM * v).collect(), speed)
+    }
+
+    fn deposition<'a>(flow: &'a [f64], speed: &'a [f64]) -> Deposition<'a> {
+        Deposition {
+            commanded_flow_mm3_s: flow,
+            speed_mm_s: speed,
+            dt_s: DT_S,
+            layer_height_mm: H_MM,
+            tau_s: TAU_S,
+            bead_width_mm: W0_MM,
+        }
+    }
+
     /// A noiseless synthetic print in the model's own terms: `layers` layers of
-    /// `samples` samples, a bumpy layer-0 profile, frames every 0.125 s.
+    /// `samples` samples, a bumpy layer-0 profile, frames every 0.125 s, straight-run
+    /// widths with a flow τ `τ0·(1 + tau_excess)` read through a contour gain of 1.1.
     fn synthetic(layers: usize, latency_s: f64, rate: f64, heat: Option<(f64, f64)>, warming: f64) -> ThermalRecord {
+        synthetic_with_tau(layers, latency_s, rate, heat, warming, 0.0)
+    }
+
+    fn synthetic_with_tau(
+        layers: usize,
+        latency_s: f64,
+        rate: f64,
+        heat: Option<(f64, f64)>,
+        warming: f64,
+        tau_excess: f64,
+    ) -> ThermalRecord {
         let (samples, duration) = (400, 8.0);
+        let (flow, speed) = flow_and_speed(samples);
         let (nozzle, bed) = (215.0, 60.0);
+        let flow_model = check_deposition(&deposition(&flow, &speed), samples).unwrap();
+        let excess = flow_model.width_excess_mm(tau_excess);
         let probe = ThermalRecord {
             frames: vec![],
             temps: vec![],
+            widths: vec![],
+            flow: flow_model,
             layers,
             samples,
             layer_duration_s: duration,
             nozzle_temp_c: nozzle,
             bed_temp_c: bed,
-            scales: Scales { offset_s: 1.0, temp_c: 1.0 },
+            scales: Scales { offset_s: 1.0, temp_c: 1.0, width_mm: 1.0 },
         };
         let s = probe.substrate_excess_c(heat, warming).unwrap();
         let mut frames = vec![];
         let mut temps = vec![];
+        let mut widths = vec![];
         for (n, &s_n) in s.iter().enumerate() {
             for i in 0..64 {
                 let t = i as f64 * 0.125;
@@ -607,11 +936,18 @@ mod tests {
                 let c = 180.0 + 10.0 * (k as f64 * 0.05).sin() + 0.02 * ((k * 13 + n * 5) % 7) as f64;
                 let t_s = k as f64 * duration / samples as f64;
                 temps.push(TemperatureObservation { layer: n, sample: k, t_s, temp_c: probe.reading(c, s_n) });
+                if speed[k] >= 19.0 {
+                    let wobble = 1e-4 * (((k * 11 + n * 7) % 5) as f64 - 2.0);
+                    let width_mm = W0_MM + 0.002 + 1.1 * excess[k] + wobble;
+                    widths.push(WidthObservation { layer: n, sample: k, width_mm });
+                }
             }
         }
         ThermalRecord::new(RecordParts {
             frames: &frames,
             temps: &temps,
+            widths: &widths,
+            deposition: deposition(&flow, &speed),
             samples,
             layer_duration_s: duration,
             nozzle_temp_c: nozzle,
@@ -638,6 +974,10 @@ mod tests {
         assert!((f - 0.5).abs() < 0.01 && (g - 0.3).abs() < 0.01, "{f} {g}");
         let fit = fit_all(synthetic(8, 0.0, 0.0, None, 1.5), &[BED_WARMING]);
         assert!((fit.warming_c_per_layer - 1.5).abs() < 0.01, "{}", fit.warming_c_per_layer);
+        let fit = fit_all(synthetic_with_tau(8, 0.0, 0.0, None, 0.0, 0.3), &[TAU_MISMATCH]);
+        assert!((fit.tau_excess - 0.3).abs() < 0.01, "{}", fit.tau_excess);
+        let (a, b) = fit.contour_line;
+        assert!((a - W0_MM - 0.002).abs() < 1e-3 && (b - 1.1).abs() < 0.01, "{a} {b}");
     }
 
     #[test]
@@ -665,5 +1005,22 @@ mod tests {
         assert_eq!(run(synthetic(8, 0.0, 0.0, None, 0.0)), Vec::<usize>::new());
         assert_eq!(run(synthetic(8, 0.01, 0.0, None, 0.0)), [CAMERA_LATENCY]);
         assert_eq!(run(synthetic(8, 0.0, 0.0, Some((0.5, 0.3)), 0.0)), [LAYER_HEAT_ACCUMULATION]);
+        assert_eq!(run(synthetic_with_tau(8, 0.0, 0.0, None, 0.0, 0.3)), [TAU_MISMATCH]);
+    }
+
+    #[test]
+    fn the_straight_run_width_is_the_lagged_flow_over_the_path() {
+        let (flow, speed) = flow_and_speed(400);
+        let model = check_deposition(&deposition(&flow, &speed), 400).unwrap();
+        let excess = model.width_excess_mm(0.0);
+        // Standing still: no width; long after a ramp the flow has caught up with the
+        // command; on the ramp the lagging flow leaves the bead thin.
+        assert!(excess[0].is_nan());
+        assert!(excess[99].abs() < 1e-3, "{}", excess[99]);
+        assert!(excess[10] < -0.01, "{}", excess[10]);
+        // A longer τ lags more.
+        assert!(model.width_excess_mm(0.5)[10] < excess[10]);
+        assert!(line_fit([(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)].into_iter()) == Some((1.0, 2.0)));
+        assert!(line_fit([(1.0, 1.0), (1.0, 3.0)].into_iter()).is_none());
     }
 }

@@ -491,6 +491,52 @@ fn ring_buckets(cx: usize, cy: usize, ring: usize, nx: usize, ny: usize) -> impl
         .map(|(x, y)| (x as usize, y as usize))
 }
 
+/// A_c of eq. 40: the perfect corner polytope, the rhombus where the two edges' ideal
+/// beads of width `bead_width_mm` overlap at interior angle θ, W²/sin θ (mm²).
+pub fn corner_polytope_area_mm2(bead_width_mm: f64, interior_angle_deg: f64) -> f64 {
+    bead_width_mm * bead_width_mm / interior_angle_deg.to_radians().sin()
+}
+
+/// A printed part scored as paper 003 Sec. 3.3 scores it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrintQuality {
+    /// Mean over the CAD corners of the first layer's O_E = A_o/A_c (eq. 40), percent.
+    pub mean_oe_pct: f64,
+    /// Eq. 41 over every layer: the largest contour error (mm).
+    pub contour_max_mm: f64,
+    /// Eq. 41 over every layer: the RMS contour error (mm).
+    pub contour_rms_mm: f64,
+}
+
+/// [`PrintQuality`] of the printed `layers` against the ideal `bead` of width
+/// `bead_width_mm` along the CAD polygon `path_mm`: O_E in a window of `corner_radius_mm`
+/// around each vertex, eq. 41 at the CAD points `cad_points_mm`.
+pub fn print_quality(
+    layers: &[DepositGrid],
+    bead: &IdealBead,
+    path_mm: &[[f64; 2]],
+    bead_width_mm: f64,
+    corner_radius_mm: f64,
+    cad_points_mm: &[[f64; 2]],
+) -> PrintQuality {
+    let angles = super::setup::interior_angles_deg(path_mm);
+    let oe: Vec<f64> = match layers.first() {
+        Some(first) => path_mm
+            .iter()
+            .zip(&angles)
+            .map(|(v, a)| {
+                let corner = corner_deposition(first, bead, *v, corner_radius_mm);
+                100.0 * corner.over_area_mm2 / corner_polytope_area_mm2(bead_width_mm, *a)
+            })
+            .collect(),
+        None => vec![],
+    };
+    let mean_oe_pct = if oe.is_empty() { f64::NAN } else { oe.iter().sum::<f64>() / oe.len() as f64 };
+    let errors: Vec<Vec<ContourPoint>> = layers.iter().map(|g| contour_errors(g, cad_points_mm)).collect();
+    let contour = summarize(&errors);
+    PrintQuality { mean_oe_pct, contour_max_mm: contour.max_mm, contour_rms_mm: contour.rms_mm }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

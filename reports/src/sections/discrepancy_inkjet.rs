@@ -16,7 +16,7 @@ use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 use super::discrepancy_fdm::{causes_table, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow};
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
-use crate::read::{f64s, ints, read_parquet, strs};
+use crate::read::{f64_triples, f64s, ints, read_parquet, strs};
 
 /// The ink-jet tables: one discovery per dataset, heights in µm, a group is a block of
 /// consecutive layers.
@@ -232,10 +232,7 @@ struct ControlRow {
 impl ControlRow {
     fn read(path: &Path) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
-        let triple = |name: &str, lo: &str, hi: &str| -> Result<Vec<(f64, f64, f64)>, StageError> {
-            let (m, l, h) = (f64s(&df, name, path)?, f64s(&df, lo, path)?, f64s(&df, hi, path)?);
-            Ok((0..m.len()).map(|i| (m[i], l[i], h[i])).collect())
-        };
+        let triple = |name: &str, lo: &str, hi: &str| f64_triples(&df, [name, lo, hi], path);
         let (effect, controller) = (strs(&df, "effect", path)?, strs(&df, "controller", path)?);
         let (strength, desired, printers) =
             (f64s(&df, "strength", path)?, f64s(&df, "desired_um", path)?, ints(&df, "printers", path)?);
@@ -260,19 +257,20 @@ impl ControlRow {
 }
 
 /// `value (lo to hi)` with three significant digits.
-fn with_interval((value, lo, hi): (f64, f64, f64)) -> String {
+pub(super) fn with_interval((value, lo, hi): (f64, f64, f64)) -> String {
     format!("{} ({} to {})", format_sig(value), format_sig(lo), format_sig(hi))
 }
 
-/// What the paired interval of a difference to the paper's controller says, in words.
-fn difference_words((d, lo, hi): (f64, f64, f64)) -> String {
-    let interval = format!("95 % interval {} to {} µm", format_sig(lo), format_sig(hi));
+/// What the paired interval `(d, lo, hi)` of a difference to `reference` says, in
+/// words, with the unit `unit` (`µm`, ` percentage points`).
+pub(super) fn difference_words((d, lo, hi): (f64, f64, f64), unit: &str, reference: &str) -> String {
+    let interval = format!("95 % interval {} to {}{unit}", format_sig(lo), format_sig(hi));
     if lo > 0.0 {
-        format!("higher than the paper controller's by {} µm ({interval})", format_sig(d))
+        format!("higher than {reference} by {}{unit} ({interval})", format_sig(d))
     } else if hi < 0.0 {
-        format!("lower than the paper controller's by {} µm ({interval})", format_sig(-d))
+        format!("lower than {reference} by {}{unit} ({interval})", format_sig(-d))
     } else {
-        format!("not resolved from the paper controller's (a difference of {} µm, {interval})", format_sig(d))
+        format!("not resolved from {reference} (a difference of {}{unit}, {interval})", format_sig(d))
     }
 }
 
@@ -318,7 +316,7 @@ the footprint, as in Figs 11-12 and Table II; intervals are 95 % Student-t over 
             "With a {} of {}, the extended controller's RMSD is {}. ",
             escape(&r.effect.replace('_', " ")),
             format_sig(r.strength),
-            difference_words(r.rmsd_vs_paper)
+            difference_words(r.rmsd_vs_paper, " µm", "the paper controller's")
         );
     }
     let lowest = control.iter().map(|r| r.height.1).fold(f64::INFINITY, f64::min);

@@ -1,17 +1,25 @@
-//! `report.discrepancy_thermal`: what paper 003's capture-time model (eq. 28) and its
-//! assumption that every layer prints alike get wrong about what the thermal monitor
-//! measures, the cause the discrepancy engine names, the extended model and its held-out
-//! gain, and with a power study how often hidden effects are named (DESIGN §7). Every
-//! number is read from the tables of `thermal.discrepancy` and `thermal.discovery_power`.
+//! `report.discrepancy_thermal`: what paper 003's capture-time model (eq. 28), its
+//! assumption that every layer prints alike and its flow dynamics (eq. 34) get wrong
+//! about what the thermal monitor measures, the cause the discrepancy engine names, the
+//! extended model and its held-out gain, with a power study how often hidden effects are
+//! named, and with a control study whether the compensation prints better with the
+//! extended model (DESIGN §7). Every number is read from the tables of
+//! `thermal.discrepancy`, `thermal.discovery_power` and `thermal.control_gain`.
 //!
-//! Inputs: the `thermal.discrepancy` stage, then optionally `thermal.discovery_power`.
+//! Inputs: the `thermal.discrepancy` stage, then optionally `thermal.discovery_power`
+//! and `thermal.control_gain` (recognised by their tables), in any order.
+
+use std::fmt::Write as _;
+use std::path::Path;
 
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
-use super::comparison_frame;
 use super::discrepancy_fdm::{Cause, GainRow, Names, Param, PowerRow};
-use super::discrepancy_inkjet::{dataset_part, power_table, DatasetText};
+use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
+use super::{comparison_frame, Row};
+use crate::html::escape;
+use crate::read::{f64_triples, f64s, ints, read_parquet, strs};
 
 /// The thermal tables: one discovery per filmed print, residuals in noise standard
 /// deviations, a group is a filmed layer.
@@ -31,19 +39,19 @@ impl StageKind for DiscrepancyThermalSection {
         "report.discrepancy_thermal"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
-        "What the capture-time and layer models get wrong about the thermal monitor's measurements, the cause named, the extension and its gain → section.html, comparison.parquet"
+        "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet"
     }
     fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 003's eq. 28 and layer model"
+        "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model"
     }
     fn params(&self) -> &'static [ParamSpec] {
         &[]
     }
     fn arity(&self) -> Arity {
-        Arity { min: 1, max: 2 }
+        Arity { min: 1, max: 3 }
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
@@ -58,10 +66,15 @@ impl StageKind for DiscrepancyThermalSection {
         for g in &gains {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows, &THERMAL);
         }
-        if let Some(input) = ctx.inputs.get(1) {
-            let power = PowerRow::read(&input.dir.join("power.parquet"))?;
-            html += POWER_INTRO;
-            html += &power_table(&power, &input.name, &mut rows, &THERMAL);
+        for input in &ctx.inputs[1..] {
+            let control = input.dir.join("control_gain.parquet");
+            if control.is_file() {
+                html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);
+            } else {
+                let power = PowerRow::read(&input.dir.join("power.parquet"))?;
+                html += POWER_INTRO;
+                html += &power_table(&power, &input.name, &mut rows, &THERMAL);
+            }
         }
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
@@ -71,26 +84,128 @@ impl StageKind for DiscrepancyThermalSection {
 
 const POWER_INTRO: &str = "<h4>How often is a hidden effect named?</h4>\n<p>Each draw prints and films the corner test part on the virtual printer \
 (the Lepton's habits on) with one effect at the given strength or none; the monitor measures it as above and the engine, told nothing, is scored: correct when it names \
-the printed effect and nothing else, wrong when it names anything else. The three width effects have no candidate (see above): their draws show how often the engine \
+the printed effect and nothing else, wrong when it names anything else. The two corner effects have no candidate (see above): their draws show how often the engine \
 stays silent when its model has nothing to learn.</p>\n";
 
 fn method(causes: &[Cause]) -> String {
     let alpha = causes.first().map_or(f64::NAN, |c| c.alpha);
     format!(
         "<p>Paper 003 localises every frame by the time it was recorded (eq. 28: the true capture time is the recorded one plus a small, zero-mean \
-fluctuation) and prints and measures every layer the same way, on a substrate at the bed temperature. Two of the monitor's measurements test that: each \
-localised frame's capture offset, its capture time estimated by eq. 30 minus its recorded time (eq. 30's search window widened so that a delay is not \
-cut off; frames at its edge and repeated images are left out), and each trajectory sample's centre temperature, the bead's temperature on the path at the \
-measuring age. The baseline predicts a zero offset and, for every layer, the centre temperatures the other layers read at the same sample. Four named \
-mechanisms extend it — a constant camera latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next \
-layer's substrate (read through the bead's excess over its substrate, which decays alike whatever the substrate's temperature), and a substrate warming by \
-a fixed amount per layer; the second and the last are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided \
-by its kind's noise scale, estimated from differences no candidate explains. A group is a whole filmed layer with its frames (a layer carries its own \
-random state, which blocks of it would share); each held-out layer contributes the log ratio of its squared error before and after, a one-sided sign-flip \
-test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate of a round at α = {alpha}, and the significant candidate with the largest \
-held-out gain is named. The printer's effects that change the deposited width (a τ other than the nominal, wider heat diffusion, melt squeezed out) have no \
-candidate: even on a print without any of them, the threshold contour of a cooling bead differs near every corner from the widths eqs 5-11 give with the \
-nominal τ by more than they change it, so a width discrepancy needs a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; gain intervals are a \
-bootstrap over layers.</p>\n"
+fluctuation), prints and measures every layer the same way, on a substrate at the bed temperature, and models the flow that reaches the nozzle as the command \
+through a first-order lag with its identified τ (eq. 34). Three of the monitor's measurements test that: each localised frame's capture offset, its capture \
+time estimated by eq. 30 minus its recorded time (eq. 30's search window widened so that a delay is not cut off; frames at its edge and repeated images are \
+left out); each trajectory sample's centre temperature, the bead's temperature on the path at the measuring age; and the bead width on the straight runs, read \
+at the feed speed, away from every corner, in frames with a capture-time estimate. The baseline predicts a zero offset; for every layer, the centre temperatures \
+the other layers read at the same sample; and on a straight run the width of the lagged flow spread over the path, read through a contour line fitted to the \
+training layers (a thinner bead holds less heat, so its threshold contour shrinks more than its deposit). Five named mechanisms extend it — a constant camera \
+latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
+excess over its substrate, which decays alike whatever the substrate's temperature), a substrate warming by a fixed amount per layer, and a flow time constant \
+other than the nominal; the second and the fourth are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided by \
+its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. A group is a whole \
+filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \
+squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate \
+of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
+melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge differs from the widths of eqs 5-11 by far more than they change \
+it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; they measure how \
+the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: when the bead carries more flow for longer after a \
+corner, its threshold contour widens for longer still than its deposit does, so the τ fitted to contour widths runs above the printer's and its interval can \
+miss it (the power study's coverage column says how often). Gain intervals are a bootstrap over layers.</p>\n"
     )
+}
+
+/// One row of `control_gain.parquet`: a strength and a controller.
+struct ControlRow {
+    effect: String,
+    strength: f64,
+    controller: String,
+    prints: i64,
+    tau_named: i64,
+    oe_pct: (f64, f64, f64),
+    rms_mm: (f64, f64, f64),
+    max_mm: (f64, f64, f64),
+    oe_vs_paper: (f64, f64, f64),
+    rms_vs_paper: (f64, f64, f64),
+}
+
+impl ControlRow {
+    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        let df = read_parquet(path)?;
+        let triple = |name: &str| f64_triples(&df, [name, &format!("{name}_ci_lo"), &format!("{name}_ci_hi")], path);
+        let (effect, controller) = (strs(&df, "effect", path)?, strs(&df, "controller", path)?);
+        let (strength, prints, named) =
+            (f64s(&df, "strength", path)?, ints(&df, "prints", path)?, ints(&df, "tau_named", path)?);
+        let (oe, rms, max) = (triple("mean_oe_pct")?, triple("contour_rms_mm")?, triple("contour_max_mm")?);
+        let (oe_vs, rms_vs) = (triple("mean_oe_pct_vs_paper")?, triple("contour_rms_mm_vs_paper")?);
+        Ok((0..df.height())
+            .map(|i| Self {
+                effect: effect[i].clone(),
+                strength: strength[i],
+                controller: controller[i].clone(),
+                prints: prints[i],
+                tau_named: named[i],
+                oe_pct: oe[i],
+                rms_mm: rms[i],
+                max_mm: max[i],
+                oe_vs_paper: oe_vs[i],
+                rms_vs_paper: rms_vs[i],
+            })
+            .collect())
+    }
+}
+
+fn control_part(control: &[ControlRow], stage: &str, rows: &mut Vec<Row>) -> String {
+    let mut html = String::from(
+        "<h4>Does the extended model compensate better?</h4>\n<p>Each print (one seed) lags its flow with a τ above the nominal by the given \
+fraction. The virtual printer prints and films it, the monitor measures it as above and the engine, told nothing, names and fits what is wrong. The part is \
+then printed again three times on the same printer with the same flow draws (Sec. 3.3): with the conventional command, with the filtered-B-spline compensation \
+of eqs 31-39 from the first layer's widths and the nominal τ in G(s) (<i>paper</i>), and with the same compensation from the same widths and the τ the engine \
+fitted (<i>extended</i>; the nominal τ when it named no τ error). Mean O_E is over the first layer's corners (eq. 40); the contour error is eq. 41 over every \
+layer (Table 3); intervals are 95 % Student-t over prints, and differences to the paper's compensation are paired by print.</p>\n",
+    );
+    html += "<table><tr><th class=\"t\">printers' effect</th><th>strength</th><th class=\"t\">command</th><th>prints</th><th>τ named on</th><th>mean O_E (%)</th><th>contour RMS (mm)</th><th>contour max (mm)</th><th>O_E minus the paper's (points)</th><th>RMS minus the paper's (mm)</th></tr>\n";
+    for r in control {
+        let paired = |d| if r.controller == "paper" { "—".to_string() } else { with_interval(d) };
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\">{}</td><td>{}</td><td class=\"t\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&r.effect.replace('_', " ")),
+            r.strength,
+            escape(&r.controller),
+            r.prints,
+            r.tau_named,
+            with_interval(r.oe_pct),
+            with_interval(r.rms_mm),
+            with_interval(r.max_mm),
+            paired(r.oe_vs_paper),
+            paired(r.rms_vs_paper),
+        );
+        for (item, value, unit) in [("mean O_E", r.oe_pct.0, "%"), ("contour RMS", r.rms_mm.0, "mm")] {
+            rows.push(Row {
+                section: "discrepancy_thermal",
+                item: format!("re-print {item}, {} {}, {} command", r.effect, r.strength, r.controller),
+                paper: None,
+                ours: value,
+                unit,
+                source: format!("out/discrepancy/thermal_control_gain.parquet (stage {stage}, thermal.control_gain)"),
+            });
+        }
+    }
+    html += "</table>\n<p>";
+    for r in control.iter().filter(|r| r.controller == "extended") {
+        let _ = write!(
+            html,
+            "With the flow's τ at {} times the nominal, the engine named the τ error on {} of {} prints; the extended compensation's mean O_E is {}, and its RMS contour error is {}. ",
+            1.0 + r.strength,
+            r.tau_named,
+            r.prints,
+            difference_words(r.oe_vs_paper, " points", "the paper compensation's"),
+            difference_words(r.rms_vs_paper, " mm", "the paper compensation's"),
+        );
+    }
+    html += "</p>\n";
+    let _ = writeln!(
+        html,
+        "<p class=\"run\">Stage {stage} (thermal.control_gain): tables out/discrepancy/thermal_control_gain.parquet and thermal_control_trials.parquet (one row per print and command, with what the engine named and fitted).</p>"
+    );
+    html
 }

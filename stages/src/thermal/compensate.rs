@@ -63,6 +63,7 @@
 use std::path::Path;
 
 use datasets::thermal::deposition::conventional_command;
+use datasets::thermal::sequence::ThermalSequence;
 use models::stats::finite_median;
 use models::thermal::compensation::{
     apply_spans, compensate_spans, desired_half_width_mm, paper_gain, velocity_change_from_sweep_mm_s, FbsParams,
@@ -71,9 +72,10 @@ use models::thermal::compensation::{
 use models::thermal::dynamics::lag_excess;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
-use pipeline::params::ParamDefault;
+use pipeline::params::{ParamDefault, Params};
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use polars::prelude::DataFrame;
 
 use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col};
@@ -191,91 +193,152 @@ impl StageKind for CompensateStage {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let seq = open_sequence(&ctx.inputs[0].dir)?;
-        let setup = seq.process.print_setup();
-        let trajectory = trajectory_of(&seq)?;
         let monitor_dir = ctx.inputs[1].dir.clone();
-        let first_layer = ctx.params.i64("layer");
-        let layers = first_layer..first_layer + ctx.params.i64("layers");
-        let measured = MeasuredWidths::read(&monitor_dir, layers, trajectory.len())?;
-        let frame_geometry = DepositionFrame::read(&monitor_dir, trajectory.len())?;
-        let corner_temps = corner_temperatures(&monitor_dir, seq.path_mm.len())?;
-        let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
-        let desired = match ctx.params.str("desired_width") {
-            "eq31" => frame_geometry.eq31_desired(setup.bead_width_mm / 2.0),
-            _ => frame_geometry.cad_desired(&trajectory, &bead),
+        let tables = MonitorInputs {
+            dir: &monitor_dir,
+            widths: &read_table(&monitor_dir, "widths.parquet")?,
+            directions: &read_table(&monitor_dir, "directions.parquet")?,
+            detections: &read_table(&monitor_dir, "detections.parquet")?,
         };
-        let mut sweep = frame_geometry.sweep.clone();
-        if ctx.params.str("volume") == "linear" {
-            sweep.iter_mut().for_each(|s| s.kappa_eff_per_mm = 0.0);
-        }
-        let widths_mm: Vec<(f64, f64)> =
-            measured.sides_mm.iter().zip(&desired).map(|(m, d)| (m.0 + m.1, d.0 + d.1)).collect();
-        let mut dw: Vec<f64> = widths_mm.iter().map(|(m, d)| m - d).collect();
-        let mut dv = velocity_change_from_sweep_mm_s(
-            &measured.sides_mm,
-            &desired,
-            &sweep,
-            setup.layer_height_mm,
-            setup.filament_area_mm2(),
-            1.0,
-        );
-        if !ctx.params.bool("add_material") {
-            // (f64::max would turn an unmeasured NaN into 0.)
-            dw.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
-            dv.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
-        }
-        let params = SpanParams {
-            epsilon_mm: ctx.params.f64("epsilon_mm"),
-            extension_s: ctx.params.f64("extension_s"),
-            fbs: FbsParams {
-                knot_spacing_s: ctx.params.f64("knot_spacing_s"),
-                tau_s: setup.tau_s,
-                dv_min_mm_s: ctx.params.f64("dv_min_mm_s"),
-                dv_max_mm_s: ctx.params.f64("dv_max_mm_s"),
-                tail_s: ctx.params.f64("tail_s"),
-            },
-        };
-        let paper_gain_on = ctx.params.str("gain") == "paper";
-        let vertex_of = |span: SampleSpan| span_vertex(&seq.path_mm, &trajectory, &dw, span);
-        let gain = |span: SampleSpan| {
-            let t = corner_temps[vertex_of(span)];
-            if paper_gain_on && t.is_finite() {
-                paper_gain(t.clamp(PAPER_BAND_C.0, PAPER_BAND_C.1))
-            } else {
-                1.0
-            }
-        };
-        let nominal = conventional_command(&setup, &trajectory);
-        let spans = if ctx.params.str("source") == "lag_model" {
-            // The flow excess eq. 34 predicts for the nominal command (mm/s of filament).
-            let excess = lag_excess(&nominal, trajectory.dt_s, setup.tau_s);
-            let whole_layer = vec![f64::INFINITY; trajectory.len()];
-            let params = SpanParams { epsilon_mm: 0.0, ..params };
-            compensate_spans(&whole_layer, &excess, trajectory.dt_s, &params, |_| 1.0)
-        } else {
-            compensate_spans(&dw, &dv, trajectory.dt_s, &params, gain)
-        }
-        .map_err(StageError::domain)?;
-        let command = apply_spans(&nominal, &spans);
+        let tau_s = seq.process.print_setup().tau_s;
+        let c = compensate(&seq, &tables, &ctx.params, tau_s)?;
         let angles = interior_angles_deg(&seq.path_mm);
+        let t_s = &c.trajectory.t_s;
         let mut rows = Rows::default();
-        for (index, s) in spans.iter().enumerate() {
-            let vertex = vertex_of(s.span);
-            let max_dw = dw[s.span.first..=s.span.last].iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
-            let temp = corner_temps[vertex];
-            rows.span(index, vertex, angles[vertex], &trajectory.t_s, s.span, s.window, temp, s.gain, max_dw);
-            rows.samples(index, vertex, &trajectory.t_s, s, &widths_mm);
+        for (index, (s, &vertex)) in c.spans.iter().zip(&c.span_vertices).enumerate() {
+            let max_dw = c.dw[s.span.first..=s.span.last].iter().copied().filter(|d| d.is_finite()).fold(0.0, f64::max);
+            let temp = c.corner_temps_c[vertex];
+            rows.span(index, vertex, angles[vertex], t_s, s.span, s.window, temp, s.gain, max_dw);
+            rows.samples(index, vertex, t_s, s, &c.widths_mm);
         }
         rows.write(ctx)?;
         let mut table = frame(vec![
-            i64_col("sample", (0..trajectory.len() as i64).collect()),
-            f64_col("t_s", trajectory.t_s.clone()),
-            f64_col("v_e_mm_s", nominal),
-            f64_col("v_ef_mm_s", command),
+            i64_col("sample", (0..c.trajectory.len() as i64).collect()),
+            f64_col("t_s", t_s.clone()),
+            f64_col("v_e_mm_s", c.nominal_mm_s),
+            f64_col("v_ef_mm_s", c.command_mm_s),
         ])?;
         ctx.write_table("command", &mut table)?;
         Ok(())
     }
+}
+
+/// The monitor's tables the compensation reads, and the folder they belong to (named
+/// in errors).
+pub struct MonitorInputs<'a> {
+    /// The monitor's output folder.
+    pub dir: &'a Path,
+    /// `widths.parquet`.
+    pub widths: &'a DataFrame,
+    /// `directions.parquet`.
+    pub directions: &'a DataFrame,
+    /// `detections.parquet`.
+    pub detections: &'a DataFrame,
+}
+
+/// A compensated layer.
+pub struct Compensated {
+    /// The commanded trajectory.
+    pub trajectory: Trajectory,
+    /// The conventional command v_e per sample (mm/s of filament).
+    pub nominal_mm_s: Vec<f64>,
+    /// The compensated command v_ef per sample.
+    pub command_mm_s: Vec<f64>,
+    /// The compensated spans.
+    pub spans: Vec<SpanCompensation>,
+    /// Each span's CAD vertex.
+    pub span_vertices: Vec<usize>,
+    /// The width error of every sample (mm; NaN: unmeasured).
+    pub dw: Vec<f64>,
+    /// Each sample's (measured, desired) full width (mm).
+    pub widths_mm: Vec<(f64, f64)>,
+    /// Each CAD corner's median detected temperature (°C; NaN: never detected).
+    pub corner_temps_c: Vec<f64>,
+}
+
+/// Eqs 31-39 on `seq` from the monitor's `tables`, with the stage's parameters `params`
+/// (checked against [`CompensateStage`]'s declarations) and the deposition dynamics
+/// G(s) of eq. 34 with time constant `tau_s` (the nominal τ, or a fitted one).
+pub fn compensate(
+    seq: &ThermalSequence,
+    tables: &MonitorInputs<'_>,
+    params: &Params,
+    tau_s: f64,
+) -> Result<Compensated, StageError> {
+    let setup = seq.process.print_setup();
+    let trajectory = trajectory_of(seq)?;
+    let first_layer = params.i64("layer");
+    let layers = first_layer..first_layer + params.i64("layers");
+    let measured = MeasuredWidths::read(tables.widths, &tables.dir.join("widths.parquet"), layers, trajectory.len())?;
+    let frame_geometry =
+        DepositionFrame::read(tables.directions, &tables.dir.join("directions.parquet"), trajectory.len())?;
+    let corner_temps_c =
+        corner_temperatures(tables.detections, &tables.dir.join("detections.parquet"), seq.path_mm.len())?;
+    let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
+    let desired = match params.str("desired_width") {
+        "eq31" => frame_geometry.eq31_desired(setup.bead_width_mm / 2.0),
+        _ => frame_geometry.cad_desired(&trajectory, &bead),
+    };
+    let mut sweep = frame_geometry.sweep.clone();
+    if params.str("volume") == "linear" {
+        sweep.iter_mut().for_each(|s| s.kappa_eff_per_mm = 0.0);
+    }
+    let widths_mm: Vec<(f64, f64)> =
+        measured.sides_mm.iter().zip(&desired).map(|(m, d)| (m.0 + m.1, d.0 + d.1)).collect();
+    let mut dw: Vec<f64> = widths_mm.iter().map(|(m, d)| m - d).collect();
+    let mut dv = velocity_change_from_sweep_mm_s(
+        &measured.sides_mm,
+        &desired,
+        &sweep,
+        setup.layer_height_mm,
+        setup.filament_area_mm2(),
+        1.0,
+    );
+    if !params.bool("add_material") {
+        // (f64::max would turn an unmeasured NaN into 0.)
+        dw.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
+        dv.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
+    }
+    let span_params = SpanParams {
+        epsilon_mm: params.f64("epsilon_mm"),
+        extension_s: params.f64("extension_s"),
+        fbs: FbsParams {
+            knot_spacing_s: params.f64("knot_spacing_s"),
+            tau_s,
+            dv_min_mm_s: params.f64("dv_min_mm_s"),
+            dv_max_mm_s: params.f64("dv_max_mm_s"),
+            tail_s: params.f64("tail_s"),
+        },
+    };
+    let paper_gain_on = params.str("gain") == "paper";
+    let vertex_of = |span: SampleSpan| span_vertex(&seq.path_mm, &trajectory, &dw, span);
+    let gain = |span: SampleSpan| {
+        let t = corner_temps_c[vertex_of(span)];
+        if paper_gain_on && t.is_finite() {
+            paper_gain(t.clamp(PAPER_BAND_C.0, PAPER_BAND_C.1))
+        } else {
+            1.0
+        }
+    };
+    let nominal_mm_s = conventional_command(&setup, &trajectory);
+    let spans = if params.str("source") == "lag_model" {
+        // The flow excess eq. 34 predicts for the nominal command (mm/s of filament).
+        let excess = lag_excess(&nominal_mm_s, trajectory.dt_s, tau_s);
+        let whole_layer = vec![f64::INFINITY; trajectory.len()];
+        let span_params = SpanParams { epsilon_mm: 0.0, ..span_params };
+        compensate_spans(&whole_layer, &excess, trajectory.dt_s, &span_params, |_| 1.0)
+    } else {
+        compensate_spans(&dw, &dv, trajectory.dt_s, &span_params, gain)
+    }
+    .map_err(StageError::domain)?;
+    let command_mm_s = apply_spans(&nominal_mm_s, &spans);
+    let span_vertices = spans.iter().map(|s| vertex_of(s.span)).collect();
+    Ok(Compensated { trajectory, nominal_mm_s, command_mm_s, spans, span_vertices, dw, widths_mm, corner_temps_c })
+}
+
+/// The compensation's parameter declarations (for [`compensate`]).
+pub fn params() -> &'static [ParamSpec] {
+    PARAMS
 }
 
 /// The monitored half widths (left, right) of a run of consecutive layers, indexed by
@@ -287,24 +350,22 @@ struct MeasuredWidths {
 }
 
 impl MeasuredWidths {
-    fn read(monitor_dir: &Path, layers: std::ops::Range<i64>, samples: usize) -> Result<Self, StageError> {
-        let file = monitor_dir.join("widths.parquet");
-        let df = read_table(monitor_dir, "widths.parquet")?;
-        let layer = i64_column(&df, &file, "layer")?;
-        let sample = i64_column(&df, &file, "sample")?;
-        let left = f64_column(&df, &file, "w_left_mm")?;
-        let right = f64_column(&df, &file, "w_right_mm")?;
+    fn read(df: &DataFrame, file: &Path, layers: std::ops::Range<i64>, samples: usize) -> Result<Self, StageError> {
+        let layer = i64_column(df, file, "layer")?;
+        let sample = i64_column(df, file, "sample")?;
+        let left = f64_column(df, file, "w_left_mm")?;
+        let right = f64_column(df, file, "w_right_mm")?;
         let mut readings: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); samples];
         let mut found = 0;
         for i in (0..layer.len()).filter(|&i| layers.contains(&layer[i])) {
-            let k = sample_index(&file, i, sample[i], samples)?;
+            let k = sample_index(file, i, sample[i], samples)?;
             readings[k].0.push(left[i]);
             readings[k].1.push(right[i]);
             found += 1;
         }
         if found == 0 {
             return Err(StageError::BadInput {
-                file,
+                file: file.to_path_buf(),
                 location: Some("column layer".into()),
                 expected: format!("rows of layers {}..={}", layers.start, layers.end - 1),
             });
@@ -331,18 +392,16 @@ struct DepositionFrame {
 }
 
 impl DepositionFrame {
-    fn read(monitor_dir: &Path, samples: usize) -> Result<Self, StageError> {
-        let file = monitor_dir.join("directions.parquet");
-        let df = read_table(monitor_dir, "directions.parquet")?;
-        let sample = i64_column(&df, &file, "sample")?;
-        let col = |name: &str| f64_column(&df, &file, name);
+    fn read(df: &DataFrame, file: &Path, samples: usize) -> Result<Self, StageError> {
+        let sample = i64_column(df, file, "sample")?;
+        let col = |name: &str| f64_column(df, file, name);
         let (dep_x, dep_y, psi, kappa, speed) =
             (col("dep_x")?, col("dep_y")?, col("psi_rad")?, col("kappa_eff_per_mm")?, col("speed_mm_s")?);
         let zero = SweepSample { speed_mm_s: 0.0, psi_rad: 0.0, kappa_eff_per_mm: 0.0 };
         let mut out =
             Self { left_dir: vec![[0.0, 1.0]; samples], psi_rad: vec![0.0; samples], sweep: vec![zero; samples] };
         for i in 0..sample.len() {
-            let k = sample_index(&file, i, sample[i], samples)?;
+            let k = sample_index(file, i, sample[i], samples)?;
             out.left_dir[k] = [dep_x[i], dep_y[i]];
             out.psi_rad[k] = psi[i];
             out.sweep[k] = SweepSample { speed_mm_s: speed[i], psi_rad: psi[i], kappa_eff_per_mm: kappa[i] };
@@ -368,11 +427,9 @@ impl DepositionFrame {
 }
 
 /// Median temperature of each CAD corner's matched detections (NaN: never detected).
-fn corner_temperatures(monitor_dir: &Path, vertices: usize) -> Result<Vec<f64>, StageError> {
-    let file = monitor_dir.join("detections.parquet");
-    let df = read_table(monitor_dir, "detections.parquet")?;
-    let vertex = i64_column(&df, &file, "matched_vertex")?;
-    let temp = f64_column(&df, &file, "temp_c")?;
+fn corner_temperatures(df: &DataFrame, file: &Path, vertices: usize) -> Result<Vec<f64>, StageError> {
+    let vertex = i64_column(df, file, "matched_vertex")?;
+    let temp = f64_column(df, file, "temp_c")?;
     Ok((0..vertices)
         .map(|v| {
             let mut t: Vec<f64> = (0..vertex.len()).filter(|&i| vertex[i] == v as i64).map(|i| temp[i]).collect();

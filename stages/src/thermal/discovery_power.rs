@@ -7,9 +7,9 @@
 //! printed it. Draws run in parallel; each one's dataset lives in a scratch folder of
 //! the stage's output and is removed once measured.
 //!
-//! The width effects (`tau_mismatch`, `heat_diffusion_widening`, `melt_squeeze_out`)
-//! have no candidate (`models::thermal::discrepancy`): their draws can only come out
-//! *none* or *wrong*, and the study reports how often the engine stays silent.
+//! The corner effects (`heat_diffusion_widening`, `melt_squeeze_out`) have no candidate
+//! (`models::thermal::discrepancy`): their draws can only come out *none* or *wrong*,
+//! and the study reports how often the engine stays silent.
 //!
 //! Outputs (docs/OUTPUTS.md): `power.parquet` (the columns of `fdm.discovery_power`'s)
 //! and `power_draws.parquet` (one row per draw, with each candidate's first-round
@@ -29,7 +29,7 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use rayon::prelude::*;
 
 use super::common::open_sequence;
-use super::discrepancy::record_from_tables;
+use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
 use super::monitor;
 use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, study_settings, DrawRow, ALPHA};
 use crate::effects::strength_list;
@@ -47,8 +47,39 @@ const STUDIED: [(&str, f64, &str); 5] = [
     ("melt_squeeze_out", 1.0, "fraction"),
 ];
 
-/// The monitor's parameters this stage sets (the others keep the monitor's defaults).
-const MONITOR_PARAMS: [&str; 4] = ["band_low_c", "band_high_c", "max_corner_age_s", "window_s"];
+/// The monitor's parameters the thermal studies set (the others keep the monitor's
+/// defaults), with the studies' defaults.
+pub const MONITOR_SPECS: [ParamSpec; 4] = [
+    ParamSpec {
+        name: "band_low_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(90.0),
+        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
+    },
+    ParamSpec {
+        name: "band_high_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(220.0),
+        doc: "The monitor's band_high_c.",
+    },
+    ParamSpec {
+        name: "max_corner_age_s",
+        ty: ParamType::Float { min: 0.1, max: 100.0 },
+        default: ParamDefault::Float(0.8),
+        doc: "The monitor's max_corner_age_s.",
+    },
+    ParamSpec {
+        name: "window_s",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
+    },
+];
+
+/// The monitor's raw parameters from a study's [`MONITOR_SPECS`] values.
+pub fn monitor_params(p: &Params) -> BTreeMap<String, toml::Value> {
+    MONITOR_SPECS.iter().map(|spec| (spec.name.to_string(), toml::Value::Float(p.f64(spec.name)))).collect()
+}
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec {
@@ -67,7 +98,7 @@ const PARAMS: &[ParamSpec] = &[
         name: "tau_mismatch",
         ty: ParamType::Text,
         default: ParamDefault::Str("0.3"),
-        doc: "Strengths of tau_mismatch (relative error of the flow's τ; no candidate describes it), comma-separated.",
+        doc: "Strengths of tau_mismatch (relative error of the flow's τ: actual τ = nominal·(1 + strength)), comma-separated.",
     },
     ParamSpec {
         name: "heat_diffusion_widening",
@@ -97,34 +128,15 @@ const PARAMS: &[ParamSpec] = &[
         name: "layers",
         ty: ParamType::Int { min: 2, max: 20 },
         default: ParamDefault::Int(8),
-        doc: "Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 4 candidates).",
+        doc: "Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 5 candidates).",
     },
     ALPHA,
-    max_rounds(4, 2),
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(90.0),
-        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(220.0),
-        doc: "The monitor's band_high_c.",
-    },
-    ParamSpec {
-        name: "max_corner_age_s",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(0.8),
-        doc: "The monitor's max_corner_age_s.",
-    },
-    ParamSpec {
-        name: "window_s",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
-    },
+    max_rounds(5, 2),
+    WIDTH_CLEARANCE,
+    MONITOR_SPECS[0],
+    MONITOR_SPECS[1],
+    MONITOR_SPECS[2],
+    MONITOR_SPECS[3],
 ];
 
 impl StageKind for DiscoveryPowerStage {
@@ -132,7 +144,7 @@ impl StageKind for DiscoveryPowerStage {
         "thermal.discovery_power"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
         "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet"
@@ -175,6 +187,7 @@ struct Design {
     seed: u64,
     engine: Settings,
     monitor: Params,
+    width_clearance_mm: f64,
 }
 
 /// One print to make.
@@ -204,11 +217,8 @@ impl Design {
         for (effect, top, unit) in STUDIED {
             cells.extend(strength_list(ctx, effect, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
         }
-        let raw: BTreeMap<String, toml::Value> =
-            MONITOR_PARAMS.iter().map(|name| (name.to_string(), toml::Value::Float(p.f64(name)))).collect();
-        let monitor = Params::check(monitor::params(), &raw).map_err(|(name, why)| StageError::Params {
-            stage: ctx.stage.clone(),
-            message: format!("{name}: {why}"),
+        let monitor = Params::check(monitor::params(), &monitor_params(p)).map_err(|(name, why)| {
+            StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") }
         })?;
         Ok(Self {
             cells,
@@ -218,6 +228,7 @@ impl Design {
             seed: ctx.seed,
             engine: study_settings(ctx, 100),
             monitor,
+            width_clearance_mm: p.f64(WIDTH_CLEARANCE.name),
         })
     }
 
@@ -243,8 +254,8 @@ impl Design {
         std::fs::create_dir_all(scratch).map_err(|e| StageError::Io { path: scratch.to_path_buf(), source: e })?;
         generate_into(&config, scratch).map_err(StageError::domain)?;
         let seq = open_sequence(scratch)?;
-        let (frames, widths) = monitor::frames_and_widths(&seq, &self.monitor, seed)?;
-        let record = record_from_tables(&seq, &frames, &widths, scratch)?;
+        let tables = monitor::monitor_tables(&seq, &self.monitor, seed)?;
+        let record = record_from_tables(&seq, &tables.frames, &tables.widths, scratch, self.width_clearance_mm)?;
         std::fs::remove_dir_all(scratch).ok();
         let model = ThermalModel::new(record);
         let groups = model.record().layer_groups();

@@ -1,12 +1,13 @@
 //! `thermal.discrepancy`: what paper 003's models get wrong about what the thermal
-//! monitor measures — the frames' capture offsets (eq. 28) and the beads' centre
-//! temperatures layer after layer — which physical cause explains it, the extended model
-//! and its held-out gain: the thermal domain of the `discrepancy` engine
-//! (`models::thermal::discrepancy`, whose module doc states the baseline, the four
-//! candidates, why a group is a whole layer and why the width effects have no candidate
-//! yet). One discovery per (sequence, monitor) pair of inputs; a group is a filmed layer.
-//! Reads the sequence's `process.toml` and the monitor's `frames.parquet` and
-//! `widths.parquet`, never `truth/`.
+//! monitor measures — the frames' capture offsets (eq. 28), the beads' centre
+//! temperatures layer after layer and the straight runs' bead widths (eq. 34) — which
+//! physical cause explains it, the extended model and its held-out gain: the thermal
+//! domain of the `discrepancy` engine (`models::thermal::discrepancy`, whose module doc
+//! states the baseline, the five candidates, why a group is a whole layer and why the
+//! corner effects have no candidate yet). One discovery per (sequence, monitor) pair of
+//! inputs; a group is a filmed layer. Reads the sequence's `process.toml`, `path.csv`
+//! and `trajectory.csv` and the monitor's `frames.parquet` and `widths.parquet`, never
+//! `truth/`.
 //!
 //! Outputs (docs/OUTPUTS.md): `residuals`, `causes`, `extension`, `gain`, the columns of
 //! `fdm.discrepancy` with `dataset` for `printer`; residuals and RMSEs are in noise
@@ -17,10 +18,12 @@ use std::path::Path;
 use datasets::thermal::ThermalSequence;
 use discrepancy::discover;
 use models::thermal::discrepancy::{
-    FrameObservation, RecordParts, TemperatureObservation, ThermalModel, ThermalRecord,
+    straight_run_samples, Deposition, FrameObservation, RecordParts, TemperatureObservation, ThermalModel,
+    ThermalRecord, WidthObservation,
 };
+use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use polars::prelude::DataFrame;
 
 use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
@@ -32,20 +35,29 @@ const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
 /// The `thermal.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-const PARAMS: &[ParamSpec] = &[ALPHA, max_rounds(4, 3), BINS, BOOTSTRAP_DRAWS];
+/// How far from every CAD vertex a bead width must be read to enter the model (shared
+/// with `thermal.discovery_power`).
+pub const WIDTH_CLEARANCE: ParamSpec = ParamSpec {
+    name: "width_clearance_mm",
+    ty: ParamType::Float { min: 0.0, max: 20.0 },
+    default: ParamDefault::Float(1.5),
+    doc: "Smallest distance from every CAD vertex at which a bead width enters the model (mm): nearer, the threshold contour of the corner's hot bulge is not the straight bead of eq. 34 (on the corner test part, about three bead widths lets it settle).",
+};
+
+const PARAMS: &[ParamSpec] = &[ALPHA, max_rounds(5, 3), BINS, BOOTSTRAP_DRAWS, WIDTH_CLEARANCE];
 
 impl StageKind for DiscrepancyStage {
     fn name(&self) -> &'static str {
         "thermal.discrepancy"
     }
     fn version(&self) -> u32 {
-        1
+        2
     }
     fn summary(&self) -> &'static str {
-        "What eq. 28's capture times and the paper's layer-invariant printing get wrong about the monitor's frames and centre temperatures, the cause named among 4 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)"
+        "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)"
     }
     fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 003's eq. 28 and layer model, over thermal.monitor's frames.parquet and widths.parquet"
+        "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet"
     }
     fn params(&self) -> &'static [ParamSpec] {
         PARAMS
@@ -69,7 +81,8 @@ impl StageKind for DiscrepancyStage {
         let mut tables = DiscrepancyTables::new(THERMAL, settings.alpha);
         for pair in ctx.inputs.chunks(2) {
             let (sequence, monitor) = (&pair[0], &pair[1]);
-            let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir)?);
+            let clearance_mm = ctx.params.f64(WIDTH_CLEARANCE.name);
+            let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, clearance_mm)?);
             let blocks = model.record().layer_groups();
             let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
                 StageError::Domain(
@@ -83,13 +96,14 @@ impl StageKind for DiscrepancyStage {
     }
 }
 
-/// The model's view of a filmed print: the sequence's process and the monitor's
-/// frame offsets and centre temperatures.
-pub fn record_of(sequence_dir: &Path, monitor_dir: &Path) -> Result<ThermalRecord, StageError> {
+/// The model's view of a filmed print: the sequence's process, path and trajectory
+/// and the monitor's frame offsets, centre temperatures and the bead widths read at
+/// least `clearance_mm` from every vertex.
+pub fn record_of(sequence_dir: &Path, monitor_dir: &Path, clearance_mm: f64) -> Result<ThermalRecord, StageError> {
     let seq = open_sequence(sequence_dir)?;
     let frames = read_table(monitor_dir, "frames.parquet")?;
     let widths = read_table(monitor_dir, "widths.parquet")?;
-    record_from_tables(&seq, &frames, &widths, monitor_dir)
+    record_from_tables(&seq, &frames, &widths, monitor_dir, clearance_mm)
 }
 
 /// [`record_of`] from the monitor's two tables, read from (or written for) `monitor_dir`.
@@ -98,14 +112,29 @@ pub fn record_from_tables(
     frames: &DataFrame,
     widths: &DataFrame,
     monitor_dir: &Path,
+    clearance_mm: f64,
 ) -> Result<ThermalRecord, StageError> {
     let trajectory = trajectory_of(seq)?;
-    let frame_file = monitor_dir.join("frames.parquet");
+    let setup = seq.process.print_setup();
+    let (frame_file, width_file) = (monitor_dir.join("frames.parquet"), monitor_dir.join("widths.parquet"));
+    let estimated = f64_column(frames, &frame_file, "estimated_time_s")?;
+    let straight = straight_run_samples(&trajectory, &seq.path_mm, setup.feed_mm_s, clearance_mm);
+    let bead_widths = straight_run_widths(widths, &width_file, &straight, &estimated)?;
     let frames = frame_offsets(frames, &frame_file)?;
-    let temps = centre_temperatures(widths, &monitor_dir.join("widths.parquet"))?;
+    let temps = centre_temperatures(widths, &width_file)?;
+    let speed_mm_s = trajectory.speed_mm_s();
     ThermalRecord::new(RecordParts {
         frames: &frames,
         temps: &temps,
+        widths: &bead_widths,
+        deposition: Deposition {
+            commanded_flow_mm3_s: &seq.trajectory.e_mm3_s,
+            speed_mm_s: &speed_mm_s,
+            dt_s: trajectory.dt_s,
+            layer_height_mm: setup.layer_height_mm,
+            tau_s: setup.tau_s,
+            bead_width_mm: setup.bead_width_mm,
+        },
         samples: trajectory.len(),
         layer_duration_s: trajectory.duration_s(),
         nozzle_temp_c: seq.process.nozzle_temp_c,
@@ -134,6 +163,29 @@ fn frame_offsets(df: &DataFrame, file: &Path) -> Result<Vec<FrameObservation>, S
             offset_s: estimated[i] - recorded[i],
         })
         .collect())
+}
+
+/// The finite widths `w_l + w_r` of the `straight` samples, read in a frame with a
+/// capture-time estimate (`estimated_time_s` of `frames.parquet`, by row).
+fn straight_run_widths(
+    df: &DataFrame,
+    file: &Path,
+    straight: &[bool],
+    estimated_time_s: &[f64],
+) -> Result<Vec<WidthObservation>, StageError> {
+    let (layer, sample, frame) =
+        (i64_column(df, file, "layer")?, i64_column(df, file, "sample")?, i64_column(df, file, "frame_index")?);
+    let (left, right) = (f64_column(df, file, "w_left_mm")?, f64_column(df, file, "w_right_mm")?);
+    let timed = |f: i64| usize::try_from(f).ok().and_then(|f| estimated_time_s.get(f)).is_some_and(|t| t.is_finite());
+    let mut out = Vec::new();
+    for i in 0..df.height() {
+        let (Ok(l), Ok(k)) = (usize::try_from(layer[i]), usize::try_from(sample[i])) else { continue };
+        let width_mm = left[i] + right[i];
+        if width_mm.is_finite() && straight.get(k) == Some(&true) && timed(frame[i]) {
+            out.push(WidthObservation { layer: l, sample: k, width_mm });
+        }
+    }
+    Ok(out)
 }
 
 /// Every sample's finite centre temperature.

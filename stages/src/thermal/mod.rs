@@ -10,14 +10,17 @@
 //! - [`reprint`]: `thermal.reprint_evaluate`, re-print with and without it and measure
 //!   eqs 40-41 (evaluation: uses the virtual printer's effects).
 //! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`.
-//! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time and layer
-//!   models get wrong about the monitor's measurements, and why (DESIGN §7);
-//!   [`discovery_power`]: `thermal.discovery_power`, its power study on virtual prints.
+//! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time, layer and
+//!   flow models get wrong about the monitor's measurements, and why (DESIGN §7);
+//!   [`discovery_power`]: `thermal.discovery_power`, its power study on virtual prints;
+//!   [`control`]: `thermal.control_gain`, the compensation with the extended model
+//!   against the paper's, re-printed (evaluation).
 //! - [`common`]: what the stages share (reading a sequence, the trajectory, the camera).
 
 pub mod accuracy;
 pub mod common;
 pub mod compensate;
+pub mod control;
 pub mod discovery_power;
 pub mod discrepancy;
 pub mod generate;
@@ -36,4 +39,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(accuracy::AccuracyEvaluateStage));
     registry.register(Box::new(discrepancy::DiscrepancyStage));
     registry.register(Box::new(discovery_power::DiscoveryPowerStage));
+    registry.register(Box::new(control::ControlGainStage));
 }

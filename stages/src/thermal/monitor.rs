@@ -166,25 +166,42 @@ impl StageKind for MonitorStage {
     }
 }
 
-/// `frames.parquet` and `widths.parquet` of `seq` as [`MonitorStage`] writes them, with
-/// its parameters `params` (checked against its declarations) and localisation seed
-/// `seed`, without a stage: for studies that monitor many sequences.
-pub fn frames_and_widths(
+/// The tables [`MonitorStage`] writes that the analyses downstream read, in memory.
+pub struct MonitorTables {
+    /// `frames.parquet`.
+    pub frames: polars::prelude::DataFrame,
+    /// `widths.parquet`.
+    pub widths: polars::prelude::DataFrame,
+    /// `directions.parquet`.
+    pub directions: polars::prelude::DataFrame,
+    /// `detections.parquet`.
+    pub detections: polars::prelude::DataFrame,
+}
+
+/// [`MonitorTables`] of `seq` as [`MonitorStage`] writes them, with its parameters
+/// `params` (checked against its declarations) and localisation seed `seed`, without a
+/// stage: for studies that monitor many sequences.
+pub fn monitor_tables(
     seq: &datasets::thermal::ThermalSequence,
     params: &pipeline::params::Params,
     seed: u64,
-) -> Result<(polars::prelude::DataFrame, polars::prelude::DataFrame), StageError> {
+) -> Result<MonitorTables, StageError> {
     let setup = seq.process.print_setup();
     let trajectory = trajectory_of(seq)?;
-    let (with_dda, _) = deposition_directions(seq, &trajectory, &setup)?;
+    let (with_dda, without_dda) = deposition_directions(seq, &trajectory, &setup)?;
     let settings = Settings::from_params(params);
     let analysis = Analysis::new(seq, &trajectory, &with_dda, &setup, settings)?;
     let (frames, _) = analysis.localiser.run(seed, settings.localisation)?;
     let widths = analysis.widths(&frames);
-    Ok((frames_frame(&frames, settings.localisation)?, widths_frame(&trajectory, &with_dda, &setup, &widths)?))
+    Ok(MonitorTables {
+        frames: frames_frame(&frames, settings.localisation)?,
+        widths: widths_frame(&trajectory, &with_dda, &setup, &widths)?,
+        directions: directions_frame(&trajectory, &with_dda, &without_dda, &setup)?,
+        detections: detections_frame(&analysis.localiser.undistorter, &frames)?,
+    })
 }
 
-/// The monitor's parameter declarations (for [`frames_and_widths`]).
+/// The monitor's parameter declarations (for [`monitor_tables`]).
 pub fn params() -> &'static [ParamSpec] {
     PARAMS
 }
@@ -582,10 +599,19 @@ fn write_frame_tables(
     method: Localisation,
 ) -> Result<(), StageError> {
     ctx.write_table("frames", &mut frames_frame(frames, method)?)?;
+    ctx.write_table("detections", &mut detections_frame(undistorter, frames)?)?;
+    Ok(())
+}
+
+/// `detections.parquet`: every hot corner found, with its frame, pixel and temperature.
+fn detections_frame(
+    undistorter: &Undistorter,
+    frames: &[FrameOutcome],
+) -> Result<polars::prelude::DataFrame, StageError> {
     let rows: Vec<(&FrameOutcome, &DetectionRow)> =
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
     let raw: Vec<[f64; 2]> = rows.iter().map(|(_, d)| undistorter.distort_px(d.1)).collect();
-    let mut detections = frame(vec![
+    frame(vec![
         i64_col("layer", rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
         i64_col("frame", rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
         f64_col("u_px", rows.iter().map(|(_, d)| d.1[0]).collect()),
@@ -594,9 +620,7 @@ fn write_frame_tables(
         f64_col("raw_v_px", raw.iter().map(|p| p[1]).collect()),
         f64_col("temp_c", rows.iter().map(|(_, d)| d.2).collect()),
         i64_col("matched_vertex", rows.iter().map(|(_, d)| d.0).collect()),
-    ])?;
-    ctx.write_table("detections", &mut detections)?;
-    Ok(())
+    ])
 }
 
 /// `mount.parquet` (the rigid mounts, one row per pass: 0 the nominal start, 1 the fit

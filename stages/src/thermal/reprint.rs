@@ -32,8 +32,8 @@ use datasets::thermal::deposition::print_part;
 use datasets::thermal::effects::Effects;
 use datasets::thermal::sequence::ThermalSequence;
 use models::thermal::metrics::{
-    contour_errors, contour_region, corner_deposition, summarize, summarize_regions, ContourPoint, ContourRegion,
-    IdealBead, RegionSummary,
+    contour_errors, contour_region, corner_deposition, corner_polytope_area_mm2, summarize, summarize_regions,
+    ContourPoint, ContourRegion, IdealBead, RegionSummary,
 };
 use models::thermal::{DepositGrid, PrintSetup};
 use pipeline::params::ParamDefault;
@@ -188,7 +188,7 @@ fn corners_frame(
 ) -> Result<polars::prelude::DataFrame, StageError> {
     let angles = interior_angles_deg(&seq.path_mm);
     let width = setup.bead_width_mm;
-    let polytope: Vec<f64> = angles.iter().map(|a| width * width / a.to_radians().sin()).collect();
+    let polytope: Vec<f64> = angles.iter().map(|a| corner_polytope_area_mm2(width, *a)).collect();
     let b: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(before, bead, *v, radius_mm)).collect();
     let a: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(after, bead, *v, radius_mm)).collect();
     frame(vec![

@@ -1,0 +1,335 @@
+//! `thermal.control_gain`: does the extended model print better? For each print (one
+//! seed, the flow lagging with a τ off the nominal by a given strength), the virtual
+//! printer prints and films the corner test part; the monitor (`thermal.monitor`'s
+//! code) measures it and the discrepancy engine (`thermal.discrepancy`'s model), told
+//! nothing, names what is wrong. The part is then re-printed three times on the same
+//! printer with the same flow draws (paper 003 Sec. 3.3):
+//!
+//! - `conventional`: the nominal command, no compensation;
+//! - `paper`: the filtered-B-spline compensation of eqs 31-39 (`thermal.compensate`,
+//!   its defaults) from the first layer's widths, with the nominal τ in G(s) (eq. 34);
+//! - `extended`: the same compensation from the same widths, with the τ the engine
+//!   fitted, `τ0·(1 + m̂)`, when it named `tau_mismatch` (otherwise the nominal: then it
+//!   is the paper's command).
+//!
+//! Each print is scored as Sec. 3.3 scores it (`models::thermal::metrics::print_quality`):
+//! the first layer's mean O_E over the corners (eq. 40) and the contour error's max and
+//! RMS over every layer (eq. 41, Table 3). What changes between `paper` and `extended`
+//! is the deposition model only; the monitor, its widths and the desired widths are the
+//! same. An evaluation stage: it prints on the virtual printer and knows what it printed.
+//!
+//! Outputs (docs/OUTPUTS.md): `control_gain.parquet` (per strength and controller: each
+//! metric's mean over prints with a 95 % Student-t interval, and the mean paired
+//! difference to the paper's controller with its interval) and `control_trials.parquet`
+//! (one row per print and controller, with what the engine named and fitted).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use datasets::thermal::deposition::print_part;
+use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
+use discrepancy::stats::{mix_seed, t_interval};
+use discrepancy::{discover, Mechanism, Settings};
+use models::thermal::discrepancy::{ThermalModel, CANDIDATES, TAU_MISMATCH};
+use models::thermal::metrics::{print_quality, IdealBead, PrintQuality};
+use pipeline::params::{ParamDefault, Params};
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::common::{open_sequence, trajectory_of};
+use super::compensate::{self, compensate, MonitorInputs};
+use super::discovery_power::{monitor_params, MONITOR_SPECS};
+use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
+use super::monitor;
+use crate::discrepancy_tables::{max_rounds, study_settings, ALPHA};
+use crate::effects::strength_list;
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The `thermal.control_gain` stage kind.
+pub struct ControlGainStage;
+
+/// The controllers, in table order.
+const CONTROLLERS: [&str; 3] = ["conventional", "paper", "extended"];
+
+/// The effect the compensation's model can take up: G(s)'s τ.
+const EFFECT: &str = "tau_mismatch";
+
+/// Mixed into a print's seed for the re-prints' flow draws (all three the same).
+const REPRINT_SALT: u64 = 0x4354_524c_5245_5052;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "tau_mismatch",
+        ty: ParamType::Text,
+        default: ParamDefault::Str("0.3"),
+        doc: "Strengths of tau_mismatch (actual τ = nominal·(1 + strength)), comma-separated.",
+    },
+    ParamSpec {
+        name: "prints",
+        ty: ParamType::Int { min: 2, max: 10_000 },
+        default: ParamDefault::Int(4),
+        doc: "Prints (seeds) per strength; each is filmed, then re-printed three times.",
+    },
+    ParamSpec {
+        name: "layers",
+        ty: ParamType::Int { min: 2, max: 20 },
+        default: ParamDefault::Int(8),
+        doc: "Filmed layers of each print (the engine's groups).",
+    },
+    ParamSpec {
+        name: "reprint_layers",
+        ty: ParamType::Int { min: 1, max: 50 },
+        default: ParamDefault::Int(20),
+        doc: "Layers of each re-print scored by eq. 41 (Table 3: 20).",
+    },
+    ParamSpec {
+        name: "corner_radius_mm",
+        ty: ParamType::Float { min: 0.1, max: 5.0 },
+        default: ParamDefault::Float(1.0),
+        doc: "Radius of the corner window of eq. 40 (mm), as `thermal.reprint_evaluate`'s.",
+    },
+    ParamSpec {
+        name: "contour_spacing_mm",
+        ty: ParamType::Float { min: 0.005, max: 1.0 },
+        default: ParamDefault::Float(0.05),
+        doc: "Spacing of the CAD contour points of eq. 41 (mm), as `thermal.reprint_evaluate`'s.",
+    },
+    ALPHA,
+    max_rounds(5, 2),
+    WIDTH_CLEARANCE,
+    MONITOR_SPECS[0],
+    MONITOR_SPECS[1],
+    MONITOR_SPECS[2],
+    MONITOR_SPECS[3],
+];
+
+impl StageKind for ControlGainStage {
+    fn name(&self) -> &'static str {
+        "thermal.control_gain"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Prints with a flow τ off the nominal, compensated (eqs 31-39) with the paper's τ and with the τ the discrepancy engine fitted, re-printed and scored (eqs 40-41) → control_gain.parquet, control_trials.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 003 eqs 31-41 (Secs 2.4, 3.3) with the discrepancy engine's extended model (DESIGN §7; evaluation)"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(0)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let design = Design::from_params(ctx)?;
+        let scratch = ctx.output_dir().join("scratch");
+        let jobs: Vec<(usize, f64, usize)> = (design.strengths.iter().enumerate())
+            .flat_map(|(c, &s)| (0..design.prints).map(move |p| (c, s, p)))
+            .collect();
+        let trials: Vec<Trial> = jobs
+            .par_iter()
+            .map(|&(cell, strength, print)| {
+                design.trial(cell, strength, print, &scratch.join(format!("print_{cell}_{print}")))
+            })
+            .collect::<Result<_, _>>()?;
+        std::fs::remove_dir_all(&scratch).ok();
+        ctx.write_table("control_gain", &mut gain_frame(&trials)?)?;
+        ctx.write_table("control_trials", &mut trials_frame(&trials)?)?;
+        Ok(())
+    }
+}
+
+/// The checked study.
+struct Design {
+    strengths: Vec<f64>,
+    prints: usize,
+    layers: usize,
+    reprint_layers: usize,
+    corner_radius_mm: f64,
+    contour_spacing_mm: f64,
+    width_clearance_mm: f64,
+    seed: u64,
+    engine: Settings,
+    monitor: Params,
+    compensation: Params,
+}
+
+/// One print: what the engine made of it and its three re-prints.
+struct Trial {
+    strength: f64,
+    print: usize,
+    seed: u64,
+    named: String,
+    /// The engine's τ excess with its interval, when it named `tau_mismatch`.
+    fitted: Option<(f64, f64, f64)>,
+    /// Per controller, in [`CONTROLLERS`] order.
+    quality: [PrintQuality; 3],
+}
+
+impl Design {
+    fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
+        let p = &ctx.params;
+        let check = |specs: &'static [ParamSpec], raw: BTreeMap<String, toml::Value>| {
+            Params::check(specs, &raw).map_err(|(name, why)| StageError::Params {
+                stage: ctx.stage.clone(),
+                message: format!("{name}: {why}"),
+            })
+        };
+        Ok(Self {
+            strengths: strength_list(ctx, EFFECT, 10.0, " (relative)")?,
+            prints: p.i64("prints") as usize,
+            layers: p.i64("layers") as usize,
+            reprint_layers: p.i64("reprint_layers") as usize,
+            corner_radius_mm: p.f64("corner_radius_mm"),
+            contour_spacing_mm: p.f64("contour_spacing_mm"),
+            width_clearance_mm: p.f64(WIDTH_CLEARANCE.name),
+            seed: ctx.seed,
+            engine: study_settings(ctx, 100),
+            monitor: check(monitor::params(), monitor_params(p))?,
+            compensation: check(compensate::params(), BTreeMap::new())?,
+        })
+    }
+
+    /// Prints and films one part in `scratch`, lets the engine read it, compensates
+    /// with both models, re-prints and scores.
+    fn trial(&self, cell: usize, strength: f64, print: usize, scratch: &Path) -> Result<Trial, StageError> {
+        let seed = mix_seed(self.seed, cell as u64, print as u64);
+        let effects = Effects::from_pairs([(EFFECT, strength)]).map_err(StageError::domain)?;
+        let habits = LeptonHabits { repeated_frames: true, shutter_freeze: true };
+        let config = GenerateConfig { seed, layers: self.layers, effects, lepton_habits: habits };
+        std::fs::create_dir_all(scratch).map_err(|e| StageError::Io { path: scratch.to_path_buf(), source: e })?;
+        generate_into(&config, scratch).map_err(StageError::domain)?;
+        let seq = open_sequence(scratch)?;
+        let tables = monitor::monitor_tables(&seq, &self.monitor, seed)?;
+        let record = record_from_tables(&seq, &tables.frames, &tables.widths, scratch, self.width_clearance_mm)?;
+        std::fs::remove_dir_all(scratch).ok();
+        let model = ThermalModel::new(record);
+        let groups = model.record().layer_groups();
+        let found = discover(&model, &groups, &[], &Settings { seed, ..self.engine }).map_err(|e| {
+            StageError::Domain(format!("discrepancy engine on control print {print} (seed {seed:016x}): {e}").into())
+        })?;
+        let fitted =
+            found.extension.iter().find(|e| e.mechanism == Some(TAU_MISMATCH)).map(|e| (e.estimate, e.ci_lo, e.ci_hi));
+        let named = if found.named.is_empty() {
+            "none".to_string()
+        } else {
+            found.named.iter().map(|&m| CANDIDATES[m].name()).collect::<Vec<_>>().join("+")
+        };
+        let setup = seq.process.print_setup();
+        let inputs = MonitorInputs {
+            dir: scratch,
+            widths: &tables.widths,
+            directions: &tables.directions,
+            detections: &tables.detections,
+        };
+        let paper = compensate(&seq, &inputs, &self.compensation, setup.tau_s)?;
+        let tau_extended_s = setup.tau_s * (1.0 + fitted.map_or(0.0, |f| f.0));
+        let extended = compensate(&seq, &inputs, &self.compensation, tau_extended_s)?;
+        let commands = [&paper.nominal_mm_s, &paper.command_mm_s, &extended.command_mm_s];
+        let quality = self.reprint(&seq, &effects, seed, commands)?;
+        Ok(Trial { strength, print, seed, named, fitted, quality })
+    }
+
+    /// Re-prints the part with each command on the same printer and flow draws, scored.
+    fn reprint(
+        &self,
+        seq: &datasets::thermal::ThermalSequence,
+        effects: &Effects,
+        seed: u64,
+        commands: [&Vec<f64>; 3],
+    ) -> Result<[PrintQuality; 3], StageError> {
+        let setup = seq.process.print_setup();
+        let trajectory = trajectory_of(seq)?;
+        let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
+        let cad = bead.contour_points(self.contour_spacing_mm, false);
+        let score = |command: &Vec<f64>| -> Result<PrintQuality, StageError> {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ REPRINT_SALT);
+            let printed = print_part(&setup, &trajectory, command, self.reprint_layers, effects, &mut rng)
+                .map_err(StageError::domain)?;
+            let grids: Vec<_> = printed.into_iter().map(|l| l.grid).collect();
+            Ok(print_quality(&grids, &bead, &seq.path_mm, setup.bead_width_mm, self.corner_radius_mm, &cad))
+        };
+        let scored: Vec<PrintQuality> = commands.par_iter().map(|c| score(c)).collect::<Result<_, _>>()?;
+        Ok([scored[0], scored[1], scored[2]])
+    }
+}
+
+/// One metric of a print: its column name and how to read it.
+type Metric = (&'static str, fn(&PrintQuality) -> f64);
+
+/// The three metrics of Sec. 3.3, in table order.
+const METRICS: [Metric; 3] = [
+    ("mean_oe_pct", |q| q.mean_oe_pct),
+    ("contour_rms_mm", |q| q.contour_rms_mm),
+    ("contour_max_mm", |q| q.contour_max_mm),
+];
+
+/// `control_gain.parquet`: per strength and controller, each metric's mean over prints
+/// with its 95 % Student-t interval, and the paired difference to `paper`.
+fn gain_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError> {
+    let mut strengths: Vec<f64> = trials.iter().map(|t| t.strength).collect();
+    strengths.dedup();
+    let (mut strength, mut controller, mut prints, mut named) = (vec![], vec![], vec![], vec![]);
+    let mut columns: Vec<(String, Vec<f64>)> = METRICS
+        .iter()
+        .flat_map(|(m, _)| {
+            ["", "_ci_lo", "_ci_hi", "_vs_paper", "_vs_paper_ci_lo", "_vs_paper_ci_hi"]
+                .map(|suffix| (format!("{m}{suffix}"), Vec::new()))
+        })
+        .collect();
+    for s in strengths {
+        let these: Vec<&Trial> = trials.iter().filter(|t| t.strength == s).collect();
+        for (c, name) in CONTROLLERS.iter().enumerate() {
+            strength.push(s);
+            controller.push(name.to_string());
+            prints.push(these.len() as i64);
+            named.push(these.iter().filter(|t| t.fitted.is_some()).count() as i64);
+            for (m, (_, metric)) in METRICS.iter().enumerate() {
+                let values: Vec<f64> = these.iter().map(|t| metric(&t.quality[c])).collect();
+                let paired: Vec<f64> = these.iter().map(|t| metric(&t.quality[c]) - metric(&t.quality[1])).collect();
+                let (mean, diff) = (t_interval(&values), t_interval(&paired));
+                for (k, v) in [mean.0, mean.1, mean.2, diff.0, diff.1, diff.2].into_iter().enumerate() {
+                    columns[6 * m + k].1.push(v);
+                }
+            }
+        }
+    }
+    let mut cols = vec![
+        str_col("effect", vec![EFFECT.to_string(); strength.len()]),
+        f64_col("strength", strength),
+        str_col("controller", controller),
+        i64_col("prints", prints),
+        i64_col("tau_named", named),
+    ];
+    cols.extend(columns.into_iter().map(|(name, values)| f64_col(&name, values)));
+    frame(cols)
+}
+
+/// `control_trials.parquet`: one row per print and controller.
+fn trials_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError> {
+    let rows: Vec<(&Trial, usize)> = trials.iter().flat_map(|t| (0..3).map(move |c| (t, c))).collect();
+    let fitted = |k: usize| -> Vec<f64> {
+        rows.iter().map(|(t, _)| t.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect()
+    };
+    let mut cols = vec![
+        str_col("effect", vec![EFFECT.to_string(); rows.len()]),
+        f64_col("strength", rows.iter().map(|(t, _)| t.strength).collect()),
+        i64_col("print", rows.iter().map(|(t, _)| t.print as i64).collect()),
+        str_col("seed", rows.iter().map(|(t, _)| format!("{:016x}", t.seed)).collect()),
+        str_col("named", rows.iter().map(|(t, _)| t.named.clone()).collect()),
+        f64_col("tau_excess", fitted(0)),
+        f64_col("tau_excess_ci_lo", fitted(1)),
+        f64_col("tau_excess_ci_hi", fitted(2)),
+        str_col("controller", rows.iter().map(|(_, c)| CONTROLLERS[*c].to_string()).collect()),
+    ];
+    for (name, metric) in METRICS {
+        cols.push(f64_col(name, rows.iter().map(|(t, c)| metric(&t.quality[*c])).collect()));
+    }
+    frame(cols)
+}
