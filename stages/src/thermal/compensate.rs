@@ -336,9 +336,11 @@ pub fn compensate(
     Ok(Compensated { trajectory, nominal_mm_s, command_mm_s, spans, span_vertices, dw, widths_mm, corner_temps_c })
 }
 
-/// The compensation's parameter declarations (for [`compensate`]).
-pub fn params() -> &'static [ParamSpec] {
-    PARAMS
+/// The compensation's default parameters (the paper's settings, for [`compensate`]);
+/// `ctx` names the stage that asks in an error.
+pub fn default_params(ctx: &StageContext) -> Result<Params, StageError> {
+    Params::check(PARAMS, &std::collections::BTreeMap::new())
+        .map_err(|(name, why)| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") })
 }
 
 /// The monitored half widths (left, right) of a run of consecutive layers, indexed by

@@ -23,7 +23,6 @@
 //! difference to the paper's controller with its interval) and `control_trials.parquet`
 //! (one row per print and controller, with what the engine named and fitted).
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use datasets::thermal::deposition::print_part;
@@ -41,7 +40,6 @@ use rayon::prelude::*;
 
 use super::common::{open_sequence, trajectory_of};
 use super::compensate::{self, compensate, MonitorInputs};
-use super::discovery_power::{monitor_params, MONITOR_SPECS};
 use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
 use super::monitor;
 use crate::discrepancy_tables::{max_rounds, study_settings, ALPHA};
@@ -100,10 +98,10 @@ const PARAMS: &[ParamSpec] = &[
     ALPHA,
     max_rounds(5, 2),
     WIDTH_CLEARANCE,
-    MONITOR_SPECS[0],
-    MONITOR_SPECS[1],
-    MONITOR_SPECS[2],
-    MONITOR_SPECS[3],
+    monitor::STUDY_PARAMS[0],
+    monitor::STUDY_PARAMS[1],
+    monitor::STUDY_PARAMS[2],
+    monitor::STUDY_PARAMS[3],
 ];
 
 impl StageKind for ControlGainStage {
@@ -175,12 +173,6 @@ struct Trial {
 impl Design {
     fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
         let p = &ctx.params;
-        let check = |specs: &'static [ParamSpec], raw: BTreeMap<String, toml::Value>| {
-            Params::check(specs, &raw).map_err(|(name, why)| StageError::Params {
-                stage: ctx.stage.clone(),
-                message: format!("{name}: {why}"),
-            })
-        };
         Ok(Self {
             strengths: strength_list(ctx, EFFECT, 10.0, " (relative)")?,
             prints: p.i64("prints") as usize,
@@ -191,8 +183,8 @@ impl Design {
             width_clearance_mm: p.f64(WIDTH_CLEARANCE.name),
             seed: ctx.seed,
             engine: study_settings(ctx, 100),
-            monitor: check(monitor::params(), monitor_params(p))?,
-            compensation: check(compensate::params(), BTreeMap::new())?,
+            monitor: monitor::study_params(ctx)?,
+            compensation: compensate::default_params(ctx)?,
         })
     }
 

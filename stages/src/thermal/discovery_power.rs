@@ -15,7 +15,6 @@
 //! and `power_draws.parquet` (one row per draw, with each candidate's first-round
 //! p-value).
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
@@ -46,40 +45,6 @@ const STUDIED: [(&str, f64, &str); 5] = [
     ("heat_diffusion_widening", 20.0, "relative"),
     ("melt_squeeze_out", 1.0, "fraction"),
 ];
-
-/// The monitor's parameters the thermal studies set (the others keep the monitor's
-/// defaults), with the studies' defaults.
-pub const MONITOR_SPECS: [ParamSpec; 4] = [
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(90.0),
-        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(220.0),
-        doc: "The monitor's band_high_c.",
-    },
-    ParamSpec {
-        name: "max_corner_age_s",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(0.8),
-        doc: "The monitor's max_corner_age_s.",
-    },
-    ParamSpec {
-        name: "window_s",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
-    },
-];
-
-/// The monitor's raw parameters from a study's [`MONITOR_SPECS`] values.
-pub fn monitor_params(p: &Params) -> BTreeMap<String, toml::Value> {
-    MONITOR_SPECS.iter().map(|spec| (spec.name.to_string(), toml::Value::Float(p.f64(spec.name)))).collect()
-}
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec {
@@ -133,10 +98,10 @@ const PARAMS: &[ParamSpec] = &[
     ALPHA,
     max_rounds(5, 2),
     WIDTH_CLEARANCE,
-    MONITOR_SPECS[0],
-    MONITOR_SPECS[1],
-    MONITOR_SPECS[2],
-    MONITOR_SPECS[3],
+    monitor::STUDY_PARAMS[0],
+    monitor::STUDY_PARAMS[1],
+    monitor::STUDY_PARAMS[2],
+    monitor::STUDY_PARAMS[3],
 ];
 
 impl StageKind for DiscoveryPowerStage {
@@ -217,9 +182,7 @@ impl Design {
         for (effect, top, unit) in STUDIED {
             cells.extend(strength_list(ctx, effect, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
         }
-        let monitor = Params::check(monitor::params(), &monitor_params(p)).map_err(|(name, why)| {
-            StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") }
-        })?;
+        let monitor = monitor::study_params(ctx)?;
         Ok(Self {
             cells,
             draws: p.i64("draws") as usize,

@@ -42,6 +42,8 @@
 //! Also written for the figures (Fig. 4): the undistorted frame with the most matched
 //! corners, its detections, and a mosaic of all localised frames on the plane.
 
+use std::collections::BTreeMap;
+
 use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::ThermalSequence;
 use models::stats::finite_median;
@@ -50,7 +52,7 @@ use models::thermal::dda::DepositionDirections;
 use models::thermal::dynamics::lag_excess;
 use models::thermal::geometry::half_widths_mm;
 use models::thermal::{PrintSetup, Trajectory};
-use pipeline::params::ParamDefault;
+use pipeline::params::{ParamDefault, Params};
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use vision::camera::Undistorter;
@@ -201,9 +203,42 @@ pub fn monitor_tables(
     })
 }
 
-/// The monitor's parameter declarations (for [`monitor_tables`]).
-pub fn params() -> &'static [ParamSpec] {
-    PARAMS
+/// The monitor's parameters a study that films its own prints sets (the others keep
+/// the monitor's defaults), with the studies' defaults.
+pub const STUDY_PARAMS: [ParamSpec; 4] = [
+    ParamSpec {
+        name: "band_low_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(90.0),
+        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
+    },
+    ParamSpec {
+        name: "band_high_c",
+        ty: ParamType::Float { min: 0.0, max: 300.0 },
+        default: ParamDefault::Float(220.0),
+        doc: "The monitor's band_high_c.",
+    },
+    ParamSpec {
+        name: "max_corner_age_s",
+        ty: ParamType::Float { min: 0.1, max: 100.0 },
+        default: ParamDefault::Float(0.8),
+        doc: "The monitor's max_corner_age_s.",
+    },
+    ParamSpec {
+        name: "window_s",
+        ty: ParamType::Float { min: 0.001, max: 0.5 },
+        default: ParamDefault::Float(0.05),
+        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
+    },
+];
+
+/// The monitor's checked parameters from a study's [`STUDY_PARAMS`] values.
+pub fn study_params(ctx: &StageContext) -> Result<Params, StageError> {
+    let raw: BTreeMap<String, toml::Value> = (STUDY_PARAMS.iter())
+        .map(|spec| (spec.name.to_string(), toml::Value::Float(ctx.params.f64(spec.name))))
+        .collect();
+    Params::check(PARAMS, &raw)
+        .map_err(|(name, why)| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") })
 }
 
 /// The checked parameters.
