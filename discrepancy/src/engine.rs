@@ -448,8 +448,6 @@ fn score(
     }
 }
 
-/// `ln(before/after)` per group, with a floor far below any real squared error so that
-/// a perfectly predicted group stays finite.
 /// Each group's mask of the observations `mechanism` moves ([`Model::moved_by`]), or
 /// `None` when it may move all of them.
 fn moved<M: Model>(model: &M, groups: &[M::Group], mechanism: usize) -> Option<Vec<Vec<bool>>> {
@@ -480,6 +478,8 @@ fn restricted<G: Group, F>(
     (sse_before, sse_after, samples)
 }
 
+/// `ln(before/after)` per group, with a floor far below any real squared error so that
+/// a perfectly predicted group stays finite.
 fn log_gains(before: &[f64], after: &[f64]) -> Vec<f64> {
     let floor = 1e-12 * before.iter().sum::<f64>() / before.len().max(1) as f64 + f64::MIN_POSITIVE;
     before.iter().zip(after).map(|(b, a)| ((b + floor) / (a + floor)).ln()).collect()

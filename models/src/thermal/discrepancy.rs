@@ -47,6 +47,12 @@
 //! - `tau_mismatch`: the flow reaches the nozzle with a time constant `τ0·(1 + m)`
 //!   instead of eq. 34's nominal τ0, so the thin stretch after every corner is longer or
 //!   shorter (the printer's effect); fitted with the contour line re-fitted at each `m`.
+//!   Known limitation: the contour line is linear and local, but a bead that carries
+//!   more flow for longer stays hot, and its contour wide, for longer still than its
+//!   deposit, so `m` fitted to contour widths runs above the printer's (fitted to the
+//!   deposit's true widths it does not) and its jackknife interval misses the truth; the
+//!   power study's coverage column measures it. A model of the contour's thermal
+//!   response would remove it.
 //!
 //! The other thermal effects that change the deposit (`heat_diffusion_widening`,
 //! `melt_squeeze_out`) have no candidate: they act at the corners, where the threshold
@@ -64,7 +70,7 @@
 //! temperature's noise belongs to the frame it is read in, and a layer's baseline
 //! profile comes from the other layers' readings of the same samples. An exact
 //! sign-flip test over G layers cannot reach p below 2^−G, so eight or more filmed
-//! layers are needed before anything can be named at α = 0.05 over four candidates.
+//! layers are needed before anything can be named at α = 0.05 over five candidates.
 //!
 //! **Scales.** A group's squared error adds offsets (s), temperatures (°C) and widths
 //! (mm), so every observation is divided by its kind's noise scale, estimated robustly
