@@ -26,10 +26,9 @@
 use std::path::Path;
 
 use datasets::thermal::deposition::print_part;
-use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
+use datasets::thermal::Effects;
 use discrepancy::stats::{mix_seed, t_interval};
-use discrepancy::{discover, Mechanism, Settings};
-use models::thermal::discrepancy::{ThermalModel, CANDIDATES, TAU_MISMATCH};
+use models::thermal::discrepancy::TAU_MISMATCH;
 use models::thermal::metrics::{print_quality, IdealBead, PrintQuality};
 use pipeline::params::{ParamDefault, Params};
 use pipeline::stage::Arity;
@@ -38,11 +37,12 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::common::{open_sequence, trajectory_of};
+use super::common::trajectory_of;
 use super::compensate::{self, compensate, MonitorInputs};
-use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
+use super::discrepancy::WIDTH_CLEARANCE;
+use super::filmed_print::{named_list, FilmedPrint, Filming};
 use super::monitor;
-use crate::discrepancy_tables::{max_rounds, study_settings, ALPHA};
+use crate::discrepancy_tables::{max_rounds, ALPHA};
 use crate::effects::strength_list;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
@@ -147,14 +147,11 @@ impl StageKind for ControlGainStage {
 struct Design {
     strengths: Vec<f64>,
     prints: usize,
-    layers: usize,
     reprint_layers: usize,
     corner_radius_mm: f64,
     contour_spacing_mm: f64,
-    width_clearance_mm: f64,
     seed: u64,
-    engine: Settings,
-    monitor: Params,
+    filming: Filming,
     compensation: Params,
 }
 
@@ -176,14 +173,11 @@ impl Design {
         Ok(Self {
             strengths: strength_list(ctx, EFFECT, 10.0, " (relative)")?,
             prints: p.i64("prints") as usize,
-            layers: p.i64("layers") as usize,
             reprint_layers: p.i64("reprint_layers") as usize,
             corner_radius_mm: p.f64("corner_radius_mm"),
             contour_spacing_mm: p.f64("contour_spacing_mm"),
-            width_clearance_mm: p.f64(WIDTH_CLEARANCE.name),
             seed: ctx.seed,
-            engine: study_settings(ctx, 100),
-            monitor: monitor::study_params(ctx)?,
+            filming: Filming::from_params(ctx)?,
             compensation: compensate::default_params(ctx)?,
         })
     }
@@ -193,26 +187,11 @@ impl Design {
     fn trial(&self, cell: usize, strength: f64, print: usize, scratch: &Path) -> Result<Trial, StageError> {
         let seed = mix_seed(self.seed, cell as u64, print as u64);
         let effects = Effects::from_pairs([(EFFECT, strength)]).map_err(StageError::domain)?;
-        let habits = LeptonHabits { repeated_frames: true, shutter_freeze: true };
-        let config = GenerateConfig { seed, layers: self.layers, effects, lepton_habits: habits };
-        std::fs::create_dir_all(scratch).map_err(|e| StageError::Io { path: scratch.to_path_buf(), source: e })?;
-        generate_into(&config, scratch).map_err(StageError::domain)?;
-        let seq = open_sequence(scratch)?;
-        let tables = monitor::monitor_tables(&seq, &self.monitor, seed)?;
-        let record = record_from_tables(&seq, &tables.frames, &tables.widths, scratch, self.width_clearance_mm)?;
-        std::fs::remove_dir_all(scratch).ok();
-        let model = ThermalModel::new(record);
-        let groups = model.record().layer_groups();
-        let found = discover(&model, &groups, &[], &Settings { seed, ..self.engine }).map_err(|e| {
-            StageError::Domain(format!("discrepancy engine on control print {print} (seed {seed:016x}): {e}").into())
-        })?;
+        let FilmedPrint { sequence: seq, tables, found } =
+            self.filming.film(effects, seed, scratch, &format!("control print {print}"))?;
         let fitted =
             found.extension.iter().find(|e| e.mechanism == Some(TAU_MISMATCH)).map(|e| (e.estimate, e.ci_lo, e.ci_hi));
-        let named = if found.named.is_empty() {
-            "none".to_string()
-        } else {
-            found.named.iter().map(|&m| CANDIDATES[m].name()).collect::<Vec<_>>().join("+")
-        };
+        let named = named_list(&found.named);
         let setup = seq.process.print_setup();
         let inputs = MonitorInputs {
             dir: scratch,

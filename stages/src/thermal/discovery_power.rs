@@ -17,20 +17,20 @@
 
 use std::path::Path;
 
-use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
+use datasets::thermal::Effects;
 use discrepancy::power::{summarize, DrawScore, DrawVerdict, Outcome};
 use discrepancy::stats::mix_seed;
-use discrepancy::{discover, Mechanism, Settings};
-use models::thermal::discrepancy::{candidate_index, ThermalModel, CANDIDATES};
-use pipeline::params::{ParamDefault, Params};
+use discrepancy::Mechanism;
+use models::thermal::discrepancy::{candidate_index, CANDIDATES};
+use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use rayon::prelude::*;
 
-use super::common::open_sequence;
-use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
+use super::discrepancy::WIDTH_CLEARANCE;
+use super::filmed_print::{named_list, FilmedPrint, Filming};
 use super::monitor;
-use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, study_settings, DrawRow, ALPHA};
+use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, DrawRow, ALPHA};
 use crate::effects::strength_list;
 
 /// The `thermal.discovery_power` stage kind.
@@ -133,7 +133,7 @@ impl StageKind for DiscoveryPowerStage {
             .map(|job| design.draw(job, &scratch.join(format!("draw_{}_{}", job.cell, job.draw))))
             .collect::<Result<_, _>>()?;
         std::fs::remove_dir_all(&scratch).ok();
-        let base = format!("corner test part × {} layers", design.layers);
+        let base = format!("corner test part × {} layers", design.filming.layers);
         let scores: Vec<DrawScore> = draws.iter().map(Draw::score).collect();
         ctx.write_table("power", &mut power_frame(&base, &summarize(&scores))?)?;
         let rows: Vec<DrawRow<'_>> = draws.iter().map(Draw::row).collect();
@@ -148,11 +148,8 @@ struct Design {
     cells: Vec<(&'static str, f64)>,
     draws: usize,
     null_draws: usize,
-    layers: usize,
     seed: u64,
-    engine: Settings,
-    monitor: Params,
-    width_clearance_mm: f64,
+    filming: Filming,
 }
 
 /// One print to make.
@@ -182,16 +179,12 @@ impl Design {
         for (effect, top, unit) in STUDIED {
             cells.extend(strength_list(ctx, effect, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
         }
-        let monitor = monitor::study_params(ctx)?;
         Ok(Self {
             cells,
             draws: p.i64("draws") as usize,
             null_draws: p.i64("null_draws") as usize,
-            layers: p.i64("layers") as usize,
             seed: ctx.seed,
-            engine: study_settings(ctx, 100),
-            monitor,
-            width_clearance_mm: p.f64(WIDTH_CLEARANCE.name),
+            filming: Filming::from_params(ctx)?,
         })
     }
 
@@ -212,19 +205,8 @@ impl Design {
             Some(name) => Effects::from_pairs([(name, job.strength)]).map_err(StageError::domain)?,
             None => Effects::none(),
         };
-        let habits = LeptonHabits { repeated_frames: true, shutter_freeze: true };
-        let config = GenerateConfig { seed, layers: self.layers, effects, lepton_habits: habits };
-        std::fs::create_dir_all(scratch).map_err(|e| StageError::Io { path: scratch.to_path_buf(), source: e })?;
-        generate_into(&config, scratch).map_err(StageError::domain)?;
-        let seq = open_sequence(scratch)?;
-        let tables = monitor::monitor_tables(&seq, &self.monitor, seed)?;
-        let record = record_from_tables(&seq, &tables.frames, &tables.widths, scratch, self.width_clearance_mm)?;
-        std::fs::remove_dir_all(scratch).ok();
-        let model = ThermalModel::new(record);
-        let groups = model.record().layer_groups();
-        let found = discover(&model, &groups, &[], &Settings { seed, ..self.engine }).map_err(|e| {
-            StageError::Domain(format!("discrepancy engine on power draw {} (seed {seed:016x}): {e}", job.draw).into())
-        })?;
+        let FilmedPrint { found, .. } =
+            self.filming.film(effects, seed, scratch, &format!("power draw {}", job.draw))?;
         let DrawVerdict { outcome, fitted, first_round_p } =
             DrawVerdict::of(&found, job.effect.and_then(candidate_index), CANDIDATES.len());
         Ok(Draw {
@@ -251,11 +233,7 @@ impl Draw {
     }
 
     fn row(&self) -> DrawRow<'_> {
-        let named = if self.named.is_empty() {
-            "none".to_string()
-        } else {
-            self.named.iter().map(|&m| CANDIDATES[m].name()).collect::<Vec<_>>().join("+")
-        };
+        let named = named_list(&self.named);
         DrawRow {
             effect: self.effect_name(),
             strength: self.strength,

@@ -23,6 +23,7 @@ pub mod compensate;
 pub mod control;
 pub mod discovery_power;
 pub mod discrepancy;
+pub mod filmed_print;
 pub mod generate;
 pub mod localise;
 pub mod monitor;
