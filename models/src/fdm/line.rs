@@ -74,6 +74,28 @@ pub fn rmse(predicted_mm: &[f64], measured_mm: &[f64]) -> f64 {
     (sse / predicted_mm.len() as f64).sqrt()
 }
 
+/// The widths a printer of another family would lay down along the same path: every
+/// width times `width_scale` (a nozzle `width_scale` times wider at the same kinematics:
+/// mass conservation scales the bead), then a first-order lag of length `lag_mm` in path
+/// length, `w' (x) = w'(x⁻) + (w(x) − w'(x⁻))·(1 − e^{−Δx/lag_mm})`, started at the first
+/// width (a slower melt response that stretches the start dip and the end bulge).
+/// `lag_mm = 0` leaves the profile's shape as it is.
+pub fn other_family_widths(positions_mm: &[f64], widths_mm: &[f64], width_scale: f64, lag_mm: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(widths_mm.len());
+    let mut state = widths_mm.first().map_or(0.0, |w| w * width_scale);
+    for (i, (&x, &w)) in positions_mm.iter().zip(widths_mm).enumerate() {
+        let target = w * width_scale;
+        state = if i == 0 || lag_mm <= 0.0 {
+            target
+        } else {
+            let dx = x - positions_mm[i - 1];
+            state + (target - state) * (1.0 - (-dx / lag_mm).exp())
+        };
+        out.push(state);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,6 +22,7 @@
 //! Architecture invariant: no file I/O and no tables here; functions take slices and
 //! structs and return structs.
 
+pub mod colearn;
 pub mod discrepancy;
 pub mod errors;
 pub mod fit;
@@ -41,12 +42,15 @@ pub mod transfer_cv;
 #[cfg(test)]
 mod test_support;
 
+pub use colearn::{
+    default_tasks, summarise, transfer_matrix, MatrixMethod, MatrixRow, MatrixSummary, StudyPrinter, TransferTask,
+};
 pub use errors::{FitError, KinematicsError, ParamError};
 pub use fit::{fit, fit_at};
 pub use hyperparams::{PiecewiseParams, PiecewiseValidParams};
 pub use kinematics::{KinematicSamples, LineKinematics, MotionPhase};
 pub use lag::{fit_lag, FittedLag, LagParams, LagValidParams};
-pub use line::{rmse, MeasuredLine};
+pub use line::{other_family_widths, rmse, MeasuredLine};
 pub use loo::{leave_one_out, leave_one_out_lag, LagLooFold, LooFold};
 pub use piecewise::{Bp1PowerLaw, LineChain, PiecewiseCoefficients, WidthPhase};
 pub use predict::FittedPiecewise;

@@ -154,51 +154,71 @@ pub fn transfer_cv(
     ];
     let configs = Configs::new(&priors, lambdas);
     let subsets = all_condition_subsets(n);
-    let prepared: Vec<PreparedLine> =
-        target_lines.iter().enumerate().map(|(i, l)| prepare_line(l, i, target_params)).collect::<Result<_, _>>()?;
-    for subset in &subsets {
-        let refs: Vec<&PreparedLine> = subset.indices.iter().map(|&i| &prepared[i]).collect();
-        check_p1_count(&refs, target_params)?;
-    }
-    let fits = fit_every_subset(&prepared, target_params, &subsets, &configs)?;
-    let held_out = held_out_rmse(target_lines, &subsets, &fits, configs.len())?;
-    let table = HeldOut { n_lines: n, n_configs: configs.len(), rmse_mm: held_out };
+    let table = held_out_table(target_lines, target_params, &subsets, &configs)?;
     assemble_rows(&subsets, &configs, &source, &table)
 }
 
-/// The prior configurations of one training set: index 0 without prior, then the
-/// zero-mean prior at each grid `λ`, then the source-mean prior at each grid `λ`.
-struct Configs<'a> {
+/// Fits every subset of `target_lines` under every configuration and predicts every
+/// line outside it (module docs, points 1-3).
+pub(crate) fn held_out_table(
+    target_lines: &[MeasuredLine],
+    target_params: &PiecewiseValidParams,
+    subsets: &[ConditionSubset],
+    configs: &Configs,
+) -> Result<HeldOut, FitError> {
+    let prepared: Vec<PreparedLine> =
+        target_lines.iter().enumerate().map(|(i, l)| prepare_line(l, i, target_params)).collect::<Result<_, _>>()?;
+    for subset in subsets {
+        let refs: Vec<&PreparedLine> = subset.indices.iter().map(|&i| &prepared[i]).collect();
+        check_p1_count(&refs, target_params)?;
+    }
+    let fits = fit_every_subset(&prepared, target_params, subsets, configs)?;
+    let rmse_mm = held_out_rmse(target_lines, subsets, &fits, configs.len())?;
+    Ok(HeldOut { n_lines: target_lines.len(), n_configs: configs.len(), rmse_mm, models: fits.models })
+}
+
+/// The prior configurations of one training set: index 0 without prior, then each
+/// prior of the list at each grid `λ` (prior-major).
+pub(crate) struct Configs<'a> {
     priors: Vec<ChainPrior>,
     lambdas: &'a [f64],
 }
 
 impl<'a> Configs<'a> {
-    fn new(priors: &[SegmentPrior; 2], lambdas: &'a [f64]) -> Self {
+    pub(crate) fn new(priors: &[SegmentPrior], lambdas: &'a [f64]) -> Self {
         let with = |p| lambdas.iter().map(move |&l| Some(WeightedPrior::new(p, l)));
-        let list = std::iter::once(None).chain(with(&priors[0])).chain(with(&priors[1])).collect();
+        let list = std::iter::once(None).chain(priors.iter().flat_map(with)).collect();
         Self { priors: list, lambdas }
     }
 
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.priors.len()
     }
 
-    /// Configuration index of a method at the `j`-th grid `λ` (`j` ignored for single).
-    fn index(&self, mean: Option<PriorMean>, j: usize) -> usize {
-        match mean {
-            None => 0,
-            Some(PriorMean::Zero) => 1 + j,
-            Some(PriorMean::SourceMean) => 1 + self.lambdas.len() + j,
-        }
+    /// The grid of `λ`.
+    pub(crate) fn lambdas(&self) -> &[f64] {
+        self.lambdas
+    }
+
+    /// Configuration index of the `k`-th prior at the `j`-th grid `λ` (`None`: no prior).
+    pub(crate) fn index(&self, prior: Option<usize>, j: usize) -> usize {
+        prior.map_or(0, |k| 1 + k * self.lambdas.len() + j)
     }
 
     /// The `λ` a configuration's model records (0 without prior).
-    fn lambda(&self, c: usize) -> f64 {
+    pub(crate) fn lambda(&self, c: usize) -> f64 {
         match c {
             0 => 0.0,
             c => self.lambdas[(c - 1) % self.lambdas.len()],
         }
+    }
+}
+
+/// The prior index of `transfer_cv`'s configurations for a prior mean.
+fn prior_slot(mean: PriorMean) -> usize {
+    match mean {
+        PriorMean::Zero => 0,
+        PriorMean::SourceMean => 1,
     }
 }
 
@@ -460,16 +480,23 @@ impl PredictWork {
     }
 }
 
-/// The held-out RMSE table.
-struct HeldOut {
-    n_lines: usize,
+/// The held-out RMSE table, with the model of every (subset, configuration).
+pub(crate) struct HeldOut {
+    pub(crate) n_lines: usize,
     n_configs: usize,
     rmse_mm: Vec<f64>,
+    models: Vec<FittedPiecewise>,
 }
 
 impl HeldOut {
-    fn at(&self, subset: usize, config: usize, line: usize) -> f64 {
+    /// RMSE on `line` of the fit on `subset` under `config` (NaN for a line inside it).
+    pub(crate) fn at(&self, subset: usize, config: usize, line: usize) -> f64 {
         self.rmse_mm[(subset * self.n_configs + config) * self.n_lines + line]
+    }
+
+    /// The fit on `subset` under `config`.
+    pub(crate) fn model(&self, subset: usize, config: usize) -> &FittedPiecewise {
+        &self.models[subset * self.n_configs + config]
     }
 }
 
@@ -487,7 +514,10 @@ fn assemble_rows(
         for method in TransferMethod::ALL {
             let c = match method.prior_mean() {
                 None => 0,
-                Some(mean) => configs.index(Some(mean), chosen_lambda(sub, mean, configs, source, table, &index)?),
+                Some(mean) => {
+                    let slot = Some(prior_slot(mean));
+                    configs.index(slot, chosen_lambda(sub, mean, configs, source, table, &index)?)
+                }
             };
             for test_index in (0..table.n_lines).filter(|k| !sub.indices.contains(k)) {
                 rows.push(TransferCvRow {
@@ -530,13 +560,13 @@ fn chosen_lambda(
         .iter()
         .map(|&k| {
             let t = index[&(full & !(1u64 << k))];
-            (0..n_lambda).map(|j| table.at(t, configs.index(Some(mean), j), k)).collect()
+            (0..n_lambda).map(|j| table.at(t, configs.index(Some(prior_slot(mean)), j), k)).collect()
         })
         .collect();
     Ok(argmin(&mean_columns(&per_fold, n_lambda)))
 }
 
-fn mask(indices: &[usize]) -> u64 {
+pub(crate) fn mask(indices: &[usize]) -> u64 {
     indices.iter().fold(0, |m, &i| m | (1u64 << i))
 }
 

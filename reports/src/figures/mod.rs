@@ -21,6 +21,7 @@ mod thermal_overdeposition;
 #[cfg(test)]
 pub(crate) mod thermal_test_data;
 mod transfer_cv;
+mod transfer_matrix;
 mod virtual_agreement;
 mod width_profiles;
 
@@ -39,6 +40,7 @@ pub use thermal_directions::ThermalDirectionsFigure;
 pub use thermal_frame::ThermalFrameFigure;
 pub use thermal_overdeposition::ThermalOverdepositionFigure;
 pub use transfer_cv::TransferCvFigure;
+pub use transfer_matrix::TransferMatrixFigure;
 pub use virtual_agreement::VirtualAgreementFigure;
 pub use width_profiles::WidthProfilesFigure;
 
@@ -57,6 +59,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(DiscoveryPowerByEffectFigure));
     registry.register(Box::new(RSurfaceFigure));
     registry.register(Box::new(TransferCvFigure));
+    registry.register(Box::new(TransferMatrixFigure));
     registry.register(Box::new(InfillFigure));
     registry.register(Box::new(InkjetHeightMapsFigure));
     registry.register(Box::new(ThermalDirectionsFigure));

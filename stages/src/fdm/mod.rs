@@ -11,8 +11,10 @@ mod kinematics;
 mod line_summary;
 mod lines;
 mod loo;
+mod other_family;
 mod segment;
 mod transfer;
+mod transfer_matrix;
 mod virtual_lines;
 
 pub use discovery_power::DiscoveryPowerStage;
@@ -22,8 +24,10 @@ pub use infill::InfillStage;
 pub use kinematics::KinematicsStage;
 pub use line_summary::{summarize_line, LineSummary, LineSummaryStage, SummaryWindows};
 pub use loo::{LagLooStage, PiecewiseLooStage};
+pub use other_family::OtherFamilyStage;
 pub use segment::{SegmentAccuracyStage, SegmentWidthsStage};
 pub use transfer::TransferCvStage;
+pub use transfer_matrix::TransferMatrixStage;
 pub use virtual_lines::{GenerateLinesStage, VirtualAgreementStage};
 
 use pipeline::Registry;
@@ -36,6 +40,8 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(PiecewiseLooStage));
     registry.register(Box::new(LagLooStage));
     registry.register(Box::new(TransferCvStage));
+    registry.register(Box::new(TransferMatrixStage));
+    registry.register(Box::new(OtherFamilyStage));
     registry.register(Box::new(InfillStage));
     registry.register(Box::new(DiscrepancyStage));
     registry.register(Box::new(DiscoveryPowerStage));

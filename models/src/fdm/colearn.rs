@@ -1,0 +1,720 @@
+//! Transfer among several printers: a negative-transfer guard and co-learning from
+//! more than one source, over any set of (sources → target) tasks. Built on paper 000's
+//! MAP transfer (Ren et al. 2021, Sec. II-B, Algorithm 1, eqs 4-6) and on the held-out
+//! table of [`super::transfer_cv`]: every training subset of the target's lines is fitted
+//! once under every prior configuration, so every method here is a rule that *reads*
+//! that table, and the methods are compared on the same fits.
+//!
+//! # Methods
+//! - `single`, `transfer_zero_mean`, `transfer_source_mean`: as in
+//!   [`super::transfer_cv`] (the paper's prior and ours), one source.
+//! - `guarded` (one source): transfer only where the target's own data do not argue
+//!   against it.
+//!   1. **Conflict check.** Each target training line's single-line fit gives
+//!      `θ_k = (β, γ, c, ρ)`, the same quantity as Algorithm 1's per-line source
+//!      parameters. If the target printer were like the source, the mean `θ̄_T` of its
+//!      `n` lines would differ from the source mean `θ̄_S` (over `K` lines) only by
+//!      sampling: `T² = (θ̄_T − θ̄_S)ᵀ Σ̂_S⁻¹ (θ̄_T − θ̄_S) / (1/n + 1/K)` and
+//!      `T²·(K − p)/(p·(K − 1)) ~ F(p, K − p)` (Hotelling, covariance from the source's
+//!      `K − 1` degrees of freedom; `p` = the parameters under the prior). A source whose
+//!      `F` statistic exceeds its 95 % quantile is in conflict and is not used. A source
+//!      with `K ≤ p` lines cannot be checked and is not used.
+//!   2. **Amount.** With two or more target lines, inner leave-one-out over the
+//!      candidates "no transfer" and the source-centred prior at every grid `λ`
+//!      (smallest mean held-out RMSE; ties go to "no transfer", which comes first).
+//!   3. **One line: no transfer.** With one target line there is nothing on the target
+//!      to validate a transfer on, and the source-simulation `λ` that
+//!      `transfer_source_mean` uses validates only on the source: on the real Taz 6 →
+//!      Taz 5 pair it makes a single line worse than learning from the line alone. So
+//!      the guard does not transfer with one line, which makes its guarantee exact
+//!      there (the same fit as `single`).
+//! - `co_learning` (two or more sources): the same rule over several priors. Candidates
+//!   are the sources that pass the conflict check and the *pooled* prior, Algorithm 1
+//!   over the per-line parameters of all the task's sources together (its covariance
+//!   holds the spread between printers as well as within them), if it passes the check
+//!   too. With two or more target lines inner leave-one-out chooses among "no
+//!   transfer" and every candidate at every grid `λ`; with one line, no transfer (as
+//!   the guard). An unrelated printer among the sources
+//!   either fails the check or loses the inner cross-validation, so adding it costs
+//!   at most the selection noise.
+//!
+//! # The summary
+//! [`summarise`] gives per (task, n, method) the median held-out RMSE over every
+//! (subset, held-out line) row, its improvement over `single` in %, and a 95 %
+//! percentile interval of the improvement from a paired bootstrap over the target's
+//! held-out *lines* (the independent unit: a line is one printed experiment), with the
+//! same resampled lines for the method and for `single`.
+
+use std::collections::HashMap;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+use super::errors::FitError;
+use super::hyperparams::PiecewiseValidParams;
+use super::line::MeasuredLine;
+use super::transfer::{
+    all_condition_subsets, argmin, estimate_covariance, prior_precision, segment_prior, ConditionSubset,
+    ParameterCovariance, PriorMean, SourcePrior, TransferValidParams, TRANSFER_DIM,
+};
+use super::transfer_cv::{held_out_table, mask, Configs, HeldOut, MAX_TARGET_LINES};
+
+/// Level of the conflict check (its `F` quantile is `1 − CONFLICT_ALPHA`).
+pub const CONFLICT_ALPHA: f64 = 0.05;
+
+/// One printer of a transfer study: its lines and its piecewise-model settings.
+#[derive(Debug, Clone, Copy)]
+pub struct StudyPrinter<'a> {
+    /// Printer name (from its dataset).
+    pub name: &'a str,
+    /// Its measured lines.
+    pub lines: &'a [MeasuredLine],
+    /// Its model settings (with or without the start blob).
+    pub params: &'a PiecewiseValidParams,
+}
+
+/// A transfer task: learn `target` from `sources` (indices into the printers).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TransferTask {
+    /// Source printers (one or more, none equal to the target).
+    pub sources: Vec<usize>,
+    /// Target printer.
+    pub target: usize,
+}
+
+/// The methods compared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MatrixMethod {
+    /// Target lines only.
+    Single,
+    /// The paper's zero-mean prior (one source).
+    TransferZeroMean,
+    /// The source-centred prior (one source).
+    TransferSourceMean,
+    /// The source-centred prior behind the negative-transfer guard (one source).
+    Guarded,
+    /// Several sources: guarded choice among the compatible sources and their pool.
+    CoLearning,
+}
+
+impl MatrixMethod {
+    /// Stable snake_case name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Single => "single",
+            Self::TransferZeroMean => "transfer_zero_mean",
+            Self::TransferSourceMean => "transfer_source_mean",
+            Self::Guarded => "guarded",
+            Self::CoLearning => "co_learning",
+        }
+    }
+
+    /// The methods of a task with `n_sources` sources, in row order.
+    pub fn for_sources(n_sources: usize) -> &'static [MatrixMethod] {
+        if n_sources == 1 {
+            &[Self::Single, Self::TransferZeroMean, Self::TransferSourceMean, Self::Guarded]
+        } else {
+            &[Self::Single, Self::CoLearning]
+        }
+    }
+}
+
+/// One prediction: a method fitted on a subset of the target's lines, tested on one of
+/// its other lines.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatrixRow {
+    /// Index of the task.
+    pub task: usize,
+    /// Number of target training lines.
+    pub n_train: usize,
+    /// Subset id ([`ConditionSubset::id`]).
+    pub subset: String,
+    /// Held-out target line.
+    pub test_index: usize,
+    /// The method.
+    pub method: MatrixMethod,
+    /// RMSE over the held-out line (mm).
+    pub rmse_mm: f64,
+    /// The `λ` used (0 without transfer).
+    pub lambda: f64,
+    /// The prior used: `none`, a source printer's name, or `pooled`.
+    pub prior: String,
+}
+
+/// Every task's rows (see the module docs). Errors on a task with no source, a source
+/// equal to its target, an index out of range, a target with fewer than two or more than
+/// [`MAX_TARGET_LINES`] lines, a source with fewer than three lines, or a failed fit.
+pub fn transfer_matrix(
+    printers: &[StudyPrinter],
+    tasks: &[TransferTask],
+    transfer: &TransferValidParams,
+) -> Result<Vec<MatrixRow>, FitError> {
+    check_tasks(printers, tasks)?;
+    let mut used: Vec<usize> = tasks.iter().flat_map(|t| t.sources.iter().copied()).collect();
+    used.sort_unstable();
+    used.dedup();
+    let built: Vec<(usize, SourcePrior)> = used
+        .iter()
+        .map(|&s| Ok((s, SourcePrior::build(printers[s].lines, printers[s].params, transfer)?)))
+        .collect::<Result<_, FitError>>()?;
+    let sources: HashMap<usize, SourcePrior> = built.into_iter().collect();
+    let mut targets: Vec<usize> = tasks.iter().map(|t| t.target).collect();
+    targets.sort_unstable();
+    targets.dedup();
+    let mut rows = Vec::new();
+    for target in targets {
+        rows.extend(target_rows(printers, tasks, target, &sources, transfer)?);
+    }
+    rows.sort_by_key(|r| r.task);
+    Ok(rows)
+}
+
+fn check_tasks(printers: &[StudyPrinter], tasks: &[TransferTask]) -> Result<(), FitError> {
+    for (i, t) in tasks.iter().enumerate() {
+        let bad = |why: String| Err(FitError::Dimension(format!("transfer task {i}: {why}")));
+        if t.sources.is_empty() {
+            return bad("no source printer".into());
+        }
+        if let Some(&s) = t.sources.iter().chain([&t.target]).find(|&&s| s >= printers.len()) {
+            return bad(format!("printer index {s} of {}", printers.len()));
+        }
+        if t.sources.contains(&t.target) {
+            return bad(format!("{} is both source and target", printers[t.target].name));
+        }
+        let n = printers[t.target].lines.len();
+        if !(2..=MAX_TARGET_LINES).contains(&n) {
+            return bad(format!("target {} has {n} lines (2 to {MAX_TARGET_LINES})", printers[t.target].name));
+        }
+    }
+    Ok(())
+}
+
+/// A prior of one target's configurations, with what the rules need to know of it.
+struct PriorSlot {
+    /// Which source (or the pool of a task's sources) it comes from.
+    origin: Origin,
+    mean: PriorMean,
+    covariance: ParameterCovariance,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Origin {
+    Source(usize),
+    Pool(Vec<usize>),
+}
+
+/// Rows of every task with this target: one held-out table for all of them.
+fn target_rows(
+    printers: &[StudyPrinter],
+    tasks: &[TransferTask],
+    target: usize,
+    sources: &HashMap<usize, SourcePrior>,
+    transfer: &TransferValidParams,
+) -> Result<Vec<MatrixRow>, FitError> {
+    let mine: Vec<(usize, &TransferTask)> = tasks.iter().enumerate().filter(|(_, t)| t.target == target).collect();
+    let slots = prior_slots(&mine, sources)?;
+    let priors = slots.iter().map(|s| segment_prior(&s.covariance, s.mean, transfer)).collect::<Result<Vec<_>, _>>()?;
+    let lambdas = &transfer.get().lambda_grid;
+    let configs = Configs::new(&priors, lambdas);
+    let tp = printers[target];
+    let subsets = all_condition_subsets(tp.lines.len());
+    let table = held_out_table(tp.lines, tp.params, &subsets, &configs)?;
+    let study = TargetStudy::new(&subsets, &configs, &table, &slots, sources, transfer)?;
+    let mut rows = Vec::new();
+    for &(task, t) in &mine {
+        for (s, sub) in subsets.iter().enumerate() {
+            for &method in MatrixMethod::for_sources(t.sources.len()) {
+                let choice = study.choose(sub, t, method)?;
+                for k in (0..tp.lines.len()).filter(|k| !sub.indices.contains(k)) {
+                    rows.push(MatrixRow {
+                        task,
+                        n_train: sub.indices.len(),
+                        subset: sub.id.clone(),
+                        test_index: k,
+                        method,
+                        rmse_mm: table.at(s, choice.config, k),
+                        lambda: configs.lambda(choice.config),
+                        prior: choice.prior_name(printers),
+                    });
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// Per source: zero-mean and source-mean priors; per task with several sources: the pool.
+fn prior_slots(
+    mine: &[(usize, &TransferTask)],
+    sources: &HashMap<usize, SourcePrior>,
+) -> Result<Vec<PriorSlot>, FitError> {
+    let mut ids: Vec<usize> = mine.iter().flat_map(|(_, t)| t.sources.iter().copied()).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let mut slots = Vec::new();
+    for s in ids {
+        for mean in [PriorMean::Zero, PriorMean::SourceMean] {
+            slots.push(PriorSlot { origin: Origin::Source(s), mean, covariance: sources[&s].covariance.clone() });
+        }
+    }
+    for (_, t) in mine.iter().filter(|(_, t)| t.sources.len() > 1) {
+        let mut pool = t.sources.clone();
+        pool.sort_unstable();
+        if slots.iter().any(|s| s.origin == Origin::Pool(pool.clone())) {
+            continue;
+        }
+        let per_line: Vec<[f64; TRANSFER_DIM]> =
+            pool.iter().flat_map(|s| sources[s].covariance.per_line.iter().copied()).collect();
+        slots.push(PriorSlot {
+            origin: Origin::Pool(pool),
+            mean: PriorMean::SourceMean,
+            covariance: estimate_covariance(&per_line)?,
+        });
+    }
+    Ok(slots)
+}
+
+/// A method's choice for one subset: a configuration and the prior it uses.
+struct Choice {
+    config: usize,
+    origin: Option<Origin>,
+}
+
+impl Choice {
+    const NONE: Choice = Choice { config: 0, origin: None };
+
+    fn prior_name(&self, printers: &[StudyPrinter]) -> String {
+        match &self.origin {
+            None => "none".into(),
+            Some(Origin::Source(s)) => printers[*s].name.to_string(),
+            Some(Origin::Pool(_)) => "pooled".into(),
+        }
+    }
+}
+
+/// What the rules read for one target: the held-out table, the priors, the single-line
+/// parameters of every target line, and each subset's index by line mask.
+struct TargetStudy<'a> {
+    configs: &'a Configs<'a>,
+    table: &'a HeldOut,
+    slots: &'a [PriorSlot],
+    sources: &'a HashMap<usize, SourcePrior>,
+    transfer: &'a TransferValidParams,
+    index: HashMap<u64, usize>,
+    line_theta: Vec<[f64; TRANSFER_DIM]>,
+}
+
+impl<'a> TargetStudy<'a> {
+    fn new(
+        subsets: &[ConditionSubset],
+        configs: &'a Configs<'a>,
+        table: &'a HeldOut,
+        slots: &'a [PriorSlot],
+        sources: &'a HashMap<usize, SourcePrior>,
+        transfer: &'a TransferValidParams,
+    ) -> Result<Self, FitError> {
+        let index: HashMap<u64, usize> = subsets.iter().enumerate().map(|(s, sub)| (mask(&sub.indices), s)).collect();
+        let line_theta = (0..table.n_lines)
+            .map(|k| {
+                let s =
+                    index.get(&(1u64 << k)).ok_or_else(|| FitError::Dimension(format!("no subset for line {k}")))?;
+                Ok(table.model(*s, 0).coefficients.transfer_vector())
+            })
+            .collect::<Result<_, FitError>>()?;
+        Ok(Self { configs, table, slots, sources, transfer, index, line_theta })
+    }
+
+    fn slot(&self, origin: &Origin, mean: PriorMean) -> usize {
+        self.slots.iter().position(|s| &s.origin == origin && s.mean == mean).expect("every task's priors are slotted")
+    }
+
+    fn choose(&self, sub: &ConditionSubset, task: &TransferTask, method: MatrixMethod) -> Result<Choice, FitError> {
+        match method {
+            MatrixMethod::Single => Ok(Choice::NONE),
+            MatrixMethod::TransferZeroMean | MatrixMethod::TransferSourceMean => {
+                let mean =
+                    if method == MatrixMethod::TransferZeroMean { PriorMean::Zero } else { PriorMean::SourceMean };
+                let origin = Origin::Source(task.sources[0]);
+                let slot = self.slot(&origin, mean);
+                let j = if sub.indices.len() == 1 {
+                    self.grid_index(self.sources[&task.sources[0]].single_line_lambda(mean))?
+                } else {
+                    let scores: Vec<f64> = (0..self.configs.lambdas().len())
+                        .map(|j| self.inner_cv(sub, self.configs.index(Some(slot), j)))
+                        .collect();
+                    argmin(&scores)
+                };
+                Ok(Choice { config: self.configs.index(Some(slot), j), origin: Some(origin) })
+            }
+            MatrixMethod::Guarded | MatrixMethod::CoLearning => self.guarded(sub, task, method),
+        }
+    }
+
+    /// The guard's rule over the candidates of a task (module docs).
+    fn guarded(&self, sub: &ConditionSubset, task: &TransferTask, method: MatrixMethod) -> Result<Choice, FitError> {
+        let mut candidates: Vec<(Origin, f64)> = task
+            .sources
+            .iter()
+            .map(|&src| (Origin::Source(src), self.conflict(sub, &self.sources[&src].covariance)))
+            .collect();
+        if method == MatrixMethod::CoLearning {
+            let mut pool = task.sources.clone();
+            pool.sort_unstable();
+            let slot = self.slot(&Origin::Pool(pool.clone()), PriorMean::SourceMean);
+            candidates.push((Origin::Pool(pool), self.conflict(sub, &self.slots[slot].covariance)));
+        }
+        candidates.retain(|(_, ratio)| *ratio <= 1.0);
+        if sub.indices.len() == 1 {
+            return Ok(Choice::NONE);
+        }
+        let mut best = (self.inner_cv(sub, 0), Choice::NONE);
+        for (origin, _) in candidates {
+            let slot = self.slot(&origin, PriorMean::SourceMean);
+            for j in 0..self.configs.lambdas().len() {
+                let config = self.configs.index(Some(slot), j);
+                let score = self.inner_cv(sub, config);
+                if score < best.0 {
+                    best = (score, Choice { config, origin: Some(origin.clone()) });
+                }
+            }
+        }
+        Ok(best.1)
+    }
+
+    /// The conflict statistic over its 95 % quantile (≤ 1: compatible; `∞` when the
+    /// source has too few lines to check).
+    fn conflict(&self, sub: &ConditionSubset, source: &ParameterCovariance) -> f64 {
+        let on = &self.transfer.get().prior_on;
+        let p = on.iter().filter(|&&b| b).count();
+        let k = source.per_line.len();
+        if k <= p {
+            return f64::INFINITY;
+        }
+        let Ok(precision) = prior_precision(source, self.transfer) else { return f64::INFINITY };
+        let n = sub.indices.len() as f64;
+        let mut mean_t = [0.0; TRANSFER_DIM];
+        for &i in &sub.indices {
+            for (m, t) in mean_t.iter_mut().zip(&self.line_theta[i]) {
+                *m += t / n;
+            }
+        }
+        let d: Vec<f64> = (0..TRANSFER_DIM).map(|i| mean_t[i] - source.mean[i]).collect();
+        let quad: f64 =
+            (0..TRANSFER_DIM).map(|i| (0..TRANSFER_DIM).map(|j| d[i] * precision[i][j] * d[j]).sum::<f64>()).sum();
+        let t2 = quad / (1.0 / n + 1.0 / k as f64);
+        conflict_ratio(t2, p, k)
+    }
+
+    /// Mean inner leave-one-out RMSE of a configuration on a subset (fold `k` is the fit
+    /// on the subset without line `k`, tested on `k`, read from the table).
+    fn inner_cv(&self, sub: &ConditionSubset, config: usize) -> f64 {
+        let full = mask(&sub.indices);
+        let total: f64 =
+            sub.indices.iter().map(|&k| self.table.at(self.index[&(full & !(1u64 << k))], config, k)).sum();
+        total / sub.indices.len() as f64
+    }
+
+    fn grid_index(&self, lambda: f64) -> Result<usize, FitError> {
+        self.configs
+            .lambdas()
+            .iter()
+            .position(|&l| l == lambda)
+            .ok_or_else(|| FitError::Dimension(format!("source-simulation λ {lambda} is not on the λ grid")))
+    }
+}
+
+/// Hotelling's `T²` of a target mean against a source of `k` lines with `p` parameters,
+/// as a ratio to its `1 − CONFLICT_ALPHA` critical value (`∞` if it cannot be formed).
+pub fn conflict_ratio(t2: f64, p: usize, k: usize) -> f64 {
+    if k <= p || p == 0 {
+        return f64::INFINITY;
+    }
+    let (p, k) = (p as f64, k as f64);
+    let Ok(f) = FisherSnedecor::new(p, k - p) else { return f64::INFINITY };
+    let critical = f.inverse_cdf(1.0 - CONFLICT_ALPHA) * p * (k - 1.0) / (k - p);
+    t2 / critical
+}
+
+/// One line of the summary: a method on a task at one training size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatrixSummary {
+    /// Index of the task.
+    pub task: usize,
+    /// Number of target training lines.
+    pub n_train: usize,
+    /// The method.
+    pub method: MatrixMethod,
+    /// Median held-out RMSE over every (subset, held-out line) (mm).
+    pub median_rmse_mm: f64,
+    /// `100·(single − method)/single` of the medians (%; > 0 is better than single).
+    pub improvement_pct: f64,
+    /// 95 % bootstrap interval of the improvement (%).
+    pub ci_lo_pct: f64,
+    /// Upper end of that interval (%).
+    pub ci_hi_pct: f64,
+    /// Rows behind the median.
+    pub rows: usize,
+}
+
+/// Per (task, n, method) medians, improvements and bootstrap intervals (module docs);
+/// `draws` resamples of the held-out lines from `seed`. Rows come in task, n, method
+/// order.
+pub fn summarise(rows: &[MatrixRow], draws: usize, seed: u64) -> Vec<MatrixSummary> {
+    let mut groups: HashMap<(usize, usize), Vec<&MatrixRow>> = HashMap::new();
+    for r in rows {
+        groups.entry((r.task, r.n_train)).or_default().push(r);
+    }
+    let mut keys: Vec<(usize, usize)> = groups.keys().copied().collect();
+    keys.sort_unstable();
+    keys.par_iter()
+        .flat_map_iter(|key| {
+            let rng_seed = seed ^ ((key.0 as u64) << 32) ^ key.1 as u64;
+            summarise_group(*key, &groups[key], draws, rng_seed)
+        })
+        .collect()
+}
+
+fn summarise_group(
+    (task, n_train): (usize, usize),
+    rows: &[&MatrixRow],
+    draws: usize,
+    seed: u64,
+) -> Vec<MatrixSummary> {
+    let mut methods: Vec<MatrixMethod> = rows.iter().map(|r| r.method).collect();
+    methods.sort_unstable();
+    methods.dedup();
+    let n_lines = rows.iter().map(|r| r.test_index).max().map_or(0, |m| m + 1);
+    let by_method = |m: MatrixMethod| -> Vec<(usize, f64)> {
+        rows.iter().filter(|r| r.method == m).map(|r| (r.test_index, r.rmse_mm)).collect()
+    };
+    let single = by_method(MatrixMethod::Single);
+    let ones = vec![1usize; n_lines];
+    let base = weighted_median(&single, &ones);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let tested: Vec<usize> = {
+        let mut t: Vec<usize> = single.iter().map(|r| r.0).collect();
+        t.sort_unstable();
+        t.dedup();
+        t
+    };
+    let weights: Vec<Vec<usize>> = (0..draws)
+        .map(|_| {
+            let mut w = vec![0usize; n_lines];
+            for _ in 0..tested.len() {
+                w[tested[rng.random_range(0..tested.len())]] += 1;
+            }
+            w
+        })
+        .collect();
+    methods
+        .into_iter()
+        .map(|m| {
+            let own = by_method(m);
+            let median = weighted_median(&own, &ones);
+            let mut boot: Vec<f64> = weights
+                .iter()
+                .map(|w| improvement_pct(weighted_median(&single, w), weighted_median(&own, w)))
+                .filter(|v| v.is_finite())
+                .collect();
+            boot.sort_by(f64::total_cmp);
+            MatrixSummary {
+                task,
+                n_train,
+                method: m,
+                median_rmse_mm: median,
+                improvement_pct: improvement_pct(base, median),
+                ci_lo_pct: percentile(&boot, 0.025),
+                ci_hi_pct: percentile(&boot, 0.975),
+                rows: own.len(),
+            }
+        })
+        .collect()
+}
+
+/// `100·(single − method)/single` (%).
+pub fn improvement_pct(single_mm: f64, method_mm: f64) -> f64 {
+    100.0 * (single_mm - method_mm) / single_mm
+}
+
+/// The median of the values `(group, value)` with each row repeated `weights[group]`
+/// times (the usual median, the mean of the two middle values for an even count; NaN
+/// when the total weight is 0).
+pub fn weighted_median(values: &[(usize, f64)], weights: &[usize]) -> f64 {
+    let mut v: Vec<(f64, usize)> =
+        values.iter().filter(|(g, _)| weights[*g] > 0).map(|&(g, x)| (x, weights[g])).collect();
+    let total: usize = v.iter().map(|p| p.1).sum();
+    if total == 0 {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let at = |pos: usize| {
+        let mut seen = 0;
+        for &(x, w) in &v {
+            seen += w;
+            if seen > pos {
+                return x;
+            }
+        }
+        v[v.len() - 1].0
+    };
+    0.5 * (at((total - 1) / 2) + at(total / 2))
+}
+
+/// Linear-interpolated percentile `q ∈ [0, 1]` of sorted values (NaN when empty).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let pos = q * (sorted.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
+}
+
+/// Every ordered pair `(source → target)` of `n` printers, then, when `co_learning` and
+/// `n ≥ 3`, every printer as target of all the others.
+pub fn default_tasks(n: usize, co_learning: bool) -> Vec<TransferTask> {
+    let mut tasks: Vec<TransferTask> = (0..n)
+        .flat_map(|t| (0..n).filter(move |&s| s != t).map(move |s| TransferTask { sources: vec![s], target: t }))
+        .collect();
+    if co_learning && n >= 3 {
+        tasks.extend((0..n).map(|t| TransferTask { sources: (0..n).filter(|&s| s != t).collect(), target: t }));
+    }
+    tasks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::hyperparams::PiecewiseParams;
+    use super::super::line::other_family_widths;
+    use super::super::test_support::real_lines;
+    use super::super::transfer::TransferParams;
+    use super::*;
+
+    #[test]
+    fn weighted_median_is_the_median_of_the_repeated_rows() {
+        let v = [(0, 3.0), (1, 1.0), (2, 2.0), (2, 10.0)];
+        assert_eq!(weighted_median(&v, &[1, 1, 1]), 2.5, "1, 2, 3, 10");
+        assert_eq!(weighted_median(&v, &[0, 1, 1]), 2.0, "1, 2, 10");
+        assert_eq!(weighted_median(&v, &[3, 0, 0]), 3.0);
+        assert_eq!(weighted_median(&v, &[0, 2, 1]), 1.5, "1, 1, 2, 10");
+        assert!(weighted_median(&v, &[0, 0, 0]).is_nan());
+    }
+
+    #[test]
+    fn conflict_ratio_is_hotelling_against_its_f_quantile() {
+        // F(4, 5) at 0.95 is 5.1922; T² critical = 5.1922 · 4 · 8 / 5 = 33.23 for K = 9.
+        let critical = 5.192_167_7 * 4.0 * 8.0 / 5.0;
+        assert!((conflict_ratio(critical, 4, 9) - 1.0).abs() < 1e-6);
+        assert!(conflict_ratio(0.5 * critical, 4, 9) < 1.0);
+        assert_eq!(conflict_ratio(1.0, 4, 4), f64::INFINITY, "K ≤ p cannot be checked");
+    }
+
+    #[test]
+    fn default_tasks_are_every_ordered_pair_then_all_others() {
+        let tasks = default_tasks(4, true);
+        assert_eq!(tasks.len(), 12 + 4);
+        assert!(tasks[..12].iter().all(|t| t.sources.len() == 1 && t.sources[0] != t.target));
+        assert_eq!(tasks[12], TransferTask { sources: vec![1, 2, 3], target: 0 });
+        assert_eq!(default_tasks(2, true).len(), 2, "co-learning needs three printers");
+        assert_eq!(default_tasks(3, false).len(), 6);
+    }
+
+    #[test]
+    fn other_family_widths_scale_and_lag_in_closed_form() {
+        let xs: Vec<f64> = (0..=100).map(|i| i as f64 * 0.1).collect();
+        let step: Vec<f64> = xs.iter().map(|&x| if x < 1.0 { 0.5 } else { 1.0 }).collect();
+        let scaled = other_family_widths(&xs, &step, 1.6, 0.0);
+        assert!(scaled.iter().zip(&step).all(|(a, b)| (a - 1.6 * b).abs() < 1e-12));
+        // A first-order lag of L = 2 mm, discretised exactly for an input that changes at
+        // a sample: the step reaches the lag in the interval after x = 0.9 mm, so
+        // w'(x) = 1 − 0.5·e^{−(x − 0.9)/L} from x = 1 mm on.
+        let lagged = other_family_widths(&xs, &step, 1.0, 2.0);
+        for (&x, &w) in xs.iter().zip(&lagged).filter(|(x, _)| **x >= 1.0) {
+            let expected = 1.0 - 0.5 * (-(x - 0.9) / 2.0).exp();
+            assert!((w - expected).abs() < 1e-9, "x = {x}: {w} vs {expected}");
+        }
+    }
+
+    fn real_study() -> Option<(Vec<MeasuredLine>, Vec<MeasuredLine>, Vec<MeasuredLine>)> {
+        let (t5, t6) = (real_lines("taz5")?, real_lines("taz6")?);
+        let wide = t5
+            .iter()
+            .map(|l| {
+                let w = other_family_widths(&l.positions_mm, &l.widths_mm, 1.6, 0.0);
+                MeasuredLine::new(l.nominal, l.positions_mm.clone(), w).unwrap()
+            })
+            .collect();
+        Some((t5, t6, wide))
+    }
+
+    #[test]
+    fn real_lines_the_guard_never_hurts_beyond_its_interval_and_rejects_another_family() {
+        // Taz 5 ↔ Taz 6 and a 0.8 mm-nozzle Taz 5 as sources; as targets, four lines of
+        // the Taz 6 and of the Taz 5 (14 subsets each, so the test stays short; the
+        // shipped spec runs all nine). On every (task, n) the guard's interval must reach
+        // 0 or above, and with the other family as the only source it must fit exactly
+        // what single-printer learning fits.
+        let Some((t5, t6, wide)) = real_study() else { return };
+        let pick =
+            |lines: &[MeasuredLine]| -> Vec<MeasuredLine> { [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect() };
+        let (t5_four, t6_four) = (pick(&t5), pick(&t6));
+        let p5 = PiecewiseParams::paper_defaults().check().unwrap();
+        let p6 = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+        let printers = [
+            StudyPrinter { name: "taz5", lines: &t5, params: &p5 },
+            StudyPrinter { name: "taz6", lines: &t6, params: &p6 },
+            StudyPrinter { name: "wide", lines: &wide, params: &p5 },
+            StudyPrinter { name: "taz5-four", lines: &t5_four, params: &p5 },
+            StudyPrinter { name: "taz6-four", lines: &t6_four, params: &p6 },
+        ];
+        let tasks = [
+            TransferTask { sources: vec![0], target: 4 },
+            TransferTask { sources: vec![2], target: 4 },
+            TransferTask { sources: vec![1], target: 3 },
+            TransferTask { sources: vec![0, 2], target: 4 },
+        ];
+        let transfer = TransferParams {
+            lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
+            ..TransferParams::paper_defaults()
+        }
+        .check()
+        .unwrap();
+        let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
+        let summary = summarise(&rows, 500, 7);
+        for s in summary.iter().filter(|s| matches!(s.method, MatrixMethod::Guarded | MatrixMethod::CoLearning)) {
+            assert!(s.ci_hi_pct >= 0.0, "task {} n = {}: {s:?}", s.task, s.n_train);
+        }
+        let of = |task: usize, m: MatrixMethod| -> Vec<f64> {
+            rows.iter().filter(|r| r.task == task && r.method == m).map(|r| r.rmse_mm).collect()
+        };
+        assert_eq!(of(1, MatrixMethod::Guarded), of(1, MatrixMethod::Single), "the other family is rejected");
+        assert!(
+            of(1, MatrixMethod::TransferSourceMean).iter().sum::<f64>()
+                > of(1, MatrixMethod::Single).iter().sum::<f64>()
+        );
+        let one_line = rows.iter().filter(|r| r.n_train == 1 && r.method == MatrixMethod::Guarded);
+        assert!(one_line.clone().count() > 0 && one_line.clone().all(|r| r.lambda == 0.0 && r.prior == "none"));
+        // Co-learning with the related and the unrelated source never uses the other
+        // family alone, and the same seed gives the same summary.
+        assert!(rows.iter().filter(|r| r.task == 3).all(|r| r.prior != "wide"));
+        assert_eq!(summarise(&rows, 500, 7), summary);
+    }
+
+    #[test]
+    fn bad_tasks_are_errors() {
+        let Some((t5, t6, _)) = real_study() else { return };
+        let p = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+        let printers =
+            [StudyPrinter { name: "a", lines: &t5, params: &p }, StudyPrinter { name: "b", lines: &t6, params: &p }];
+        let transfer = TransferParams::paper_defaults().check().unwrap();
+        for task in [
+            TransferTask { sources: vec![], target: 0 },
+            TransferTask { sources: vec![0], target: 0 },
+            TransferTask { sources: vec![5], target: 0 },
+        ] {
+            assert!(matches!(transfer_matrix(&printers, &[task], &transfer), Err(FitError::Dimension(_))));
+        }
+    }
+}

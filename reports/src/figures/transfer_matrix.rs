@@ -1,0 +1,242 @@
+//! `figure.fdm_transfer_matrix`: transfer among several printers (paper 000 Fig. 9
+//! carried to every source → target task). One panel per target printer: the median
+//! held-out RMSE improvement over single-printer learning against the number of target
+//! training lines, for the source-centred prior and the negative-transfer guard from
+//! each source (one colour per source; dashed: source-centred, solid: guarded) and for
+//! co-learning from all the other printers (black, with its 95 % bootstrap interval).
+//! The y axis is clipped so that a catastrophic transfer cannot flatten the rest; a
+//! clipped value is drawn as a triangle on the bottom edge. Reads
+//! `transfer_matrix.parquet`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
+
+/// The `figure.fdm_transfer_matrix` stage kind.
+pub struct TransferMatrixFigure;
+
+const PARAMS: &[ParamSpec] = &[ParamSpec {
+    name: "title",
+    ty: ParamType::Text,
+    default: ParamDefault::Str(""),
+    doc: "Figure title (default: says what is compared and cites paper 000 Fig. 9).",
+}];
+
+/// Figure size in pixels (panels in a grid of two columns).
+const PANEL_PX: (u32, u32) = (760, 520);
+/// The y axis never goes below this (%): worse transfers are marked on the edge.
+const FLOOR_PCT: f64 = -40.0;
+
+/// One summary row of `transfer_matrix.parquet`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cell {
+    /// `+`-joined source printers.
+    pub sources: String,
+    /// Training lines.
+    pub n_train: i64,
+    /// Method name.
+    pub method: String,
+    /// Median improvement over single (%).
+    pub improvement_pct: f64,
+    /// Its 95 % interval (%).
+    pub ci_pct: (f64, f64),
+}
+
+/// The summary rows by target printer.
+pub type Matrix = BTreeMap<String, Vec<Cell>>;
+
+impl StageKind for TransferMatrixFigure {
+    fn name(&self) -> &'static str {
+        "figure.fdm_transfer_matrix"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 000 Fig. 9 over several printers"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::exactly(1)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let matrix = load(&ctx.inputs[0].dir)?;
+        let title = super::title_or(ctx, || {
+            "Transfer among printers: median RMSE improvement over single-printer learning (cf. paper 000 Fig. 9)"
+                .to_string()
+        });
+        let rows = matrix.len().div_ceil(2) as u32;
+        let size = (2 * PANEL_PX.0, rows * PANEL_PX.1 + 60);
+        let stem = ctx.output_path("transfer_matrix")?;
+        draw_png_and_svg(&stem, size, |a| draw(a, &title, &matrix), |a| draw(a, &title, &matrix))
+    }
+}
+
+/// Reads `<dir>/transfer_matrix.parquet`.
+pub fn load(dir: &Path) -> Result<Matrix, StageError> {
+    let path = dir.join("transfer_matrix.parquet");
+    let df = read_parquet(&path)?;
+    let (sources, target, method) =
+        (strs(&df, "sources", &path)?, strs(&df, "target", &path)?, strs(&df, "method", &path)?);
+    let n_train = i64s(&df, "n_train", &path)?;
+    let (imp, lo, hi) =
+        (f64s(&df, "improvement_pct", &path)?, f64s(&df, "ci_lo_pct", &path)?, f64s(&df, "ci_hi_pct", &path)?);
+    let mut matrix = Matrix::new();
+    for i in (0..df.height()).filter(|&i| imp[i].is_finite() && method[i] != "single") {
+        matrix.entry(target[i].clone()).or_default().push(Cell {
+            sources: sources[i].clone(),
+            n_train: n_train[i],
+            method: method[i].clone(),
+            improvement_pct: imp[i],
+            ci_pct: (lo[i], hi[i]),
+        });
+    }
+    if matrix.is_empty() {
+        return Err(no_rows(&path, "improvement_pct", "a finite improvement of a transfer method"));
+    }
+    Ok(matrix)
+}
+
+/// One panel per target, two per row.
+pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, matrix: &Matrix) -> Result<(), String> {
+    let area = area.margin(12, 6, 6, 14).titled(title, text(24.0)).map_err(|e| e.to_string())?;
+    let rows = matrix.len().div_ceil(2);
+    let panels = area.split_evenly((rows, 2));
+    for ((target, cells), panel) in matrix.iter().zip(&panels) {
+        draw_panel(panel, target, cells).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    target: &str,
+    cells: &[Cell],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let n_max = cells.iter().map(|c| c.n_train).max().unwrap_or(1) as f64;
+    let top = cells.iter().map(|c| c.ci_pct.1.max(c.improvement_pct)).fold(10.0, f64::max).min(100.0) + 5.0;
+    let y = |v: f64| v.max(FLOOR_PCT);
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("target {target}"), text(18.0))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.5..n_max + 0.5, FLOOR_PCT..top)?;
+    house_mesh(&mut chart)
+        .x_desc("target training lines n")
+        .y_desc("median RMSE improvement (%)")
+        .x_labels(n_max as usize)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    chart.draw_series(DashedLineSeries::new([(0.5, 0.0), (n_max + 0.5, 0.0)], 6, 4, BLACK.stroke_width(1)))?;
+    let mut sources: Vec<&str> =
+        cells.iter().filter(|c| !c.sources.contains('+')).map(|c| c.sources.as_str()).collect();
+    sources.sort_unstable();
+    sources.dedup();
+    for (k, source) in sources.iter().enumerate() {
+        let colour = PALETTE[k % PALETTE.len()];
+        for (method, dashed) in [("transfer_source_mean", true), ("guarded", false)] {
+            let pts = series(cells, source, method);
+            let style = colour.stroke_width(if dashed { 2 } else { 3 });
+            let label = format!("{source}: {}", if dashed { "source-centred" } else { "guarded" });
+            let drawn = if dashed {
+                chart.draw_series(DashedLineSeries::new(pts.iter().map(|p| (p.0, y(p.1))), 8, 5, style))?
+            } else {
+                chart.draw_series(LineSeries::new(pts.iter().map(|p| (p.0, y(p.1))), style))?
+            };
+            drawn.label(label).legend(move |(x, yy)| PathElement::new([(x, yy), (x + 20, yy)], style));
+            let clipped = pts.iter().filter(|p| p.1 < FLOOR_PCT);
+            chart.draw_series(clipped.map(|p| TriangleMarker::new((p.0, FLOOR_PCT + 1.5), 6, colour.filled())))?;
+        }
+    }
+    let co: Vec<&Cell> = cells.iter().filter(|c| c.method == "co_learning").collect();
+    if !co.is_empty() {
+        let style = BLACK.stroke_width(3);
+        let pts: Vec<(f64, f64)> = co.iter().map(|c| (c.n_train as f64, y(c.improvement_pct))).collect();
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), style))?
+            .label("co-learning from all others (95 % interval)")
+            .legend(move |(x, yy)| PathElement::new([(x, yy), (x + 20, yy)], style));
+        chart.draw_series(co.iter().map(|c| {
+            let x = c.n_train as f64;
+            PathElement::new([(x, y(c.ci_pct.0)), (x, y(c.ci_pct.1))], BLACK.stroke_width(1))
+        }))?;
+    }
+    draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)
+}
+
+/// `(n, improvement)` of one single-source method, ascending in `n`.
+fn series(cells: &[Cell], source: &str, method: &str) -> Vec<(f64, f64)> {
+    let mut pts: Vec<(f64, f64)> = cells
+        .iter()
+        .filter(|c| c.sources == source && c.method == method)
+        .map(|c| (c.n_train as f64, c.improvement_pct))
+        .collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_util::{assert_drawn, write_table};
+    use polars::df;
+
+    #[test]
+    fn draws_one_panel_per_target_and_rejects_an_empty_table() {
+        let tmp = tempfile::tempdir().expect("tempdir");
+        let dir = tmp.path();
+        let mut rows = Vec::new();
+        for (sources, target) in [("a", "b"), ("b", "a"), ("a+c", "b")] {
+            for n in 1..=3i64 {
+                for m in ["single", "transfer_source_mean", "guarded", "co_learning"] {
+                    rows.push((
+                        sources,
+                        target,
+                        n,
+                        m,
+                        5.0 * n as f64 - if m == "transfer_source_mean" { 80.0 } else { 0.0 },
+                    ));
+                }
+            }
+        }
+        type Row<'a> = (&'a str, &'a str, i64, &'a str, f64);
+        let col = |f: &dyn Fn(&Row) -> String| rows.iter().map(f).collect::<Vec<String>>();
+        let table = df!(
+            "sources" => col(&|r| r.0.to_string()),
+            "target" => col(&|r| r.1.to_string()),
+            "n_train" => rows.iter().map(|r| r.2).collect::<Vec<i64>>(),
+            "method" => col(&|r| r.3.to_string()),
+            "median_rmse_mm" => rows.iter().map(|_| 0.05).collect::<Vec<f64>>(),
+            "improvement_pct" => rows.iter().map(|r| r.4).collect::<Vec<f64>>(),
+            "ci_lo_pct" => rows.iter().map(|r| r.4 - 3.0).collect::<Vec<f64>>(),
+            "ci_hi_pct" => rows.iter().map(|r| r.4 + 3.0).collect::<Vec<f64>>(),
+        )
+        .unwrap();
+        write_table(dir, "transfer_matrix", table.clone());
+        let matrix = load(dir).unwrap();
+        assert_eq!(matrix.keys().collect::<Vec<_>>(), ["a", "b"]);
+        assert!(matrix["b"].iter().all(|c| c.method != "single"), "single is the baseline, not a series");
+        let stem = dir.join("transfer_matrix");
+        draw_png_and_svg(&stem, (1520, 1100), |a| draw(a, "t", &matrix), |a| draw(a, "t", &matrix)).expect("draws");
+        assert_drawn(&stem);
+        write_table(dir, "transfer_matrix", table.head(Some(0)));
+        assert!(load(dir).is_err());
+    }
+}

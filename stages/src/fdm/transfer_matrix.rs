@@ -1,0 +1,164 @@
+//! `fdm.transfer_matrix`: transfer learning among several printers (paper 000 Sec. II-B
+//! and III-B, Algorithm 1, eqs 4-6, carried to many printers): every ordered
+//! (source → target) pair of the input printers and, with `co_learning`, every printer
+//! as the target of all the others. Per task every subset of the target's lines is
+//! fitted with the methods of `models::fdm::colearn` (single, the paper's zero-mean
+//! prior, the source-centred prior, the negative-transfer guard, co-learning) and tested
+//! on the target's other lines.
+//!
+//! Outputs:
+//! - `transfer_matrix.parquet`: sources, target, n_train, method, median_rmse_mm,
+//!   improvement_pct, ci_lo_pct, ci_hi_pct, rows (a paired bootstrap over the held-out
+//!   lines gives the interval).
+//! - `transfer_matrix_rows.parquet`: sources, target, n_train, subset, test_condition,
+//!   method, rmse_mm, lambda, prior (one row per prediction).
+
+use models::fdm::{
+    default_tasks, summarise, transfer_matrix, MatrixRow, PiecewiseParams, PiecewiseValidParams, StudyPrinter,
+    TransferParams, TransferTask,
+};
+use pipeline::params::ParamDefault;
+use pipeline::stage::Arity;
+use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+
+use crate::fdm::lines::{fit_failed, PrinterLines};
+use crate::table::{f64_col, frame, i64_col, str_col};
+
+/// The `fdm.transfer_matrix` stage kind.
+pub struct TransferMatrixStage;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "blob_printers",
+        ty: ParamType::Text,
+        default: ParamDefault::Str(""),
+        doc: "Comma-separated printer names (dataset.toml `printer`) whose lines start with a dwell blob (phase p1 of eq. 3); the others are fitted without it.",
+    },
+    ParamSpec {
+        name: "co_learning",
+        ty: ParamType::Bool,
+        default: ParamDefault::Bool(true),
+        doc: "Also learn each printer from all the others together (needs three or more printers).",
+    },
+    ParamSpec {
+        name: "lambda_step_decades",
+        ty: ParamType::Float { min: 0.1, max: 2.0 },
+        default: ParamDefault::Float(1.0),
+        doc: "Spacing of the λ grid from 1e-6 to 1e4 (decades; fdm.transfer_cv uses 0.5). Every method's λ is chosen on this grid.",
+    },
+    ParamSpec {
+        name: "bootstrap_draws",
+        ty: ParamType::Int { min: 100, max: 100_000 },
+        default: ParamDefault::Int(2000),
+        doc: "Bootstrap resamples of the target's held-out lines for each improvement's 95 % interval.",
+    },
+];
+
+impl StageKind for TransferMatrixStage {
+    fn name(&self) -> &'static str {
+        "fdm.transfer_matrix"
+    }
+    fn version(&self) -> u32 {
+        1
+    }
+    fn summary(&self) -> &'static str {
+        "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning} → transfer_matrix.parquet, transfer_matrix_rows.parquet"
+    }
+    fn implements(&self) -> &'static str {
+        "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard"
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+    fn arity(&self) -> Arity {
+        Arity::at_least(2)
+    }
+
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let printers =
+            ctx.inputs.iter().map(|i| PrinterLines::read(&i.dir)).collect::<Result<Vec<PrinterLines>, _>>()?;
+        let params = model_params(&printers, ctx.params.str("blob_printers"))
+            .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
+        let study: Vec<StudyPrinter> = printers
+            .iter()
+            .zip(&params)
+            .map(|(p, params)| StudyPrinter { name: &p.printer, lines: &p.lines, params })
+            .collect();
+        let transfer = lambda_grid(ctx.params.f64("lambda_step_decades"))
+            .check()
+            .map_err(|e| fit_failed("transfer parameters", e))?;
+        let tasks = default_tasks(study.len(), ctx.params.bool("co_learning"));
+        let rows = transfer_matrix(&study, &tasks, &transfer).map_err(|e| fit_failed("transfer matrix", e))?;
+        let draws = ctx.params.i64("bootstrap_draws") as usize;
+        let summary = summarise(&rows, draws, ctx.seed);
+        let names = |t: &TransferTask| -> (String, String) {
+            let sources: Vec<&str> = t.sources.iter().map(|&s| printers[s].printer.as_str()).collect();
+            (sources.join("+"), printers[t.target].printer.clone())
+        };
+        let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names(&tasks[s.task])).unzip();
+        let mut table = frame(vec![
+            str_col("sources", s_src),
+            str_col("target", s_tgt),
+            i64_col("n_train", summary.iter().map(|s| s.n_train as i64).collect()),
+            str_col("method", summary.iter().map(|s| s.method.name().to_string()).collect()),
+            f64_col("median_rmse_mm", summary.iter().map(|s| s.median_rmse_mm).collect()),
+            f64_col("improvement_pct", summary.iter().map(|s| s.improvement_pct).collect()),
+            f64_col("ci_lo_pct", summary.iter().map(|s| s.ci_lo_pct).collect()),
+            f64_col("ci_hi_pct", summary.iter().map(|s| s.ci_hi_pct).collect()),
+            i64_col("rows", summary.iter().map(|s| s.rows as i64).collect()),
+        ])?;
+        ctx.write_table("transfer_matrix", &mut table)?;
+        ctx.write_table("transfer_matrix_rows", &mut rows_table(&rows, &tasks, &printers, &names)?)?;
+        Ok(())
+    }
+}
+
+/// Each printer's model settings: the paper's, with the start blob where named.
+fn model_params(printers: &[PrinterLines], blob_printers: &str) -> Result<Vec<PiecewiseValidParams>, String> {
+    let blob: Vec<&str> = blob_printers.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
+    if let Some(unknown) = blob.iter().find(|b| !printers.iter().any(|p| p.printer == **b)) {
+        let known: Vec<&str> = printers.iter().map(|p| p.printer.as_str()).collect();
+        return Err(format!("blob_printers names `{unknown}`, which is not an input printer ({})", known.join(", ")));
+    }
+    printers
+        .iter()
+        .map(|p| {
+            let params = if blob.contains(&p.printer.as_str()) {
+                PiecewiseParams::paper_defaults()
+            } else {
+                PiecewiseParams::paper_defaults_without_blob()
+            };
+            params.check().map_err(|e| format!("piecewise parameters: {e}"))
+        })
+        .collect()
+}
+
+/// The paper's transfer settings on a λ grid from 1e-6 to 1e4 in steps of `step` decades.
+fn lambda_grid(step: f64) -> TransferParams {
+    let count = (10.0 / step + 1e-9).floor() as usize + 1;
+    TransferParams {
+        lambda_grid: (0..count).map(|k| 10f64.powf(-6.0 + step * k as f64)).collect(),
+        ..TransferParams::paper_defaults()
+    }
+}
+
+fn rows_table(
+    rows: &[MatrixRow],
+    tasks: &[TransferTask],
+    printers: &[PrinterLines],
+    names: &dyn Fn(&TransferTask) -> (String, String),
+) -> Result<polars::prelude::DataFrame, StageError> {
+    let (src, tgt): (Vec<String>, Vec<String>) = rows.iter().map(|r| names(&tasks[r.task])).unzip();
+    let condition = |r: &MatrixRow| printers[tasks[r.task].target].conditions[r.test_index].clone();
+    frame(vec![
+        str_col("sources", src),
+        str_col("target", tgt),
+        i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
+        str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
+        str_col("test_condition", rows.iter().map(condition).collect()),
+        str_col("method", rows.iter().map(|r| r.method.name().to_string()).collect()),
+        f64_col("rmse_mm", rows.iter().map(|r| r.rmse_mm).collect()),
+        f64_col("lambda", rows.iter().map(|r| r.lambda).collect()),
+        str_col("prior", rows.iter().map(|r| r.prior.clone()).collect()),
+    ])
+}
