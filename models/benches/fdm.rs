@@ -2,16 +2,18 @@
 //! `r_a`, `r_F` grid-search fit (441 pairs, Sec. II-A) on 8 synthetic lines of ~2500
 //! samples, a 9-fold leave-one-out (Table II), one transfer fit with inner
 //! cross-validation of `λ` (eq. 5), and the whole Fig. 9 cross-validation (Sec. III-B:
-//! 510 training subsets of 9 target lines × 3 methods, 9 source lines). Inputs are built
-//! outside the timed closures.
+//! 510 training subsets of 9 target lines × 3 methods, 9 source lines), and the transfer
+//! matrix among four printers (every ordered pair and each printer from the three
+//! others, 5 methods, six lines per printer so that one run takes seconds, not minutes).
+//! Inputs are built outside the timed closures.
 
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use models::fdm::synthetic::{synthetic_truth, TABLE_I};
 use models::fdm::{
-    fit, leave_one_out, transfer_cv, transfer_source_mean, LineKinematics, MeasuredLine, PiecewiseParams, SourcePrior,
-    TransferParams,
+    default_tasks, fit, leave_one_out, transfer_cv, transfer_matrix, transfer_source_mean, LineKinematics,
+    MeasuredLine, PiecewiseParams, SourcePrior, StudyPrinter, TransferParams,
 };
 
 /// A Taz-5-like (blob) or Taz-6-like model; `bump` perturbs the widths per line so the
@@ -74,5 +76,45 @@ fn bench_transfer_cv(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_fit, bench_transfer, bench_transfer_cv);
+fn bench_transfer_matrix(c: &mut Criterion) {
+    // Four printers: the Taz-5-like and Taz-6-like models, and each with 1.3× wider
+    // beads (another nozzle); six lines each, the λ grid in whole decades as the stage's.
+    let scaled = |lines: Vec<MeasuredLine>, k: f64| -> Vec<MeasuredLine> {
+        let six = lines.into_iter().take(6);
+        six.map(|l| MeasuredLine::new(l.nominal, l.positions_mm.clone(), l.widths_mm.iter().map(|w| w * k).collect()))
+            .collect::<Result<_, _>>()
+            .unwrap()
+    };
+    let printers_lines = [
+        scaled(lines(true, 0.01), 1.0),
+        scaled(lines(false, 0.012), 1.0),
+        scaled(lines(true, 0.008), 1.3),
+        scaled(lines(false, 0.01), 1.3),
+    ];
+    let (blob, plain) = (
+        PiecewiseParams::paper_defaults().check().unwrap(),
+        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
+    );
+    let names = ["a", "b", "c", "d"];
+    let printers: Vec<StudyPrinter> = printers_lines
+        .iter()
+        .enumerate()
+        .map(|(k, l)| StudyPrinter { name: names[k], lines: l, params: if k % 2 == 0 { &blob } else { &plain } })
+        .collect();
+    let transfer = TransferParams {
+        lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
+        ..TransferParams::paper_defaults()
+    }
+    .check()
+    .unwrap();
+    let tasks = default_tasks(4, true);
+    let mut g = c.benchmark_group("fdm_transfer_matrix");
+    g.sample_size(10).measurement_time(Duration::from_secs(60));
+    g.bench_function("four_printers_6_lines_16_tasks_5_methods", |b| {
+        b.iter(|| transfer_matrix(&printers, &tasks, &transfer).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_fit, bench_transfer, bench_transfer_cv, bench_transfer_matrix);
 criterion_main!(benches);

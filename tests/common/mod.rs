@@ -93,24 +93,43 @@ pub const SHIPPED_WHITE_STUDY: &str = "draws = 10, null_draws = 50";
 /// See [`SHIPPED_WHITE_STUDY`].
 pub const TEST_WHITE_STUDY: &str = "draws = 1, null_draws = 2";
 
+/// The transfer matrix of the shipped `specs/ren2021_transfer.toml` (four printers,
+/// about two minutes), and the two-printer matrix the tests run instead.
+pub const SHIPPED_MATRIX: &str =
+    "inputs = [\"taz5\", \"taz6\", \"taz5_wide_nozzle\", \"taz6_slow_melt\"]\nparams = { blob_printers = \"taz5, taz5-0.8mm\" }";
+/// See [`SHIPPED_MATRIX`].
+pub const TEST_MATRIX: &str = "inputs = [\"taz6\", \"taz6_slow_melt\"]\nparams = { bootstrap_draws = 400 }";
+
+/// A shipped spec's text with its studies cut to the tests' size: the power studies
+/// ([`TEST_POWER_STUDY`], [`TEST_WHITE_STUDY`]) and the transfer matrix
+/// ([`TEST_MATRIX`]); `file` names it in the message when a shipped study changed.
+pub fn cut_studies(file: &str, shipped: &str) -> String {
+    if shipped.contains("fdm.discovery_power") {
+        assert!(
+            shipped.contains(SHIPPED_POWER_STUDY),
+            "{file}: the power study's draws changed; update SHIPPED_POWER_STUDY"
+        );
+        assert!(
+            shipped.contains(SHIPPED_WHITE_STUDY),
+            "{file}: the white-noise study changed; update SHIPPED_WHITE_STUDY"
+        );
+    }
+    if shipped.contains("fdm.transfer_matrix") {
+        assert!(shipped.contains(SHIPPED_MATRIX), "{file}: the transfer matrix changed; update SHIPPED_MATRIX");
+    }
+    shipped
+        .replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY)
+        .replace(SHIPPED_WHITE_STUDY, TEST_WHITE_STUDY)
+        .replace(SHIPPED_MATRIX, TEST_MATRIX)
+}
+
 /// The shipped `specs/<name>.toml` with its FSU dataset path (if it has one) pointed
-/// at `raw` and its power studies (if it has them) cut to [`TEST_POWER_STUDY`] and
-/// [`TEST_WHITE_STUDY`], written into `dir`.
+/// at `raw` and its studies cut to the tests' size ([`cut_studies`]), written into `dir`.
 pub fn shipped_spec(dir: &Path, name: &str, raw: &Path) -> PathBuf {
     let file = format!("specs/{name}.toml");
     let shipped = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join(&file)).unwrap();
     let text = shipped.replace("${AMREPRO_DATA:-../data}/fsu-linewidth", &raw.display().to_string());
-    if text.contains("fdm.discovery_power") {
-        assert!(
-            text.contains(SHIPPED_POWER_STUDY),
-            "{file}: the power study's draws changed; update SHIPPED_POWER_STUDY"
-        );
-        assert!(
-            text.contains(SHIPPED_WHITE_STUDY),
-            "{file}: the white-noise study changed; update SHIPPED_WHITE_STUDY"
-        );
-    }
-    let text = text.replace(SHIPPED_POWER_STUDY, TEST_POWER_STUDY).replace(SHIPPED_WHITE_STUDY, TEST_WHITE_STUDY);
+    let text = cut_studies(&file, &text);
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path

@@ -21,7 +21,7 @@ mod thermal_overdeposition;
 #[cfg(test)]
 pub(crate) mod thermal_test_data;
 mod transfer_cv;
-mod transfer_matrix;
+pub(crate) mod transfer_matrix;
 mod virtual_agreement;
 mod width_profiles;
 

@@ -35,6 +35,8 @@ const PARAMS: &[ParamSpec] = &[ParamSpec {
 const PANEL_PX: (u32, u32) = (760, 520);
 /// The y axis never goes below this (%): worse transfers are marked on the edge.
 const FLOOR_PCT: f64 = -40.0;
+/// Extra y range above the data, as a fraction of the data's range, for the legend.
+const LEGEND_ROOM: f64 = 0.45;
 
 /// One summary row of `transfer_matrix.parquet`.
 #[derive(Debug, Clone, PartialEq)]
@@ -129,7 +131,9 @@ fn draw_panel<DB: DrawingBackend>(
     cells: &[Cell],
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let n_max = cells.iter().map(|c| c.n_train).max().unwrap_or(1) as f64;
-    let top = cells.iter().map(|c| c.ci_pct.1.max(c.improvement_pct)).fold(10.0, f64::max).min(100.0) + 5.0;
+    // Head room above the data for the legend (upper left, where n is small).
+    let data_top = cells.iter().map(|c| c.ci_pct.1.max(c.improvement_pct)).fold(10.0, f64::max).min(100.0);
+    let top = data_top + LEGEND_ROOM * (data_top - FLOOR_PCT);
     let y = |v: f64| v.max(FLOOR_PCT);
     let mut chart = ChartBuilder::on(area)
         .caption(format!("target {target}"), text(18.0))
@@ -153,7 +157,8 @@ fn draw_panel<DB: DrawingBackend>(
         let colour = PALETTE[k % PALETTE.len()];
         for (method, dashed) in [("transfer_source_mean", true), ("guarded", false)] {
             let pts = series(cells, source, method);
-            let style = colour.stroke_width(if dashed { 2 } else { 3 });
+            // Source-centred: dashed and lighter (the legend's swatch is lighter too).
+            let style = if dashed { colour.mix(0.55).stroke_width(2) } else { colour.stroke_width(3) };
             let label = format!("{source}: {}", if dashed { "source-centred" } else { "guarded" });
             let drawn = if dashed {
                 chart.draw_series(DashedLineSeries::new(pts.iter().map(|p| (p.0, y(p.1))), 8, 5, style))?
@@ -178,7 +183,7 @@ fn draw_panel<DB: DrawingBackend>(
             PathElement::new([(x, y(c.ci_pct.0)), (x, y(c.ci_pct.1))], BLACK.stroke_width(1))
         }))?;
     }
-    draw_house_legend(&mut chart, SeriesLabelPosition::LowerRight)
+    draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
 /// `(n, improvement)` of one single-source method, ascending in `n`.

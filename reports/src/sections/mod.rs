@@ -9,6 +9,7 @@ mod discrepancy_thermal;
 mod fdm_virtual;
 mod lu2015;
 mod ren2021;
+mod transfer_matrix;
 
 pub use chen2024::Chen2024Section;
 pub use discrepancy_fdm::DiscrepancyFdmSection;
@@ -18,6 +19,7 @@ pub use fdm_virtual::FdmVirtualSection;
 pub use lu2015::Lu2015Section;
 
 pub use ren2021::Ren2021Section;
+pub use transfer_matrix::TransferMatrixSection;
 
 use pipeline::{Registry, StageError};
 use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
@@ -31,6 +33,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(DiscrepancyInkjetSection));
     registry.register(Box::new(DiscrepancyThermalSection));
     registry.register(Box::new(FdmVirtualSection));
+    registry.register(Box::new(TransferMatrixSection));
 }
 
 /// One comparison row.

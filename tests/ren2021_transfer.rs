@@ -1,0 +1,55 @@
+//! Transfer among several printers, end to end through the shipped
+//! `specs/ren2021_transfer.toml` cut to two printers (the real Taz 6 and the Taz 6 with a
+//! slower melt, [`TEST_MATRIX`]): the published table has the columns analysts query,
+//! the guard is never worse than single-printer learning beyond its interval, the
+//! figure and the section are drawn; bad parameters are named.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn the_guard_never_hurts_beyond_its_interval_on_the_real_lines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = shipped_spec(tmp.path(), "ren2021_transfer", &data_root().join("fsu-linewidth"));
+    ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    let table = read_table(&tmp.path().join("out/fdm/transfer_matrix.parquet"));
+    let names: Vec<String> = table.get_column_names().iter().map(|c| c.to_string()).collect();
+    let wanted =
+        ["sources", "target", "n_train", "method", "median_rmse_mm", "improvement_pct", "ci_lo_pct", "ci_hi_pct"];
+    assert!(wanted.iter().all(|w| names.iter().any(|n| n == w)), "{names:?}");
+    // Two printers: two ordered pairs × 8 training sizes × 4 methods.
+    assert_eq!(table.height(), 2 * 8 * 4);
+    let (method, hi, lo) = (strings(&table, "method"), floats(&table, "ci_hi_pct"), floats(&table, "ci_lo_pct"));
+    let imp = floats(&table, "improvement_pct");
+    for i in (0..table.height()).filter(|&i| method[i] == "guarded") {
+        assert!(hi[i] >= 0.0, "row {i}: the guard is worse than single beyond its interval");
+        assert!(lo[i] <= imp[i] && imp[i] <= hi[i] + 1e-9, "row {i}: the estimate lies in its interval");
+    }
+    let singles = (0..table.height()).filter(|&i| method[i] == "single");
+    assert!(singles.clone().count() == 16 && singles.clone().all(|i| imp[i] == 0.0));
+    let run = tmp.path().join("out/runs/ren2021_transfer");
+    assert!(run.join("matrix_fig/transfer_matrix.png").is_file());
+    let section = std::fs::read_to_string(run.join("comparison/section.html")).unwrap();
+    assert!(section.contains("negative-transfer guard"), "{section}");
+    let rows = read_table(&tmp.path().join("out/fdm/transfer_matrix_rows.parquet"));
+    let prior = strings(&rows, "prior");
+    let rows_method = strings(&rows, "method");
+    let n_train: Vec<i64> = rows.column("n_train").unwrap().i64().unwrap().into_no_null_iter().collect();
+    assert!((0..rows.height()).filter(|&i| rows_method[i] == "guarded" && n_train[i] == 1).all(|i| prior[i] == "none"));
+}
+
+#[test]
+fn unknown_blob_printer_and_a_reused_printer_name_are_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = shipped_spec(tmp.path(), "ren2021_transfer", &data_root().join("fsu-linewidth"));
+    let text = std::fs::read_to_string(&spec).unwrap();
+    let typo = text.replace("params = { bootstrap_draws = 400 }", "params = { blob_printers = \"taz7\" }");
+    std::fs::write(&spec, typo).unwrap();
+    let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    assert!(err.contains("taz7") && err.contains("matrix"), "{err}");
+    let same = text.replace("printer = \"taz6-slow-melt\"", "printer = \"taz6\"");
+    std::fs::write(&spec, same).unwrap();
+    let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    assert!(err.contains("new printer") && err.contains("taz6_slow_melt"), "{err}");
+}
