@@ -27,8 +27,8 @@ const METHODS: [(&str, &str); 4] = [
     ("guarded", "source-centred prior behind the negative-transfer guard"),
     ("co_learning", "co-learning from all other printers (guarded)"),
 ];
-/// Training-set sizes shown per task.
-const SHOWN_N: [i64; 3] = [1, 2, 3];
+/// Training-set sizes shown per task, besides the largest (n = 1 is 0 by construction).
+const SHOWN_N: [i64; 2] = [2, 3];
 const SOURCE: &str = "fdm/transfer_matrix.parquet (stage matrix, fdm.transfer_matrix)";
 
 impl StageKind for TransferMatrixSection {
@@ -105,8 +105,10 @@ Ours: run ren2021_transfer, stage matrix (fdm.transfer_matrix), table out/fdm/tr
 
 /// Per task: the guarded improvement (co-learning for several sources) at a few n.
 fn per_task(matrix: &Matrix) -> String {
+    let n_max = matrix.values().flatten().map(|c| c.n_train).max().unwrap_or(0);
+    let shown: Vec<i64> = SHOWN_N.iter().copied().filter(|&n| n < n_max).chain([n_max]).collect();
     let mut html = String::from("<table><tr><th class=\"t\">sources → target</th><th class=\"t\">method</th>");
-    for n in SHOWN_N {
+    for n in &shown {
         let _ = write!(html, "<th>n = {n}: improvement (%) [95 %]</th>");
     }
     html += "<th>source-centred prior, n = 1 / 2 (%)</th></tr>\n";
@@ -125,7 +127,7 @@ fn per_task(matrix: &Matrix) -> String {
             escape(sources),
             escape(target)
         );
-        for n in SHOWN_N {
+        for &n in &shown {
             let text = at(method, n).map_or("—".into(), |c| {
                 format!("{:+.1} [{:+.1}, {:+.1}]", c.improvement_pct, c.ci_pct.0, c.ci_pct.1)
             });
@@ -134,6 +136,6 @@ fn per_task(matrix: &Matrix) -> String {
         let plain = |n| at("transfer_source_mean", n).map_or("—".into(), |c| format!("{:+.1}", c.improvement_pct));
         let _ = writeln!(html, "<td>{} / {}</td></tr>", plain(1), plain(2));
     }
-    html + "</table>\n<p class=\"run\">With one target line the guard does not transfer (nothing on the target validates a transfer), so its n = 1 column is 0 by construction. \
+    html + "</table>\n<p class=\"run\">With one target line the guard does not transfer (nothing on the target validates a transfer), so at n = 1 it is single-printer learning by construction (not shown). \
 The printers other than the Taz 5 and Taz 6 are made from their measured lines by the stated physical change of stage fdm.other_family (a wider nozzle, a slower melt).</p>\n"
 }
