@@ -16,7 +16,9 @@
 //!      `n` lines would differ from the source mean `θ̄_S` (over `K` lines) only by
 //!      sampling: `T² = (θ̄_T − θ̄_S)ᵀ Σ̂_S⁻¹ (θ̄_T − θ̄_S) / (1/n + 1/K)` and
 //!      `T²·(K − p)/(p·(K − 1)) ~ F(p, K − p)` (Hotelling, covariance from the source's
-//!      `K − 1` degrees of freedom; `p` = the parameters under the prior). A source whose
+//!      `K − 1` degrees of freedom; `p` = the parameters under the prior; approximate, as
+//!      per-line parameters are not exactly Gaussian and one outlying source line widens
+//!      `Σ̂_S`, which makes the check more permissive, not less). A source whose
 //!      `F` statistic exceeds its 95 % quantile is in conflict and is not used. A source
 //!      with `K ≤ p` lines cannot be checked and is not used.
 //!   2. **Amount.** With two or more target lines, inner leave-one-out over the
