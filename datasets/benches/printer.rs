@@ -10,14 +10,14 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
 
-use datasets::thermal::deposition::{conventional_command, print_part};
+use datasets::thermal::deposition::print_part;
 use datasets::thermal::Effects;
 use models::thermal::{PrintSetup, Trajectory};
 
 fn printer(c: &mut Criterion) {
     let setup = PrintSetup::paper_defaults();
     let trajectory = Trajectory::corner_test(&setup).expect("corner test path");
-    let command = conventional_command(&setup, &trajectory);
+    let command = setup.conventional_command(&trajectory);
     let mut group = c.benchmark_group("thermal_printer");
     group.sample_size(10);
     for layers in [1, 5] {

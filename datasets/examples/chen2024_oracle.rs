@@ -29,7 +29,7 @@
 //!
 //! Run: `cargo run --release -p datasets --example chen2024_oracle` (about a minute).
 
-use datasets::thermal::deposition::{conventional_command, edge_distance_mm, print_part};
+use datasets::thermal::deposition::{edge_distance_mm, print_part};
 use datasets::thermal::effects::Effects;
 use models::stats::finite_median;
 use models::thermal::compensation::{
@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let trajectory = Trajectory::corner_test(&setup)?;
     let path = corner_test_path();
     let bead = IdealBead::new(&path, setup.bead_width_mm / 2.0)?;
-    let v_e = conventional_command(&setup, &trajectory);
+    let v_e = setup.conventional_command(&trajectory);
     let conventional = print(&setup, &trajectory, &v_e)?;
     let before = score(&setup, &path, &bead, &conventional);
     let excess = lag_excess(&v_e, trajectory.dt_s, setup.tau_s); // eq. 34's flow excess (mm/s of filament)
@@ -138,7 +138,7 @@ impl TrueWidths {
         layers: &[DepositGrid],
     ) -> Result<Self, Box<dyn std::error::Error>> {
         let command: Vec<f64> =
-            conventional_command(setup, trajectory).iter().map(|v| v * setup.filament_area_mm2()).collect();
+            setup.conventional_command(trajectory).iter().map(|v| v * setup.filament_area_mm2()).collect();
         let flow = first_order_lag(&command, trajectory.dt_s, setup.tau_s, 0.0);
         let dirs = allocate_directions(trajectory, &flow, setup.layer_height_mm, &DdaParams::default())?;
         let speed = trajectory.speed_mm_s();

@@ -216,12 +216,6 @@ impl PartStack {
     }
 }
 
-/// The conventional print's command: at every sample the deposition velocity that
-/// gives the nominal bead at the commanded path speed (flow ∝ speed, DESIGN §5.3).
-pub fn conventional_command(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<f64> {
-    trajectory.speed_mm_s().iter().map(|v| setup.nominal_deposition_velocity_mm_s(*v)).collect()
-}
-
 /// An empty deposit grid covering the trajectory with [`MARGIN_MM`] around it.
 pub fn grid_for(trajectory: &Trajectory) -> DepositGrid {
     let (origin, max) = grid_corners_mm(trajectory);
@@ -584,7 +578,7 @@ pub(crate) mod tests {
     fn conventional() -> (PrintSetup, Trajectory, LayerDeposit) {
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = conventional_command(&setup, &trajectory);
+        let v_e = setup.conventional_command(&trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let mut layers = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap();
         (setup, trajectory, layers.remove(0))
@@ -605,7 +599,7 @@ pub(crate) mod tests {
     fn squeezed_out_melt_is_conserved_too() {
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = conventional_command(&setup, &trajectory);
+        let v_e = setup.conventional_command(&trajectory);
         let effects = Effects::from_pairs([("melt_squeeze_out", 0.5)]).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let deposit = print_part(&setup, &trajectory, &v_e, 1, &effects, &mut rng).unwrap().remove(0);
@@ -622,7 +616,7 @@ pub(crate) mod tests {
         // pile grows from layer to layer. On the straight edge the next layer is unchanged.
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = conventional_command(&setup, &trajectory);
+        let v_e = setup.conventional_command(&trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let layers = print_part(&setup, &trajectory, &v_e, 3, &Effects::none(), &mut rng).unwrap();
         let h = setup.layer_height_mm;
@@ -680,7 +674,7 @@ pub(crate) mod tests {
         let t: Vec<f64> = (0..100).map(|k| k as f64 * setup.sample_period_s).collect();
         let x: Vec<f64> = (0..100).map(|k| k as f64 * 3.0).collect();
         let trajectory = Trajectory::from_samples(&t, &x, &vec![0.0; 100]).unwrap();
-        let v_e = conventional_command(&setup, &trajectory);
+        let v_e = setup.conventional_command(&trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let err = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap_err().to_string();
         assert!(err.contains("the virtual printer prints parts up to 8192 cells per side"), "{err}");

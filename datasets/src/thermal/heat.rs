@@ -427,8 +427,8 @@ fn convolve_at(line: &[f32], at: usize, kernel: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::thermal::deposition::print_part;
     use crate::thermal::deposition::tests::straight_sample;
-    use crate::thermal::deposition::{conventional_command, print_part};
     use models::thermal::{PrintSetup, Trajectory};
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
@@ -436,7 +436,7 @@ mod tests {
     fn heat_of_conventional_layer() -> (Trajectory, LayerDeposit, LayerHeat) {
         let setup = PrintSetup::paper_defaults();
         let trajectory = Trajectory::corner_test(&setup).unwrap();
-        let v_e = conventional_command(&setup, &trajectory);
+        let v_e = setup.conventional_command(&trajectory);
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let deposit = print_part(&setup, &trajectory, &v_e, 1, &Effects::none(), &mut rng).unwrap().remove(0);
         let heat =

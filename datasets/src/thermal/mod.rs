@@ -38,7 +38,7 @@ use crate::manifest::{DatasetManifest, Provenance, MANIFEST_FILE};
 use crate::output::{write_file, OutputDir, Ownership};
 use crate::stream;
 use camera::{Distortion, FrameCapture, Intrinsics, Mount, Pose, HEIGHT_PX, WIDTH_PX};
-use deposition::{conventional_command, LayerDeposit};
+use deposition::LayerDeposit;
 use heat::{HeatParams, LayerHeat};
 use sequence::{CameraFile, ProcessFile, TruthFile};
 
@@ -121,7 +121,7 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
     check_option("--layers", layers, &THERMAL_LAYERS)?;
     let setup = PrintSetup::paper_defaults();
     let trajectory = Trajectory::corner_test(&setup).map_err(model_error)?;
-    let v_e = conventional_command(&setup, &trajectory);
+    let v_e = setup.conventional_command(&trajectory);
     let mut rng_print = stream(config.seed, 1);
     let deposits = deposition::print_part(&setup, &trajectory, &v_e, layers, &config.effects, &mut rng_print)
         .map_err(model_error)?;
@@ -536,7 +536,7 @@ mod tests {
         let deposits = deposition::print_part(
             &setup,
             &tr,
-            &conventional_command(&setup, &tr),
+            &setup.conventional_command(&tr),
             1,
             &Effects::none(),
             &mut stream(1, 1),

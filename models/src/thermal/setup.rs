@@ -99,6 +99,13 @@ impl PrintSetup {
     pub fn nominal_deposition_velocity_mm_s(&self, speed_mm_s: f64) -> f64 {
         self.nominal_flow_mm3_s(speed_mm_s) / self.filament_area_mm2()
     }
+
+    /// The conventional print's command: at every sample of `trajectory` the deposition
+    /// velocity that gives the nominal bead at the commanded path speed (flow ∝ speed,
+    /// as a slicer commands it; paper 003 compensates away from this, eqs 31-39).
+    pub fn conventional_command(&self, trajectory: &super::Trajectory) -> Vec<f64> {
+        trajectory.speed_mm_s().iter().map(|v| self.nominal_deposition_velocity_mm_s(*v)).collect()
+    }
 }
 
 /// Height of each tooth of the test path's zig-zags (mm).
@@ -174,6 +181,21 @@ pub fn convex_vertices(polygon_mm: &[[f64; 2]]) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn conventional_command_is_the_nominal_flow_over_the_filament_area_at_each_speed() {
+        // v_e = w·h·v / (π d²/4) at every sample: proportional to the path speed.
+        let setup = PrintSetup::paper_defaults();
+        let trajectory = super::super::Trajectory::corner_test(&setup).unwrap();
+        let command = setup.conventional_command(&trajectory);
+        let speeds = trajectory.speed_mm_s();
+        assert_eq!(command.len(), speeds.len());
+        for (v_e, v) in command.iter().zip(&speeds) {
+            let expected = setup.nominal_flow_mm3_s(*v) / setup.filament_area_mm2();
+            assert_eq!(*v_e, expected);
+        }
+        assert!(command.iter().any(|v| *v > 0.0));
+    }
 
     #[test]
     fn test_path_has_the_stated_corner_angles() {

@@ -16,10 +16,10 @@ use std::path::Path;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
-use super::ren2021::median;
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
 use crate::read::{bools, f64s, i64s, read_parquet, strs};
+use models::stats::finite_median;
 
 /// The `report.fdm_virtual` stage kind.
 pub struct FdmVirtualSection;
@@ -182,8 +182,8 @@ fn loo_part(photos: &Path, real: &Path, stages: (&str, &str), rows: &mut Vec<Row
         "<h4>Paper 000's leave-one-out on the photos and on the real lines</h4>\n<p>The same stages as on the measured widths, run on the widths segmented from the virtual photos: median held-out RMSE over the nine lines.</p>\n<table><tr><th class=\"t\">printer</th><th class=\"t\">model</th><th>photos of the virtual printer (mm)</th><th>real lines (mm)</th></tr>\n",
     );
     for ((printer, model), v) in &virtual_loo {
-        let ours = median(v.clone());
-        let measured = real_loo.get(&(printer.clone(), model.clone())).map(|r| median(r.clone()));
+        let ours = finite_median(v.iter().copied());
+        let measured = real_loo.get(&(printer.clone(), model.clone())).map(|r| finite_median(r.iter().copied()));
         let cell = measured.map_or("—".into(), |m| format!("{m:.3}"));
         let _ = writeln!(
             html,

@@ -13,6 +13,8 @@ use std::path::Path;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
+use models::stats::finite_median;
+
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
 use crate::read::{f64s, read_parquet, strs};
@@ -98,18 +100,7 @@ fn transfer_medians(path: &Path) -> Result<BTreeMap<(String, i64), f64>, StageEr
     for i in 0..df.height() {
         groups.entry((method[i].clone(), n[i])).or_default().push(rmse[i]);
     }
-    Ok(groups.into_iter().map(|(k, v)| (k, median(v))).collect())
-}
-
-/// Median (mean of the two middle values for an even count).
-pub fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    match n {
-        0 => f64::NAN,
-        _ if n % 2 == 1 => v[n / 2],
-        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
+    Ok(groups.into_iter().map(|(k, v)| (k, finite_median(v))).collect())
 }
 
 fn get(loo: &LooMap, printer: &str, model: &str, condition: &str) -> Option<(f64, f64, f64)> {
@@ -167,7 +158,11 @@ fn loo_summary(loo: &LooMap) -> Vec<(String, Option<f64>, f64)> {
     let paper: Vec<f64> = TABLE_II.iter().map(|t| t.3).collect();
     let ours = values("taz5", "piecewise");
     let mut out = vec![
-        ("median, Taz 5 piecewise".to_string(), Some(median(paper.clone())), median(ours.clone())),
+        (
+            "median, Taz 5 piecewise".to_string(),
+            Some(finite_median(paper.iter().copied())),
+            finite_median(ours.iter().copied()),
+        ),
         ("min, Taz 5 piecewise".to_string(), Some(0.030), ours.iter().copied().fold(f64::INFINITY, f64::min)),
         ("max, Taz 5 piecewise".to_string(), Some(0.068), ours.iter().copied().fold(0.0, f64::max)),
     ];
@@ -182,7 +177,11 @@ fn loo_summary(loo: &LooMap) -> Vec<(String, Option<f64>, f64)> {
         out.push((format!("mean at F = {feed} mm/s, Taz 5 piecewise"), Some(paper_mean), our_mean));
     }
     for (printer, model) in [("taz5", "lag"), ("taz6", "piecewise"), ("taz6", "lag")] {
-        out.push((format!("median, {} {model}", printer.replace("taz", "Taz ")), None, median(values(printer, model))));
+        out.push((
+            format!("median, {} {model}", printer.replace("taz", "Taz ")),
+            None,
+            finite_median(values(printer, model)),
+        ));
     }
     out
 }
@@ -288,13 +287,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn median_of_odd_and_even_counts() {
-        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
-    }
-
-    #[test]
     fn paper_table_ii_median_is_0_045() {
-        assert_eq!(median(TABLE_II.iter().map(|t| t.3).collect()), 0.045);
+        assert_eq!(finite_median(TABLE_II.iter().map(|t| t.3)), 0.045);
     }
 }

@@ -62,7 +62,6 @@
 
 use std::path::Path;
 
-use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::ThermalSequence;
 use models::stats::finite_median;
 use models::thermal::compensation::{
@@ -320,7 +319,7 @@ pub fn compensate(
             1.0
         }
     };
-    let nominal_mm_s = conventional_command(&setup, &trajectory);
+    let nominal_mm_s = setup.conventional_command(&trajectory);
     let spans = if params.str("source") == "lag_model" {
         // The flow excess eq. 34 predicts for the nominal command (mm/s of filament).
         let excess = lag_excess(&nominal_mm_s, trajectory.dt_s, tau_s);

@@ -44,7 +44,6 @@
 
 use std::collections::BTreeMap;
 
-use datasets::thermal::deposition::conventional_command;
 use datasets::thermal::sequence::ThermalSequence;
 use models::stats::finite_median;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
@@ -439,7 +438,7 @@ const SETTLED_FLOW_TOLERANCE: f64 = 0.02;
 /// leg of the test path is thinner than the nominal bead along most of its length; only
 /// settled samples may calibrate T_t to the nominal width.
 fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
-    let command = conventional_command(setup, trajectory);
+    let command = setup.conventional_command(trajectory);
     let steady = setup.nominal_deposition_velocity_mm_s(setup.feed_mm_s);
     let excess = lag_excess(&command, trajectory.dt_s, setup.tau_s);
     excess.iter().map(|e| e.abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
