@@ -49,6 +49,7 @@
 
 use std::collections::HashMap;
 
+use discrepancy::stats::{mix_seed, quantile_sorted};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -58,10 +59,12 @@ use super::errors::FitError;
 use super::hyperparams::PiecewiseValidParams;
 use super::line::MeasuredLine;
 use super::transfer::{
-    all_condition_subsets, argmin, estimate_covariance, prior_precision, segment_prior, ConditionSubset,
-    ParameterCovariance, PriorMean, SourcePrior, TransferValidParams, TRANSFER_DIM,
+    all_condition_subsets, estimate_covariance, prior_precision, segment_prior, ConditionSubset, ParameterCovariance,
+    PriorMean, SourcePrior, TransferValidParams, TRANSFER_DIM,
 };
-use super::transfer_cv::{held_out_table, mask, Configs, HeldOut, MAX_TARGET_LINES};
+use super::transfer_cv::{
+    chosen_lambda, held_out_table, inner_cv_rmse, subset_index, Configs, HeldOut, MAX_TARGET_LINES,
+};
 
 /// Level of the conflict check (its `F` quantile is `1 − CONFLICT_ALPHA`).
 pub const CONFLICT_ALPHA: f64 = 0.05;
@@ -317,7 +320,7 @@ impl<'a> TargetStudy<'a> {
         sources: &'a HashMap<usize, SourcePrior>,
         transfer: &'a TransferValidParams,
     ) -> Result<Self, FitError> {
-        let index: HashMap<u64, usize> = subsets.iter().enumerate().map(|(s, sub)| (mask(&sub.indices), s)).collect();
+        let index = subset_index(subsets);
         let line_theta = (0..table.n_lines)
             .map(|k| {
                 let s =
@@ -340,14 +343,8 @@ impl<'a> TargetStudy<'a> {
                     if method == MatrixMethod::TransferZeroMean { PriorMean::Zero } else { PriorMean::SourceMean };
                 let origin = Origin::Source(task.sources[0]);
                 let slot = self.slot(&origin, mean);
-                let j = if sub.indices.len() == 1 {
-                    self.grid_index(self.sources[&task.sources[0]].single_line_lambda(mean))?
-                } else {
-                    let scores: Vec<f64> = (0..self.configs.lambdas().len())
-                        .map(|j| self.inner_cv(sub, self.configs.index(Some(slot), j)))
-                        .collect();
-                    argmin(&scores)
-                };
+                let source = &self.sources[&task.sources[0]];
+                let j = chosen_lambda(sub, mean, slot, self.configs, source, self.table, &self.index)?;
                 Ok(Choice { config: self.configs.index(Some(slot), j), origin: Some(origin) })
             }
             MatrixMethod::Guarded | MatrixMethod::CoLearning => self.guarded(sub, task, method),
@@ -409,21 +406,8 @@ impl<'a> TargetStudy<'a> {
         conflict_ratio(t2, p, k)
     }
 
-    /// Mean inner leave-one-out RMSE of a configuration on a subset (fold `k` is the fit
-    /// on the subset without line `k`, tested on `k`, read from the table).
     fn inner_cv(&self, sub: &ConditionSubset, config: usize) -> f64 {
-        let full = mask(&sub.indices);
-        let total: f64 =
-            sub.indices.iter().map(|&k| self.table.at(self.index[&(full & !(1u64 << k))], config, k)).sum();
-        total / sub.indices.len() as f64
-    }
-
-    fn grid_index(&self, lambda: f64) -> Result<usize, FitError> {
-        self.configs
-            .lambdas()
-            .iter()
-            .position(|&l| l == lambda)
-            .ok_or_else(|| FitError::Dimension(format!("source-simulation λ {lambda} is not on the λ grid")))
+        inner_cv_rmse(sub, config, self.table, &self.index)
     }
 }
 
@@ -472,7 +456,7 @@ pub fn summarise(rows: &[MatrixRow], draws: usize, seed: u64) -> Vec<MatrixSumma
     keys.sort_unstable();
     keys.par_iter()
         .flat_map_iter(|key| {
-            let rng_seed = seed ^ ((key.0 as u64) << 32) ^ key.1 as u64;
+            let rng_seed = mix_seed(seed, key.0 as u64, key.1 as u64);
             summarise_group(*key, &groups[key], draws, rng_seed)
         })
         .collect()
@@ -527,8 +511,8 @@ fn summarise_group(
                 method: m,
                 median_rmse_mm: median,
                 improvement_pct: improvement_pct(base, median),
-                ci_lo_pct: percentile(&boot, 0.025),
-                ci_hi_pct: percentile(&boot, 0.975),
+                ci_lo_pct: quantile_sorted(&boot, 0.025),
+                ci_hi_pct: quantile_sorted(&boot, 0.975),
                 rows: own.len(),
             }
         })
@@ -562,16 +546,6 @@ pub fn weighted_median(values: &[(usize, f64)], weights: &[usize]) -> f64 {
         v[v.len() - 1].0
     };
     0.5 * (at((total - 1) / 2) + at(total / 2))
-}
-
-/// Linear-interpolated percentile `q ∈ [0, 1]` of sorted values (NaN when empty).
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let pos = q * (sorted.len() - 1) as f64;
-    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
-    sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
 }
 
 /// Every ordered pair `(source → target)` of `n` printers, then, when `co_learning` and

@@ -66,8 +66,7 @@ use super::line::{rmse, MeasuredLine};
 use super::piecewise::Bp1PowerLaw;
 use super::predict::FittedPiecewise;
 use super::transfer::{
-    all_condition_subsets, argmin, mean_columns, segment_prior, ConditionSubset, PriorMean, SourcePrior,
-    TransferValidParams,
+    all_condition_subsets, argmin, segment_prior, ConditionSubset, PriorMean, SourcePrior, TransferValidParams,
 };
 
 /// Most target lines [`transfer_cv`] accepts. There are `2^N − 2` subsets, each fitted
@@ -508,15 +507,15 @@ fn assemble_rows(
     source: &SourcePrior,
     table: &HeldOut,
 ) -> Result<Vec<TransferCvRow>, FitError> {
-    let index: HashMap<u64, usize> = subsets.iter().enumerate().map(|(s, sub)| (mask(&sub.indices), s)).collect();
+    let index = subset_index(subsets);
     let mut rows = Vec::new();
     for (s, sub) in subsets.iter().enumerate() {
         for method in TransferMethod::ALL {
             let c = match method.prior_mean() {
                 None => 0,
                 Some(mean) => {
-                    let slot = Some(prior_slot(mean));
-                    configs.index(slot, chosen_lambda(sub, mean, configs, source, table, &index)?)
+                    let slot = prior_slot(mean);
+                    configs.index(Some(slot), chosen_lambda(sub, mean, slot, configs, source, table, &index)?)
                 }
             };
             for test_index in (0..table.n_lines).filter(|k| !sub.indices.contains(k)) {
@@ -534,18 +533,19 @@ fn assemble_rows(
     Ok(rows)
 }
 
-/// Index of the grid `λ` that `transfer_fit` picks for a subset: the source-simulation
-/// `λ` for one line, else the smallest mean inner leave-one-out RMSE (folds in line
-/// order, first on ties). Fold `k` is the fit on `S∖{k}`, read from the table.
-fn chosen_lambda(
+/// Index of the grid `λ` that `transfer_fit` picks for a subset under the prior in
+/// configuration slot `slot`, centred as `mean`: the source-simulation `λ` for one
+/// line, else the smallest mean inner leave-one-out RMSE ([`inner_cv_rmse`], first on
+/// ties).
+pub(crate) fn chosen_lambda(
     sub: &ConditionSubset,
     mean: PriorMean,
+    slot: usize,
     configs: &Configs,
     source: &SourcePrior,
     table: &HeldOut,
     index: &HashMap<u64, usize>,
 ) -> Result<usize, FitError> {
-    let n_lambda = configs.lambdas.len();
     if sub.indices.len() == 1 {
         let lambda = source.single_line_lambda(mean);
         return configs
@@ -554,16 +554,22 @@ fn chosen_lambda(
             .position(|&l| l == lambda)
             .ok_or_else(|| FitError::Dimension(format!("source-simulation λ {lambda} is not on the λ grid")));
     }
+    let scores: Vec<f64> =
+        (0..configs.lambdas.len()).map(|j| inner_cv_rmse(sub, configs.index(Some(slot), j), table, index)).collect();
+    Ok(argmin(&scores))
+}
+
+/// Mean inner leave-one-out RMSE of a configuration on a subset: fold `k` (in line
+/// order) is the fit on the subset without line `k`, tested on `k`, read from the table.
+pub(crate) fn inner_cv_rmse(sub: &ConditionSubset, config: usize, table: &HeldOut, index: &HashMap<u64, usize>) -> f64 {
     let full = mask(&sub.indices);
-    let per_fold: Vec<Vec<f64>> = sub
-        .indices
-        .iter()
-        .map(|&k| {
-            let t = index[&(full & !(1u64 << k))];
-            (0..n_lambda).map(|j| table.at(t, configs.index(Some(prior_slot(mean)), j), k)).collect()
-        })
-        .collect();
-    Ok(argmin(&mean_columns(&per_fold, n_lambda)))
+    let total: f64 = sub.indices.iter().map(|&k| table.at(index[&(full & !(1u64 << k))], config, k)).sum();
+    total / sub.indices.len() as f64
+}
+
+/// Each subset's position by its line mask ([`mask`]).
+pub(crate) fn subset_index(subsets: &[ConditionSubset]) -> HashMap<u64, usize> {
+    subsets.iter().enumerate().map(|(s, sub)| (mask(&sub.indices), s)).collect()
 }
 
 pub(crate) fn mask(indices: &[usize]) -> u64 {

@@ -91,11 +91,8 @@ impl StageKind for TransferMatrixStage {
         let rows = transfer_matrix(&study, &tasks, &transfer).map_err(|e| fit_failed("transfer matrix", e))?;
         let draws = ctx.params.i64("bootstrap_draws") as usize;
         let summary = summarise(&rows, draws, ctx.seed);
-        let names = |t: &TransferTask| -> (String, String) {
-            let sources: Vec<&str> = t.sources.iter().map(|&s| printers[s].printer.as_str()).collect();
-            (sources.join("+"), printers[t.target].printer.clone())
-        };
-        let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names(&tasks[s.task])).unzip();
+        let names = task_names(&tasks, &printers);
+        let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names[s.task].clone()).unzip();
         let mut table = frame(vec![
             str_col("sources", s_src),
             str_col("target", s_tgt),
@@ -142,13 +139,22 @@ fn lambda_grid(step: f64) -> TransferParams {
     }
 }
 
+/// Each task's `+`-joined source names and its target's name.
+fn task_names(tasks: &[TransferTask], printers: &[PrinterLines]) -> Vec<(String, String)> {
+    let name = |i: usize| printers[i].printer.as_str();
+    tasks
+        .iter()
+        .map(|t| (t.sources.iter().map(|&s| name(s)).collect::<Vec<_>>().join("+"), name(t.target).into()))
+        .collect()
+}
+
 fn rows_table(
     rows: &[MatrixRow],
     tasks: &[TransferTask],
     printers: &[PrinterLines],
-    names: &dyn Fn(&TransferTask) -> (String, String),
+    names: &[(String, String)],
 ) -> Result<polars::prelude::DataFrame, StageError> {
-    let (src, tgt): (Vec<String>, Vec<String>) = rows.iter().map(|r| names(&tasks[r.task])).unzip();
+    let (src, tgt): (Vec<String>, Vec<String>) = rows.iter().map(|r| names[r.task].clone()).unzip();
     let condition = |r: &MatrixRow| printers[tasks[r.task].target].conditions[r.test_index].clone();
     frame(vec![
         str_col("sources", src),
