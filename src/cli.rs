@@ -28,6 +28,28 @@ pub enum Command {
     Datasets(DatasetsCommand),
     /// Rebuild the HTML report from the manifests under the out folder.
     Report(ReportArgs),
+    /// Benchmark night: run every spec from scratch, append its numbers and timings to a
+    /// history, and write report/nightly.html with trends and regressions (docs/NIGHTLY.md).
+    Nightly(NightlyArgs),
+}
+
+/// `amrepro nightly`.
+#[derive(Debug, Args)]
+pub struct NightlyArgs {
+    /// The specs to run (default: every specs/*.toml of the current folder, the shipped ones).
+    pub specs: Vec<PathBuf>,
+    /// The history folder (Parquet, partitioned by date; created if absent, only ever appended to).
+    #[arg(long, value_name = "DIR")]
+    pub history: PathBuf,
+    /// Out folder of the runs and of report/nightly.html.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Exit with status 3 when the night has a regression (for a scheduler to alert on).
+    #[arg(long)]
+    pub fail_on_regression: bool,
+    /// Print only errors and the summary.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 /// `amrepro run`.

@@ -36,6 +36,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Thermal(args))) => generate_thermal(args),
         Command::Datasets(DatasetsCommand::Inject(args)) => inject(args),
         Command::Report(ReportArgs { out }) => report(&out),
+        Command::Nightly(args) => crate::nightly_run::run(args),
     }
 }
 
@@ -51,6 +52,7 @@ fn run(args: RunArgs) -> Result<()> {
         only: args.only.clone(),
         force: args.force,
         show_progress: !args.quiet,
+        measure_usage: false,
     };
     let quiet = args.quiet;
     let log = move |line: &str| {
@@ -94,7 +96,7 @@ fn run(args: RunArgs) -> Result<()> {
 
 /// Rebuilds the report (the caller holds the out folder's lock); warns about runs
 /// left out because their manifest is unreadable.
-fn write_report(out: &std::path::Path) -> Result<std::path::PathBuf> {
+pub fn write_report(out: &std::path::Path) -> Result<std::path::PathBuf> {
     let written = reports::html::write_report(out).context("writing the report")?;
     for (_, why) in &written.skipped {
         eprintln!("warning: the report leaves out a run: {why}");

@@ -5,6 +5,7 @@
 
 mod cli;
 mod commands;
+mod nightly_run;
 
 use std::process::ExitCode;
 
@@ -16,7 +17,10 @@ fn main() -> ExitCode {
         Ok(Ok(())) => ExitCode::SUCCESS,
         Ok(Err(err)) => {
             eprintln!("error: {}", chain(&err));
-            ExitCode::FAILURE
+            match err.is::<nightly_run::Regressed>() {
+                true => ExitCode::from(nightly_run::REGRESSION_EXIT),
+                false => ExitCode::FAILURE,
+            }
         }
         Err(panic) => {
             eprintln!(

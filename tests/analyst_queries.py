@@ -3,6 +3,7 @@ checks row counts against the run manifests, and runs every example query of
 docs/OUTPUTS.md (```sql blocks with DuckDB, ```python blocks as scripts).
 
 Usage: python analyst_queries.py OUT_DIR OUTPUTS_MD   (queries run with cwd = parent of OUT_DIR)
+       python analyst_queries.py --examples DOC_MD     (only the examples of DOC_MD, in the cwd)
 """
 import json
 import pathlib
@@ -53,6 +54,10 @@ def run_examples(doc: pathlib.Path) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1] == "--examples":
+        examples = run_examples(pathlib.Path(sys.argv[2]))
+        print(f"{examples} passed, 0 failed")
+        sys.exit(0)
     out_dir, doc = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
     tables = check_tables(out_dir)
     examples = run_examples(doc)

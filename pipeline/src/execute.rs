@@ -21,6 +21,7 @@ use crate::lock::{remove_stale_temps, OutLock};
 use crate::manifest::{Manifest, ManifestStage, OutputFile, StageRecord};
 use crate::plan::{InputRef, Plan, PlannedStage};
 use crate::stage::{InputArtifact, Registry, StageContext};
+use crate::usage::Meter;
 use crate::TOOL_VERSION;
 
 /// How to run a plan.
@@ -36,6 +37,10 @@ pub struct RunOptions {
     pub force: bool,
     /// Draw progress bars for stages that run longer than a second.
     pub show_progress: bool,
+    /// Run the stages one at a time and record each one's CPU time and peak memory
+    /// ([`crate::usage`]: both are process-wide, so a stage's own only when it runs
+    /// alone); for benchmark runs such as `amrepro nightly`.
+    pub measure_usage: bool,
 }
 
 /// What happened to one stage in this invocation.
@@ -160,8 +165,11 @@ fn execute_plan(
     let mut outcomes: Vec<Option<Outcome>> = (0..plan.stages.len()).map(|_| None).collect();
     for wave in &plan.waves {
         let jobs: Vec<usize> = wave.iter().copied().filter(|i| selected[*i]).collect();
-        let results: Vec<(usize, Result<Outcome, RunError>)> =
-            jobs.par_iter().map(|&i| (i, exec.process(i, &outcomes))).collect();
+        let process = |&i: &usize| (i, exec.process(i, &outcomes));
+        let results: Vec<(usize, Result<Outcome, RunError>)> = match opts.measure_usage {
+            true => jobs.iter().map(process).collect(),
+            false => jobs.par_iter().map(process).collect(),
+        };
         for (i, result) in results {
             let outcome = result?;
             log(&format_line(&outcome.line));
@@ -355,8 +363,10 @@ impl Executor<'_> {
             progress: self.progress.clone(),
         };
         let started = Instant::now();
+        let meter = self.opts.measure_usage.then(Meter::start);
         let record = self.run_kind(stage, &mut ctx).map_err(fail).and_then(|()| {
             let wall_time_s = started.elapsed().as_secs_f64();
+            let usage = meter.as_ref().map(Meter::finish);
             let (output_hash, files) = dir_hash(&staged).map_err(io(&staged))?;
             let record = StageRecord {
                 stage: stage.name.clone(),
@@ -371,6 +381,8 @@ impl Executor<'_> {
                 outputs: files.into_iter().map(|(path, sha256)| OutputFile { path, sha256 }).collect(),
                 rows: ctx.rows,
                 wall_time_s,
+                cpu_time_s: usage.and_then(|u| u.cpu_time_s),
+                peak_rss_bytes: usage.and_then(|u| u.peak_rss_bytes),
             };
             let json = serde_json::to_vec_pretty(&record).expect("serialisable");
             crate::artifact::write_atomic(&staged.join(RECORD_FILE), &json).map_err(fail)?;

@@ -25,6 +25,7 @@ pub mod plan;
 pub mod spec;
 pub mod stage;
 pub mod testing;
+pub mod usage;
 
 pub use error::{SpecError, StageError};
 pub use execute::{open_out_dir, run_plan, run_plan_locked, RunOptions, RunSummary};

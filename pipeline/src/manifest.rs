@@ -44,6 +44,14 @@ pub struct StageRecord {
     pub rows: u64,
     /// Wall time of the execution that produced the outputs, in seconds.
     pub wall_time_s: f64,
+    /// CPU time (user + system, all threads) of that execution, in seconds; recorded
+    /// only when the run measured it ([`crate::RunOptions::measure_usage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_time_s: Option<f64>,
+    /// Peak resident memory of that execution, in bytes; recorded as `cpu_time_s` is,
+    /// and only where the system reports it ([`crate::usage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// A stage's entry in the run manifest.

@@ -43,6 +43,9 @@ pub fn write_report(out_dir: &Path) -> Result<WrittenReport, StageError> {
     for (_, why) in &found.unreadable {
         let _ = writeln!(html, "<p><strong>Left out:</strong> {} (rerun that spec to rewrite it).</p>", escape(why));
     }
+    if out_dir.join("report").join("nightly.html").exists() {
+        html += "<p>Trends over the nights, timings and regressions: <a href=\"nightly.html\">the nightly benchmark</a>.</p>\n";
+    }
     html += &contents(manifests);
     for manifest in manifests {
         html += &run_section(out_dir, manifest)?;
