@@ -31,6 +31,73 @@ pub enum Command {
     /// Benchmark night: run every spec from scratch, append its numbers and timings to a
     /// history, and write report/nightly.html with trends and regressions (docs/NIGHTLY.md).
     Nightly(NightlyArgs),
+    /// List a spec's work units (JSON lines): what `run-unit` runs, one process or
+    /// machine each (docs/SCALE.md).
+    Plan(PlanArgs),
+    /// Run one work unit of a spec into a shared out folder; a no-op when it is done.
+    RunUnit(RunUnitArgs),
+    /// Check that every work unit is in the shared out folder, merge, run the rest of
+    /// the spec and write the report.
+    Collect(CollectArgs),
+    /// Write a Snakemake workflow that runs a spec's work units and collects them.
+    Snakefile(SnakefileArgs),
+}
+
+/// `amrepro plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// Print only the indices of the units at this level (the units they need are all at
+    /// lower levels), as a list for `sbatch --array=`.
+    #[arg(long, value_name = "LEVEL")]
+    pub array_of_level: Option<usize>,
+}
+
+/// `amrepro run-unit`.
+#[derive(Debug, Args)]
+pub struct RunUnitArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// The unit's index in `amrepro plan SPEC`.
+    #[arg(long)]
+    pub index: usize,
+    /// The shared out folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Wait up to this long for the units it needs to finish (for schedulers that start
+    /// units without ordering them, such as job arrays).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0)]
+    pub wait: u64,
+    /// Print only errors.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// `amrepro collect`.
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// The shared out folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print only errors.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// `amrepro snakefile`.
+#[derive(Debug, Args)]
+pub struct SnakefileArgs {
+    /// The spec file (TOML).
+    pub spec: PathBuf,
+    /// The shared out folder the workflow writes (can be changed with `--config out=…`).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Where to write the workflow (default: standard output).
+    #[arg(short = 'o', long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
 }
 
 /// `amrepro nightly`.

@@ -37,6 +37,10 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Datasets(DatasetsCommand::Inject(args)) => inject(args),
         Command::Report(ReportArgs { out }) => report(&out),
         Command::Nightly(args) => crate::nightly_run::run(args),
+        Command::Plan(args) => crate::scale::plan(args),
+        Command::RunUnit(args) => crate::scale::run_unit(args),
+        Command::Collect(args) => crate::scale::collect(args),
+        Command::Snakefile(args) => crate::scale::snakefile(args),
     }
 }
 
@@ -53,6 +57,7 @@ fn run(args: RunArgs) -> Result<()> {
         force: args.force,
         show_progress: !args.quiet,
         measure_usage: false,
+        resumed_because: None,
     };
     let quiet = args.quiet;
     let log = move |line: &str| {

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use common::text;
 use pipeline::hash::{dir_hash, file_sha256};
 use pipeline::Manifest;
 
@@ -23,10 +24,6 @@ fn command(cwd: &Path, args: &[&str]) -> Command {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_amrepro"));
     cmd.args(args).current_dir(cwd).env_remove("AMREPRO_DATA").env(pipeline::testing::ENV_VAR, "1");
     cmd
-}
-
-fn text(out: &Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
 }
 
 /// A spec `f` with stage `a` (publishing `t/a.txt`) and stage `b` reading it; `b_params`

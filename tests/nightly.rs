@@ -19,10 +19,6 @@ fn nightly(cwd: &Path, spec: &Path, extra: &[&str]) -> std::process::Output {
     amrepro(cwd, &args)
 }
 
-fn text(out: &std::process::Output) -> String {
-    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
-}
-
 #[test]
 fn nights_accumulate_regressions_are_flagged_and_a_kill_costs_nothing() {
     let tmp = tempfile::tempdir().unwrap();

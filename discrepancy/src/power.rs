@@ -59,6 +59,11 @@ impl Outcome {
         }
     }
 
+    /// The outcome labelled `label` ([`Outcome::label`]).
+    pub fn parse(label: &str) -> Option<Self> {
+        [Self::Correct, Self::Wrong, Self::None].into_iter().find(|o| o.label() == label)
+    }
+
     /// `correct`, `wrong` or `none`.
     pub fn label(self) -> &'static str {
         match self {

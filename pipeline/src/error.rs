@@ -114,6 +114,16 @@ pub enum RunError {
     /// `--only` named a stage that is not in the spec.
     #[error("{0}")]
     Selection(String),
+    /// Work units of a spread-out run are not in the shared out folder yet.
+    #[error("{}: {for_what} needs work units that are not finished in the shared out folder: {}; run them with `amrepro run-unit {} --index N --out OUT` first", spec.display(), missing.join(", "), spec.display())]
+    UnitsMissing {
+        /// The spec.
+        spec: PathBuf,
+        /// What needs them (`collect`, `unit 3 (power: …)`).
+        for_what: String,
+        /// The missing units, `index (stage: unit)`.
+        missing: Vec<String>,
+    },
     /// A dataset folder named in the spec does not exist.
     #[error("dataset `{name}`: folder {} does not exist{}", dir.display(), if source_hint.is_empty() { String::new() } else { format!(". {source_hint}") })]
     MissingDataset {

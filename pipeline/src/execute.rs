@@ -41,6 +41,9 @@ pub struct RunOptions {
     /// ([`crate::usage`]: both are process-wide, so a stage's own only when it runs
     /// alone); for benchmark runs such as `amrepro nightly`.
     pub measure_usage: bool,
+    /// Why a stage found finished in the run's pending folder counts as done (default:
+    /// an earlier run finished it and then failed or was killed).
+    pub resumed_because: Option<&'static str>,
 }
 
 /// What happened to one stage in this invocation.
@@ -201,7 +204,7 @@ fn keep_unselected(plan: &Plan, run_dir: &Path, outcomes: &mut [Option<Outcome>]
 }
 
 /// Marks the stages to consider: all, or the `--only` stage and its upstream.
-fn select(plan: &Plan, only: Option<&str>) -> Result<Vec<bool>, RunError> {
+pub(crate) fn select(plan: &Plan, only: Option<&str>) -> Result<Vec<bool>, RunError> {
     let Some(name) = only else {
         return Ok(vec![true; plan.stages.len()]);
     };
@@ -223,7 +226,7 @@ fn select(plan: &Plan, only: Option<&str>) -> Result<Vec<bool>, RunError> {
     Ok(selected)
 }
 
-fn hash_datasets(plan: &Plan, selected: &[bool]) -> Result<Vec<Option<String>>, RunError> {
+pub(crate) fn hash_datasets(plan: &Plan, selected: &[bool]) -> Result<Vec<Option<String>>, RunError> {
     let used =
         |d: usize| plan.stages.iter().zip(selected).any(|(s, sel)| *sel && s.inputs.contains(&InputRef::Dataset(d)));
     plan.datasets
@@ -284,7 +287,8 @@ impl Executor<'_> {
         };
         let pending = read_record(&pending_dir);
         if decide(&key, &key_hash, pending.as_ref(), &pending_dir) == Decision::Cached {
-            let why = "finished in an earlier run that did not complete".to_string();
+            let why =
+                self.opts.resumed_because.unwrap_or("finished in an earlier run that did not complete").to_string();
             return Ok(outcome(stage, Status::Resumed, why, pending, pending_dir));
         }
         self.run_or_not(stage, done, seed, key_hash, inputs, why)
@@ -343,76 +347,24 @@ impl Executor<'_> {
         input_hashes: BTreeMap<String, String>,
         reason: String,
     ) -> Result<Outcome, RunError> {
-        let fail =
-            |source: StageError| RunError::Stage { stage: stage.name.clone(), kind: stage.kind.to_string(), source };
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| RunError::Io { path, source }
-        };
         let pending_dir = self.run_dir.join(PENDING_DIR).join(&stage.name);
-        let staged = staging_dir(&pending_dir).map_err(io(&pending_dir))?;
-        let mut ctx = StageContext {
-            stage: stage.name.clone(),
-            params: stage.params.clone(),
+        let staged = staging_dir(&pending_dir).map_err(|e| io_error(&pending_dir, e))?;
+        let job = StageJob {
+            registry: self.registry,
+            stage,
             inputs: self.input_artifacts(stage, done),
+            input_hashes,
             seed,
-            stage_hash: key_hash.clone(),
-            params_hash: sha256_hex(serde_json::to_string(&stage.params).expect("serialisable").as_bytes()),
-            out_dir: staged.clone(),
-            rows: 0,
-            progress: self.progress.clone(),
+            key_hash,
         };
-        let started = Instant::now();
-        let meter = self.opts.measure_usage.then(Meter::start);
-        let record = self.run_kind(stage, &mut ctx).map_err(fail).and_then(|()| {
-            let wall_time_s = started.elapsed().as_secs_f64();
-            let usage = meter.as_ref().map(Meter::finish);
-            let (output_hash, files) = dir_hash(&staged).map_err(io(&staged))?;
-            let record = StageRecord {
-                stage: stage.name.clone(),
-                kind: stage.kind.to_string(),
-                kind_version: stage.kind_version,
-                tool_version: TOOL_VERSION.to_string(),
-                key_hash,
-                params: stage.params.clone(),
-                seed,
-                input_hashes,
-                output_hash,
-                outputs: files.into_iter().map(|(path, sha256)| OutputFile { path, sha256 }).collect(),
-                rows: ctx.rows,
-                wall_time_s,
-                cpu_time_s: usage.and_then(|u| u.cpu_time_s),
-                peak_rss_bytes: usage.and_then(|u| u.peak_rss_bytes),
-            };
-            let json = serde_json::to_vec_pretty(&record).expect("serialisable");
-            crate::artifact::write_atomic(&staged.join(RECORD_FILE), &json).map_err(fail)?;
-            replace_dir(&staged, &pending_dir).map_err(io(&pending_dir))?;
-            Ok(record)
+        let record = job.run_into(&staged, self.progress.as_ref(), self.opts.measure_usage).and_then(|record| {
+            replace_dir(&staged, &pending_dir).map(|()| record).map_err(|e| io_error(&pending_dir, e))
         });
         let record = record.inspect_err(|_| {
             let _ = std::fs::remove_dir_all(&staged);
         })?;
         let wall_time_s = record.wall_time_s;
         Ok(outcome(stage, Status::Ran, reason, Some(record), pending_dir).timed(wall_time_s))
-    }
-
-    /// Runs the kind, a panic becoming its error; a spinner appears if it is still
-    /// running after a second, and stops however the kind ends.
-    fn run_kind(&self, stage: &PlannedStage, ctx: &mut StageContext) -> Result<(), StageError> {
-        let kind = self.registry.get(stage.kind).expect("planned kinds are registered");
-        let run = |ctx: &mut StageContext| {
-            crate::panic::catch(|| kind.run(ctx)).unwrap_or_else(|m| Err(StageError::Panic(m)))
-        };
-        let Some(multi) = &self.progress else {
-            return run(ctx);
-        };
-        let (done_tx, done_rx) = mpsc::channel::<()>();
-        std::thread::scope(|scope| {
-            scope.spawn(|| spinner_after_a_second(multi, &stage.name, done_rx));
-            let result = run(ctx);
-            drop(done_tx);
-            result
-        })
     }
 
     /// The input folders: datasets, and upstream outputs where they are in this run
@@ -516,6 +468,121 @@ impl Executor<'_> {
             stages,
         })
     }
+}
+
+/// One stage ready to run: its inputs resolved and its cache key computed.
+pub(crate) struct StageJob<'a> {
+    pub registry: &'a Registry,
+    pub stage: &'a PlannedStage,
+    pub inputs: Vec<InputArtifact>,
+    pub input_hashes: BTreeMap<String, String>,
+    pub seed: u64,
+    pub key_hash: String,
+}
+
+impl StageJob<'_> {
+    /// The context the stage runs in, writing into `out_dir`.
+    pub fn context(&self, out_dir: PathBuf, progress: Option<&indicatif::MultiProgress>) -> StageContext {
+        StageContext {
+            stage: self.stage.name.clone(),
+            params: self.stage.params.clone(),
+            inputs: self.inputs.clone(),
+            seed: self.seed,
+            stage_hash: self.key_hash.clone(),
+            params_hash: sha256_hex(serde_json::to_string(&self.stage.params).expect("serialisable").as_bytes()),
+            out_dir,
+            rows: 0,
+            progress: progress.cloned(),
+        }
+    }
+
+    /// Runs the stage into the empty folder `staged` and writes its record there
+    /// (CPU time and peak memory measured when `measure_usage`).
+    pub fn run_into(
+        self,
+        staged: &Path,
+        progress: Option<&indicatif::MultiProgress>,
+        measure_usage: bool,
+    ) -> Result<StageRecord, RunError> {
+        let (registry, stage) = (self.registry, self.stage);
+        self.record_run(staged, progress, measure_usage, 0.0, |ctx| run_kind(registry, stage, ctx))
+    }
+
+    /// Runs `body` in the stage's context writing into the empty folder `staged`, then
+    /// writes the stage's record there; `earlier_wall_s` is time spent on the stage's
+    /// work elsewhere (a split stage's units), added to the record's wall time.
+    pub fn record_run(
+        self,
+        staged: &Path,
+        progress: Option<&indicatif::MultiProgress>,
+        measure_usage: bool,
+        earlier_wall_s: f64,
+        body: impl FnOnce(&mut StageContext) -> Result<(), StageError>,
+    ) -> Result<StageRecord, RunError> {
+        let stage = self.stage;
+        let mut ctx = self.context(staged.to_path_buf(), progress);
+        let started = Instant::now();
+        let meter = measure_usage.then(Meter::start);
+        body(&mut ctx).map_err(|e| stage_failed(stage, e))?;
+        let wall_time_s = earlier_wall_s + started.elapsed().as_secs_f64();
+        let usage = meter.as_ref().map(Meter::finish);
+        let (output_hash, files) = dir_hash(staged).map_err(|e| io_error(staged, e))?;
+        let record = StageRecord {
+            stage: stage.name.clone(),
+            kind: stage.kind.to_string(),
+            kind_version: stage.kind_version,
+            tool_version: TOOL_VERSION.to_string(),
+            key_hash: self.key_hash,
+            params: stage.params.clone(),
+            seed: self.seed,
+            input_hashes: self.input_hashes,
+            output_hash,
+            outputs: files.into_iter().map(|(path, sha256)| OutputFile { path, sha256 }).collect(),
+            rows: ctx.rows,
+            wall_time_s,
+            cpu_time_s: usage.and_then(|u| u.cpu_time_s),
+            peak_rss_bytes: usage.and_then(|u| u.peak_rss_bytes),
+        };
+        write_record(staged, &record).map_err(|e| stage_failed(stage, e))?;
+        Ok(record)
+    }
+}
+
+/// Runs `f`, a panic becoming its error.
+pub(crate) fn caught(f: impl FnOnce() -> Result<(), StageError>) -> Result<(), StageError> {
+    crate::panic::catch(f).unwrap_or_else(|m| Err(StageError::Panic(m)))
+}
+
+/// Writes `record` as the record file of the stage folder `dir`.
+pub(crate) fn write_record(dir: &Path, record: &StageRecord) -> Result<(), StageError> {
+    let json = serde_json::to_vec_pretty(record).expect("serialisable");
+    crate::artifact::write_atomic(&dir.join(RECORD_FILE), &json)
+}
+
+pub(crate) fn stage_failed(stage: &PlannedStage, source: StageError) -> RunError {
+    RunError::Stage { stage: stage.name.clone(), kind: stage.kind.to_string(), source }
+}
+
+pub(crate) fn io_error(path: &Path, source: std::io::Error) -> RunError {
+    RunError::Io { path: path.to_path_buf(), source }
+}
+
+/// Runs the kind, a panic becoming its error. A kind that splits draws its own
+/// progress bar over its units; any other gets a spinner if it is still running
+/// after a second, stopped however the kind ends.
+fn run_kind(registry: &Registry, stage: &PlannedStage, ctx: &mut StageContext) -> Result<(), StageError> {
+    let kind = registry.get(stage.kind).expect("planned kinds are registered");
+    let run = |ctx: &mut StageContext| caught(|| kind.run(ctx));
+    let Some(multi) = ctx.progress.clone().filter(|_| kind.split().is_none()) else {
+        return run(ctx);
+    };
+    let (done_tx, done_rx) = mpsc::channel::<()>();
+    std::thread::scope(|scope| {
+        scope.spawn(|| spinner_after_a_second(&multi, &stage.name, done_rx));
+        let result = run(ctx);
+        drop(done_tx);
+        result
+    })
 }
 
 /// Removes the temp files of a commit that will not happen.

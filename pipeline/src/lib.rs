@@ -22,9 +22,11 @@ pub mod manifest;
 pub mod panic;
 pub mod params;
 pub mod plan;
+pub mod snakefile;
 pub mod spec;
 pub mod stage;
 pub mod testing;
+pub mod units;
 pub mod usage;
 
 pub use error::{SpecError, StageError};
@@ -33,7 +35,7 @@ pub use lock::OutLock;
 pub use manifest::{Manifest, StageRecord};
 pub use params::{ParamSpec, ParamType, ParamValue, Params};
 pub use plan::Plan;
-pub use stage::{InputArtifact, Registry, StageContext, StageKind};
+pub use stage::{InputArtifact, Registry, Split, StageContext, StageKind, Unit};
 
 /// The version of this tool, written into every artifact and manifest.
 pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -50,8 +50,42 @@ pub trait StageKind: Send + Sync {
     fn params(&self) -> &'static [ParamSpec];
     /// How many inputs it takes.
     fn arity(&self) -> Arity;
-    /// Runs the stage.
+    /// Runs the stage. A kind that splits ([`StageKind::split`]) runs as
+    /// [`crate::units::run_split`]: every unit, then the merge.
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError>;
+    /// How the kind's work splits into independent units (draws, subsets, re-prints),
+    /// for runs spread over processes or machines ([`crate::units`]); `None`, the
+    /// default, for a stage that is one unit.
+    fn split(&self) -> Option<&dyn Split> {
+        None
+    }
+}
+
+/// One independent piece of a split stage's work.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Unit {
+    /// Says which part of the work it is (`base 1 draws 200-249`); stable for a spec.
+    pub key: String,
+    /// Its estimated cost, relative: 1 is a light stage run once.
+    pub cost: f64,
+}
+
+/// A stage kind whose work is a list of independent units and a merge of their parts.
+///
+/// The contract that makes a run spread over workers give the same bytes as a run in
+/// one process: the units depend only on the checked parameters and the number of
+/// inputs (so they are known before anything runs); a unit's part depends only on the
+/// stage's context and the unit's index (its randomness seeded from `ctx.seed` and the
+/// work's own indices, never from the unit boundaries); and `merge` reads the parts in
+/// unit order. A one-process run goes through the same three steps
+/// ([`crate::units::run_split`]), parts on disk included.
+pub trait Split: Send + Sync {
+    /// The units, from the checked parameters and the number of inputs.
+    fn units(&self, params: &Params, inputs: usize) -> Vec<Unit>;
+    /// Runs unit `index`, writing its part into `ctx`'s output folder.
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError>;
+    /// Writes the stage's outputs from the parts' folders, given in unit order.
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError>;
 }
 
 /// One input of a running stage: a folder of files.
@@ -112,6 +146,22 @@ impl StageContext {
         Ok(path)
     }
 
+    /// The same context writing into `out_dir` instead, with no progress bars: what
+    /// one unit of a split stage runs in.
+    pub(crate) fn for_unit(&self, out_dir: PathBuf) -> Self {
+        Self {
+            stage: self.stage.clone(),
+            params: self.params.clone(),
+            inputs: self.inputs.clone(),
+            seed: self.seed,
+            stage_hash: self.stage_hash.clone(),
+            params_hash: self.params_hash.clone(),
+            out_dir,
+            rows: 0,
+            progress: None,
+        }
+    }
+
     /// A progress bar for `len` steps of work, drawn while the stage is running for
     /// more than a second (hidden when output is not a terminal or with `--quiet`).
     pub fn progress(&self, len: u64) -> indicatif::ProgressBar {
@@ -120,7 +170,7 @@ impl StageContext {
             return indicatif::ProgressBar::hidden();
         };
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{prefix:>18} [{bar:30}] {pos}/{len} {elapsed}")
+            indicatif::ProgressStyle::with_template("{prefix:>18} [{bar:30}] {pos}/{len} {elapsed}, about {eta} left")
                 .expect("valid template")
                 .progress_chars("=> "),
         );

@@ -9,6 +9,7 @@ mod discrepancy_tables;
 pub mod effects;
 pub mod fdm;
 pub mod inkjet;
+pub mod parts;
 pub mod table;
 pub mod thermal;
 

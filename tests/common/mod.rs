@@ -56,7 +56,8 @@ pub fn fails(cwd: &Path, args: &[&str]) -> String {
     text
 }
 
-fn text(out: &Output) -> String {
+/// A finished command's standard output and error, for messages.
+pub fn text(out: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
 }
 
@@ -169,4 +170,45 @@ pub fn strings(df: &polars::prelude::DataFrame, column: &str) -> Vec<String> {
 /// A float column (nulls as NaN).
 pub fn floats(df: &polars::prelude::DataFrame, column: &str) -> Vec<f64> {
     df.column(column).unwrap().f64().unwrap().iter().map(|x| x.unwrap_or(f64::NAN)).collect()
+}
+
+/// `scale.toml` in `dir`: a power study split into eight work units (two bases × four
+/// blocks of draws; docs/SCALE.md), its inputs, and a figure of it that `collect` draws
+/// (the tail).
+pub fn split_study_spec(dir: &Path) -> PathBuf {
+    let raw = data_root().join("fsu-linewidth");
+    let text = format!(
+        r#"[run]
+name = "scale"
+title = "A power study spread over workers"
+seed = 7
+
+[dataset.fsu_raw]
+path = "{raw}"
+
+[stage.taz5]
+kind = "fdm.import"
+inputs = ["fsu_raw"]
+params = {{ printer = "taz5" }}
+
+[stage.taz6]
+kind = "fdm.import"
+inputs = ["fsu_raw"]
+params = {{ printer = "taz6" }}
+
+[stage.power]
+kind = "fdm.discovery_power"
+inputs = ["taz5", "taz6"]
+params = {{ start_blob = "taz5", {TEST_POWER_STUDY}, draws_per_unit = 3 }}
+publish = {{ "power.parquet" = "discrepancy/power.parquet", "power_draws.parquet" = "discrepancy/power_draws.parquet" }}
+
+[stage.power_curves]
+kind = "figure.fdm_discovery_power"
+inputs = ["power"]
+"#,
+        raw = raw.display()
+    );
+    let path = dir.join("scale.toml");
+    std::fs::write(&path, text).unwrap();
+    path
 }

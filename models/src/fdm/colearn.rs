@@ -156,6 +156,17 @@ pub fn transfer_matrix(
     tasks: &[TransferTask],
     transfer: &TransferValidParams,
 ) -> Result<Vec<MatrixRow>, FitError> {
+    transfer_matrix_observed(printers, tasks, transfer, &|_, _| {})
+}
+
+/// [`transfer_matrix`], calling `target_done(done, of)` after each target printer's
+/// rows (for a progress bar).
+pub fn transfer_matrix_observed(
+    printers: &[StudyPrinter],
+    tasks: &[TransferTask],
+    transfer: &TransferValidParams,
+    target_done: &dyn Fn(usize, usize),
+) -> Result<Vec<MatrixRow>, FitError> {
     check_tasks(printers, tasks)?;
     let mut used: Vec<usize> = tasks.iter().flat_map(|t| t.sources.iter().copied()).collect();
     used.sort_unstable();
@@ -169,8 +180,9 @@ pub fn transfer_matrix(
     targets.sort_unstable();
     targets.dedup();
     let mut rows = Vec::new();
-    for target in targets {
+    for (done, &target) in targets.iter().enumerate() {
         rows.extend(target_rows(printers, tasks, target, &sources, transfer)?);
+        target_done(done + 1, targets.len());
     }
     rows.sort_by_key(|r| r.task);
     Ok(rows)

@@ -43,7 +43,8 @@ pub mod transfer_cv;
 mod test_support;
 
 pub use colearn::{
-    default_tasks, summarise, transfer_matrix, MatrixMethod, MatrixRow, MatrixSummary, StudyPrinter, TransferTask,
+    default_tasks, summarise, transfer_matrix, transfer_matrix_observed, MatrixMethod, MatrixRow, MatrixSummary,
+    StudyPrinter, TransferTask,
 };
 pub use errors::{FitError, KinematicsError, ParamError};
 pub use fit::{fit, fit_at};

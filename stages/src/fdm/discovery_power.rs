@@ -9,18 +9,29 @@
 //! none counts, the correct rate with its Clopper–Pearson interval, the false-alarm
 //! rate, and how often the strength's interval covered the truth) and
 //! `power_draws.parquet` (one row per draw).
+//!
+//! It splits into work units ([`pipeline::Split`], [`crate::parts`]): blocks of
+//! `draws_per_unit` consecutive draws of one base. Each unit runs the engine once on
+//! its base as measured (the own causes every draw starts from) and then its draws;
+//! the merge stacks the units' rows and summarises them.
 
+use std::path::PathBuf;
+
+use discrepancy::power::{DrawScore, Outcome};
 use discrepancy::stats::mix_seed;
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
-use models::fdm::discrepancy::power::{names, run_draws, summarize, Base, DrawResult, Noise, PowerDesign};
+use models::fdm::discrepancy::power::{names, run_draw_range, Base, DrawResult, Noise, PowerDesign};
 use models::fdm::discrepancy::FdmModel;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use polars::prelude::{IntoColumn, NamedFrom, Series};
 
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
-use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::parts::{draw_units, listed, read_parts, unit_draws, without, COVERED, DRAWS_PER_UNIT, PART_TABLE};
+use crate::table::{f64_col, f64_column, frame, i64_col, opt_bool_column, str_col, str_column};
 
 /// The `fdm.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
@@ -82,7 +93,14 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(500),
         doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
     },
+    DRAWS_PER_UNIT,
 ];
+
+/// The effects the study hides, in the order of its cells.
+const STUDIED: [Effect; 3] = [Effect::BedTilt, Effect::GearEccentricity, Effect::FlowSaturation];
+
+/// The part's bookkeeping columns, beyond those of `power_draws.parquet`.
+const PART_ONLY: [&str; 2] = ["own_causes", COVERED];
 
 impl StageKind for DiscoveryPowerStage {
     fn name(&self) -> &'static str {
@@ -105,33 +123,90 @@ impl StageKind for DiscoveryPowerStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+impl Split for DiscoveryPowerStage {
+    fn units(&self, params: &Params, inputs: usize) -> Vec<Unit> {
+        let cells: usize = STUDIED.iter().map(|e| listed(params, e.name())).sum();
+        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
+        draw_units(inputs, draws, params.i64("draws_per_unit") as usize)
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let printers = read_printers(ctx)?;
         let blob = StartBlob::parse(ctx, &printers)?;
         let design = design(ctx)?;
-        let smoothing = ctx.params.f64("smoothing_mm");
-        let (mut rows, mut draws) = (PowerRows::default(), DrawRows::default());
-        for (b, (printer, lines)) in printers.into_iter().enumerate() {
-            let model = FdmModel::new(&lines, blob.has(&printer), smoothing);
+        let (b, range) = unit_draws(index, design.draw_count(), ctx.params.i64("draws_per_unit") as usize);
+        let mut rows = DrawRows::default();
+        if let Some((printer, lines)) = printers.into_iter().nth(b) {
+            let model = FdmModel::new(&lines, blob.has(&printer), ctx.params.f64("smoothing_mm"));
             let base =
                 Base::new(printer.clone(), model, lines, &design.engine).map_err(|e| engine_failed(&printer, e))?;
-            let base_design = PowerDesign { seed: mix_seed(design.seed, b as u64, 0), ..design.clone() };
-            let results = run_draws(&base, &base_design).map_err(|e| engine_failed(&printer, e))?;
-            rows.add(&base, design.noise, &results);
-            draws.add(&base.label, &results);
+            let base_design = PowerDesign { seed: mix_seed(design.seed, b as u64, 0), ..design };
+            let results = run_draw_range(&base, &base_design, range).map_err(|e| engine_failed(&printer, e))?;
+            rows.add(&base, &results);
         }
-        let mut power = rows.into_frame()?;
+        let mut part = rows.into_frame()?;
+        ctx.write_table(PART_TABLE, &mut part)?;
+        Ok(())
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        let all = read_parts(parts)?;
+        let mut power = power_rows(ctx, &all)?.into_frame()?;
         ctx.write_table("power", &mut power)?;
-        let mut per_draw = draws.into_frame()?;
+        let mut per_draw = without(&all, &PART_ONLY)?;
         ctx.write_table("power_draws", &mut per_draw)?;
         Ok(())
     }
+}
+
+/// The power table of the stacked parts: per base, in order, its draws summarised.
+fn power_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<PowerRows, StageError> {
+    let bad = |what: &str, value: &str| StageError::BadInput {
+        file: ctx.output_dir().join("parts"),
+        location: None,
+        expected: format!("a known {what}, got `{value}`"),
+    };
+    let file = ctx.output_dir().join("parts");
+    let text = |name: &str| str_column(all, &file, name);
+    let (base, own, effect, outcome) = (text("base")?, text(PART_ONLY[0])?, text("effect")?, text("outcome")?);
+    let (strength, covered) = (f64_column(all, &file, "strength")?, opt_bool_column(all, &file, PART_ONLY[1])?);
+    let noise = if ctx.params.str("noise") == "white" { Noise::White } else { Noise::Measured };
+    let mut labels: Vec<&str> = Vec::new();
+    for b in &base {
+        if !labels.contains(&b.as_str()) {
+            labels.push(b);
+        }
+    }
+    let mut rows = PowerRows::default();
+    for label in labels {
+        let mut scores = Vec::new();
+        for i in (0..base.len()).filter(|&i| base[i] == label) {
+            scores.push(DrawScore {
+                effect: Effect::parse(&effect[i]).ok_or_else(|| bad("effect", &effect[i]))?.name(),
+                strength: strength[i],
+                outcome: Outcome::parse(&outcome[i]).ok_or_else(|| bad("outcome", &outcome[i]))?,
+                covered: covered[i],
+            });
+        }
+        let own_causes = &own[base.iter().position(|b| b == label).expect("a label of the rows")];
+        rows.add(label, own_causes, noise, &scores);
+    }
+    Ok(rows)
 }
 
 /// The study's design from the parameters.
 fn design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
     let p = &ctx.params;
     let mut cells = Vec::new();
-    for effect in [Effect::BedTilt, Effect::GearEccentricity, Effect::FlowSaturation] {
+    for effect in STUDIED {
         for strength in strengths(ctx, effect)? {
             cells.push((effect, strength));
         }
@@ -179,11 +254,11 @@ struct PowerRows {
 }
 
 impl PowerRows {
-    fn add(&mut self, base: &Base, noise: Noise, results: &[DrawResult]) {
-        for row in summarize(results) {
+    fn add(&mut self, base: &str, own_causes: &str, noise: Noise, scores: &[DrawScore]) {
+        for row in discrepancy::power::summarize(scores) {
             self.noise.push(noise.name().into());
-            self.base.push(base.label.clone());
-            self.own.push(names(&base.own));
+            self.base.push(base.into());
+            self.own.push(own_causes.into());
             self.effect.push(row.effect.into());
             self.strength.push(row.strength);
             self.draws.push(row.draws as i64);
@@ -246,12 +321,16 @@ struct DrawRows {
     named: Vec<String>,
     outcome: Vec<String>,
     fitted: [Vec<f64>; 3],
+    own: Vec<String>,
+    covered: Vec<Option<bool>>,
 }
 
 impl DrawRows {
-    fn add(&mut self, base: &str, results: &[DrawResult]) {
+    fn add(&mut self, base: &Base, results: &[DrawResult]) {
         for d in results {
-            self.base.push(base.into());
+            self.base.push(base.label.clone());
+            self.own.push(names(&base.own));
+            self.covered.push(d.covered());
             self.effect.push(d.effect.name().into());
             self.strength.push(d.strength);
             self.draw.push(d.draw as i64);
@@ -277,6 +356,8 @@ impl DrawRows {
             f64_col("estimate", estimate),
             f64_col("ci_lo", lo),
             f64_col("ci_hi", hi),
+            str_col(PART_ONLY[0], self.own),
+            Series::new(PART_ONLY[1].into(), self.covered).into_column(),
         ])
     }
 }

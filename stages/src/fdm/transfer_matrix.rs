@@ -14,7 +14,7 @@
 //!   method, rmse_mm, lambda, prior (one row per prediction).
 
 use models::fdm::{
-    default_tasks, summarise, transfer_matrix, MatrixRow, PiecewiseParams, PiecewiseValidParams, StudyPrinter,
+    default_tasks, summarise, transfer_matrix_observed, MatrixRow, PiecewiseParams, PiecewiseValidParams, StudyPrinter,
     TransferParams, TransferTask,
 };
 use pipeline::params::ParamDefault;
@@ -88,7 +88,13 @@ impl StageKind for TransferMatrixStage {
             .check()
             .map_err(|e| fit_failed("transfer parameters", e))?;
         let tasks = default_tasks(study.len(), ctx.params.bool("co_learning"));
-        let rows = transfer_matrix(&study, &tasks, &transfer).map_err(|e| fit_failed("transfer matrix", e))?;
+        let bar = ctx.progress(printers.len() as u64);
+        let rows = transfer_matrix_observed(&study, &tasks, &transfer, &|done, of| {
+            bar.set_length(of as u64);
+            bar.set_position(done as u64);
+        })
+        .map_err(|e| fit_failed("transfer matrix", e))?;
+        bar.finish_and_clear();
         let draws = ctx.params.i64("bootstrap_draws") as usize;
         let summary = summarise(&rows, draws, ctx.seed);
         let names = task_names(&tasks, &printers);

@@ -15,23 +15,26 @@
 //! columns of `fdm.discovery_power`'s) and `power_draws.parquet` (one row per draw,
 //! with each candidate's first-round p-value).
 
+use std::path::PathBuf;
+
 use datasets::inkjet::InkjetScans;
 use discrepancy::discover;
-use discrepancy::power::summarize;
 use models::inkjet::discrepancy::mechanisms::CANDIDATES;
-use models::inkjet::discrepancy::power::{names, run_draws, DrawResult, PowerDesign, PrintDesign};
+use models::inkjet::discrepancy::power::{names, run_draw_range, DrawResult, PowerDesign, PrintDesign};
 use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
 use models::inkjet::printer::Effect;
 use models::inkjet::{DropletCoeffs, Grid};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, engine_settings, max_rounds, power_frame, study_settings, DiscrepancyTables,
-    Domain, DrawRow, ALPHA, BINS, BOOTSTRAP_DRAWS,
+    draws_frame as shared_draws_frame, engine_settings, max_rounds, study_settings, DiscrepancyTables, Domain, DrawRow,
+    ALPHA, BINS, BOOTSTRAP_DRAWS,
 };
 use crate::effects::strength_list;
+use crate::parts::{draw_units, listed, merge_study, unit_draws, write_study_part, DRAWS_PER_UNIT};
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
 const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
@@ -188,6 +191,7 @@ const POWER_PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(200),
         doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
     },
+    DRAWS_PER_UNIT,
 ];
 
 impl StageKind for DiscoveryPowerStage {
@@ -211,15 +215,33 @@ impl StageKind for DiscoveryPowerStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: blocks of `draws_per_unit` consecutive draws ([`crate::parts`]).
+impl Split for DiscoveryPowerStage {
+    fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
+        let cells: usize = STUDIED.iter().map(|e| listed(params, e.name())).sum();
+        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
+        draw_units(1, draws, params.i64("draws_per_unit") as usize)
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let design = power_design(ctx)?;
-        let results = run_draws(&design).map_err(StageError::domain)?;
+        let (_, range) = unit_draws(index, design.draw_count(), ctx.params.i64("draws_per_unit") as usize);
+        let results = run_draw_range(&design, range).map_err(StageError::domain)?;
         let base = format!("cylinder r{} × {} layers", design.print.radius_cells, design.print.layers);
-        let scores: Vec<_> = results.iter().map(DrawResult::score).collect();
-        let mut power = power_frame(&base, &summarize(&scores))?;
-        ctx.write_table("power", &mut power)?;
-        let mut draws = draws_frame(&base, &results)?;
-        ctx.write_table("power_draws", &mut draws)?;
-        Ok(())
+        let covered = results.iter().map(|d| d.score().covered).collect();
+        write_study_part(ctx, draws_frame(&base, &results)?, covered)
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        merge_study(ctx, parts, &STUDIED.map(|e| e.name()))
     }
 }
 

@@ -77,25 +77,7 @@ pub fn read_table(dir: &Path, file: &str) -> Result<DataFrame, StageError> {
     pipeline::artifact::read_parquet(&dir.join(file))
 }
 
-/// A column of floats of `df` (read from `file`), nulls as NaN.
-pub fn f64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<f64>, StageError> {
-    let series = pipeline::artifact::column(df, name, file)?;
-    let cast = series
-        .cast(&polars::prelude::DataType::Float64)
-        .map_err(|source| StageError::Table { path: file.into(), source })?;
-    let values = cast.f64().map_err(|source| StageError::Table { path: file.into(), source })?;
-    Ok(values.iter().map(|v| v.unwrap_or(f64::NAN)).collect())
-}
-
-/// A column of integers of `df` (read from `file`).
-pub fn i64_column(df: &DataFrame, file: &Path, name: &str) -> Result<Vec<i64>, StageError> {
-    let series = pipeline::artifact::column(df, name, file)?;
-    let cast = series
-        .cast(&polars::prelude::DataType::Int64)
-        .map_err(|source| StageError::Table { path: file.into(), source })?;
-    let values = cast.i64().map_err(|source| StageError::Table { path: file.into(), source })?;
-    Ok(values.iter().map(|v| v.unwrap_or(-1)).collect())
-}
+pub use crate::table::{f64_column, i64_column};
 
 /// A domain error about one file of the sequence.
 pub fn bad_input(seq: &ThermalSequence, file: &str, err: impl std::fmt::Display) -> StageError {

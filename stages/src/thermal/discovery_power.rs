@@ -15,23 +15,25 @@
 //! and `power_draws.parquet` (one row per draw, with each candidate's first-round
 //! p-value).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use datasets::thermal::Effects;
-use discrepancy::power::{summarize, DrawScore, DrawVerdict, Outcome};
+use discrepancy::power::{DrawScore, DrawVerdict, Outcome};
 use discrepancy::stats::mix_seed;
 use discrepancy::Mechanism;
 use models::thermal::discrepancy::{candidate_index, CANDIDATES};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
 use rayon::prelude::*;
 
 use super::discrepancy::WIDTH_CLEARANCE;
 use super::filmed_print::{named_list, FilmedPrint, Filming};
 use super::monitor;
-use crate::discrepancy_tables::{draws_frame, max_rounds, power_frame, DrawRow, ALPHA};
+use crate::discrepancy_tables::{draws_frame, max_rounds, DrawRow, ALPHA};
 use crate::effects::strength_list;
+use crate::parts::{draw_units, listed, merge_study, unit_draws, write_study_part, DRAWS_PER_UNIT};
 
 /// The `thermal.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
@@ -102,6 +104,7 @@ const PARAMS: &[ParamSpec] = &[
     monitor::STUDY_PARAMS[1],
     monitor::STUDY_PARAMS[2],
     monitor::STUDY_PARAMS[3],
+    DRAWS_PER_UNIT,
 ];
 
 impl StageKind for DiscoveryPowerStage {
@@ -125,21 +128,41 @@ impl StageKind for DiscoveryPowerStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: blocks of `draws_per_unit` consecutive prints ([`crate::parts`]).
+impl Split for DiscoveryPowerStage {
+    fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
+        let cells: usize = STUDIED.iter().map(|(effect, _, _)| listed(params, effect)).sum();
+        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
+        draw_units(1, draws, params.i64("draws_per_unit") as usize)
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let design = Design::from_params(ctx)?;
+        let jobs = design.jobs();
+        let (_, range) = unit_draws(index, jobs.len(), ctx.params.i64("draws_per_unit") as usize);
         let scratch = ctx.output_dir().join("scratch");
-        let draws: Vec<Draw> = design
-            .jobs()
+        let draws: Vec<Draw> = jobs[range]
             .par_iter()
             .map(|job| design.draw(job, &scratch.join(format!("draw_{}_{}", job.cell, job.draw))))
             .collect::<Result<_, _>>()?;
         std::fs::remove_dir_all(&scratch).ok();
         let base = format!("corner test part × {} layers", design.filming.layers);
-        let scores: Vec<DrawScore> = draws.iter().map(Draw::score).collect();
-        ctx.write_table("power", &mut power_frame(&base, &summarize(&scores))?)?;
         let rows: Vec<DrawRow<'_>> = draws.iter().map(Draw::row).collect();
         let candidates: Vec<&str> = CANDIDATES.iter().map(Mechanism::name).collect();
-        ctx.write_table("power_draws", &mut draws_frame(&base, &rows, &candidates)?)?;
-        Ok(())
+        let covered = draws.iter().map(|d| d.score().covered).collect();
+        write_study_part(ctx, draws_frame(&base, &rows, &candidates)?, covered)
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        merge_study(ctx, parts, &STUDIED.map(|(effect, _, _)| effect))
     }
 }
 

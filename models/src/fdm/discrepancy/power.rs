@@ -48,6 +48,13 @@ pub struct PowerDesign {
     pub noise: Noise,
 }
 
+impl PowerDesign {
+    /// How many draws the design makes on one base.
+    pub fn draw_count(&self) -> usize {
+        self.null_draws + self.cells.len() * self.draws_per_cell
+    }
+}
+
 /// The noise of a draw around the own-cause model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Noise {
@@ -160,13 +167,25 @@ impl DrawResult {
 /// Runs every draw of `design` on `base`, in parallel; the results are in design order
 /// and do not depend on the number of threads.
 pub fn run_draws(base: &Base, design: &PowerDesign) -> Result<Vec<DrawResult>, PowerError> {
+    run_draw_range(base, design, 0..design.draw_count())
+}
+
+/// Draws `range` of [`run_draws`]' list (null draws first, then each cell's), in
+/// parallel: a draw's result depends only on its place in the list, so a study split
+/// into ranges gives the draws of the whole.
+pub fn run_draw_range(
+    base: &Base,
+    design: &PowerDesign,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<DrawResult>, PowerError> {
     let surrogates = Surrogates::new(base.lines.iter().map(|l| l.line.len()));
     let mut jobs: Vec<(usize, Effect, f64, usize)> =
         (0..design.null_draws).map(|d| (0, Effect::None, 0.0, d)).collect();
     for (c, &(effect, strength)) in design.cells.iter().enumerate() {
         jobs.extend((0..design.draws_per_cell).map(|d| (c + 1, effect, strength, d)));
     }
-    jobs.par_iter()
+    jobs[range]
+        .par_iter()
         .map(|&(cell, effect, strength, draw)| {
             let seed = mix_seed(design.seed, cell as u64, draw as u64);
             one_draw(base, design, &surrogates, effect, strength, draw, seed)

@@ -67,6 +67,13 @@ pub struct PowerDesign {
     pub engine: Settings,
 }
 
+impl PowerDesign {
+    /// How many draws the design makes.
+    pub fn draw_count(&self) -> usize {
+        self.null_draws + self.cells.len() * self.draws_per_cell
+    }
+}
+
 /// Why a draw could not be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PowerError {
@@ -139,12 +146,20 @@ pub fn print_of(scenario: &Scenario, recording: &PrintRecording) -> Result<Inkje
 /// Runs every draw of `design`, in parallel; results in design order, independent of
 /// the number of threads.
 pub fn run_draws(design: &PowerDesign) -> Result<Vec<DrawResult>, PowerError> {
+    run_draw_range(design, 0..design.draw_count())
+}
+
+/// Draws `range` of [`run_draws`]' list (null draws first, then each cell's), in
+/// parallel: a draw depends only on its place in the list, so a study split into
+/// ranges gives the draws of the whole.
+pub fn run_draw_range(design: &PowerDesign, range: std::ops::Range<usize>) -> Result<Vec<DrawResult>, PowerError> {
     let mut jobs: Vec<(usize, Option<Effect>, f64, usize)> =
         (0..design.null_draws).map(|d| (0, None, 0.0, d)).collect();
     for (c, &(effect, strength)) in design.cells.iter().enumerate() {
         jobs.extend((0..design.draws_per_cell).map(|d| (c + 1, Some(effect), strength, d)));
     }
-    jobs.par_iter()
+    jobs[range]
+        .par_iter()
         .map(|&(cell, effect, strength, draw)| {
             one_draw(design, effect, strength, draw, mix_seed(design.seed, cell as u64, draw as u64))
         })

@@ -1,0 +1,164 @@
+//! The work units of the power studies (`pipeline::units`): a study's draws on each
+//! base, cut into blocks of consecutive draws, each block's per-draw rows written as
+//! one Parquet part, and the parts read back in order for the merge. A draw's result
+//! depends only on its base and its place in the base's draw list, never on the block
+//! it falls in, so the cut changes how the work is spread, not what it gives.
+
+use std::ops::Range;
+use std::path::PathBuf;
+
+use discrepancy::power::{summarize, DrawScore, Outcome};
+use pipeline::artifact::read_parquet;
+use pipeline::params::ParamDefault;
+use pipeline::{ParamSpec, ParamType, Params, StageContext, StageError, Unit};
+use polars::prelude::{DataFrame, IntoColumn, NamedFrom, PlSmallStr, Series};
+
+use crate::discrepancy_tables::power_frame;
+use crate::table::{opt_bool_column, str_column};
+
+/// The file of a unit's part in its folder.
+pub const PART_TABLE: &str = "part";
+/// The part's column saying whether a draw's strength interval covered the truth (null:
+/// no interval), which the summary needs and `power_draws.parquet` does not carry.
+pub const COVERED: &str = "covered";
+
+/// The `draws_per_unit` parameter of every power study.
+pub const DRAWS_PER_UNIT: ParamSpec = ParamSpec {
+    name: "draws_per_unit",
+    ty: ParamType::Int { min: 1, max: 100_000 },
+    default: ParamDefault::Int(50),
+    doc: "Draws per work unit of a spread-out run (`amrepro plan`, docs/SCALE.md); how the work is cut, not what it gives.",
+};
+
+/// How many strengths the text parameter `name` lists (the cells of one effect),
+/// counted before they are checked (a bad one fails the unit that parses it).
+pub fn listed(params: &Params, name: &str) -> usize {
+    params.str(name).split(',').filter(|s| !s.trim().is_empty()).count()
+}
+
+/// Writes one unit's part of a power study on a virtual printer: its rows of
+/// `power_draws.parquet` and whether each draw's interval covered the truth.
+pub fn write_study_part(
+    ctx: &mut StageContext,
+    draws: DataFrame,
+    covered: Vec<Option<bool>>,
+) -> Result<(), StageError> {
+    let mut part = draws;
+    part.with_column(Series::new(COVERED.into(), covered).into_column())
+        .map_err(|source| StageError::Table { path: ctx.output_dir().join(PART_TABLE), source })?;
+    ctx.write_table(PART_TABLE, &mut part)?;
+    Ok(())
+}
+
+/// The merge of a power study on a virtual printer (one base, [`write_study_part`]):
+/// `power_draws.parquet` is the parts' rows, `power.parquet` their summary; `effects`
+/// are the study's effect names (`none` is added).
+pub fn merge_study(ctx: &mut StageContext, parts: &[PathBuf], effects: &[&'static str]) -> Result<(), StageError> {
+    let all = read_parts(parts)?;
+    let file = ctx.output_dir().join("parts");
+    let (base, effect, outcome) =
+        (str_column(&all, &file, "base")?, str_column(&all, &file, "effect")?, str_column(&all, &file, "outcome")?);
+    let strength = crate::table::f64_column(&all, &file, "strength")?;
+    let covered = opt_bool_column(&all, &file, COVERED)?;
+    let bad = |what: &str, value: &str| StageError::BadInput {
+        file: file.clone(),
+        location: None,
+        expected: format!("a known {what}, got `{value}`"),
+    };
+    let scores = (0..all.height())
+        .map(|i| {
+            let name = std::iter::once("none").chain(effects.iter().copied()).find(|e| *e == effect[i]);
+            Ok(DrawScore {
+                effect: name.ok_or_else(|| bad("effect", &effect[i]))?,
+                strength: strength[i],
+                outcome: Outcome::parse(&outcome[i]).ok_or_else(|| bad("outcome", &outcome[i]))?,
+                covered: covered[i],
+            })
+        })
+        .collect::<Result<Vec<_>, StageError>>()?;
+    let label = base.first().cloned().unwrap_or_default();
+    ctx.write_table("power", &mut power_frame(&label, &summarize(&scores))?)?;
+    ctx.write_table("power_draws", &mut without(&all, &[COVERED])?)?;
+    Ok(())
+}
+
+/// The blocks of a study of `draws` draws on each of `bases` bases, `per_unit` draws
+/// each (the last block of a base may be shorter); a base with no draws is one empty
+/// unit, so that every base is visited. Keys name the base when there are several.
+pub fn draw_units(bases: usize, draws: usize, per_unit: usize) -> Vec<Unit> {
+    (0..bases)
+        .flat_map(|b| {
+            block_ranges(draws, per_unit).map(move |r| Unit {
+                key: match bases {
+                    1 => format!("draws {}-{}", r.start, r.end.saturating_sub(1)),
+                    _ => format!("base {b} draws {}-{}", r.start, r.end.saturating_sub(1)),
+                },
+                cost: r.len().max(1) as f64,
+            })
+        })
+        .collect()
+}
+
+/// Unit `index` of [`draw_units`] as (base, range of its draws).
+pub fn unit_draws(index: usize, draws: usize, per_unit: usize) -> (usize, Range<usize>) {
+    let per_base = block_ranges(draws, per_unit).count();
+    let block = block_ranges(draws, per_unit).nth(index % per_base).expect("index within the base's blocks");
+    (index / per_base, block)
+}
+
+fn block_ranges(draws: usize, per_unit: usize) -> impl Iterator<Item = Range<usize>> + Clone {
+    let per_unit = per_unit.max(1);
+    let blocks = draws.div_ceil(per_unit).max(1);
+    (0..blocks).map(move |k| (k * per_unit).min(draws)..((k + 1) * per_unit).min(draws))
+}
+
+/// The parts, stacked in unit order into one single-chunk table.
+pub fn read_parts(parts: &[PathBuf]) -> Result<DataFrame, StageError> {
+    let mut stacked: Option<DataFrame> = None;
+    for dir in parts {
+        let path = dir.join(format!("{PART_TABLE}.parquet"));
+        let part = read_parquet(&path)?;
+        match &mut stacked {
+            None => stacked = Some(part),
+            Some(all) => {
+                all.vstack_mut(&part).map_err(|source| StageError::Table { path: path.clone(), source })?;
+            }
+        }
+    }
+    let mut all = stacked.unwrap_or_default();
+    all.rechunk_mut();
+    Ok(all)
+}
+
+/// `df` without the columns `drop` (the parts' bookkeeping columns).
+pub fn without(df: &DataFrame, drop: &[&str]) -> Result<DataFrame, StageError> {
+    let keep: Vec<PlSmallStr> =
+        df.get_column_names().into_iter().filter(|n| !drop.contains(&n.as_str())).cloned().collect();
+    df.select(keep).map_err(|source| StageError::Table { path: "(merged parts)".into(), source })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_cover_every_draw_of_every_base_once_in_order() {
+        let units = draw_units(2, 7, 3);
+        assert_eq!(units.len(), 6);
+        let mut seen = Vec::new();
+        for i in 0..units.len() {
+            let (base, range) = unit_draws(i, 7, 3);
+            seen.extend(range.map(|d| (base, d)));
+        }
+        let expected: Vec<(usize, usize)> = (0..2).flat_map(|b| (0..7).map(move |d| (b, d))).collect();
+        assert_eq!(seen, expected);
+        assert_eq!(units[2].key, "base 0 draws 6-6");
+        assert_eq!(units[2].cost, 1.0);
+    }
+
+    #[test]
+    fn a_base_without_draws_is_one_empty_unit() {
+        assert_eq!(draw_units(3, 0, 10).len(), 3);
+        assert_eq!(unit_draws(2, 0, 10), (2, 0..0));
+    }
+}
