@@ -232,8 +232,8 @@ struct Keyed {
 }
 
 impl<'a> Shared<'a> {
-    /// The shared folder `out_dir` for `plan`, hashing the datasets the stages in
-    /// `stages` read (all stages when `None`).
+    /// The shared folder `out_dir` for `plan`, hashing the datasets that `stage` and
+    /// its upstream read (every stage's when `None`).
     pub fn open(plan: &'a Plan, registry: &'a Registry, out_dir: &Path, stage: Option<&str>) -> Result<Self, RunError> {
         let selected = select(plan, stage)?;
         Ok(Self {
@@ -261,7 +261,7 @@ impl<'a> Shared<'a> {
             let missing = self.missing_before(s);
             return Err(RunError::UnitsMissing {
                 spec: self.plan.spec_file.clone(),
-                for_what: format!("unit {index} ({} {})", unit.stage, unit.unit),
+                for_what: format!("unit {index} ({}: {})", unit.stage, unit.unit),
                 missing,
             });
         };

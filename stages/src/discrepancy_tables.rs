@@ -249,14 +249,17 @@ fn s(text: &str) -> Value {
 }
 
 impl DiscrepancyTables {
+    /// The tables' names, as written.
+    pub(crate) const NAMES: [&'static str; 4] = ["residuals", "causes", "extension", "gain"];
+
     /// Empty tables with the domain's column names.
     pub(crate) fn new(domain: Domain, alpha: f64) -> Self {
         Self {
             alpha,
-            residuals: Table::new("residuals", RESIDUALS, domain),
-            causes: Table::new("causes", CAUSES, domain),
-            extension: Table::new("extension", EXTENSION, domain),
-            gain: Table::new("gain", GAIN, domain),
+            residuals: Table::new(Self::NAMES[0], RESIDUALS, domain),
+            causes: Table::new(Self::NAMES[1], CAUSES, domain),
+            extension: Table::new(Self::NAMES[2], EXTENSION, domain),
+            gain: Table::new(Self::NAMES[3], GAIN, domain),
         }
     }
 

@@ -1,8 +1,9 @@
-//! The work units of the power studies (`pipeline::units`): a study's draws on each
-//! base, cut into blocks of consecutive draws, each block's per-draw rows written as
-//! one Parquet part, and the parts read back in order for the merge. A draw's result
-//! depends only on its base and its place in the base's draw list, never on the block
-//! it falls in, so the cut changes how the work is spread, not what it gives.
+//! The work units of split stages (`pipeline::units`). Power studies: a study's draws
+//! on each base, cut into blocks of consecutive draws, each block's per-draw rows
+//! written as one Parquet part, and the parts read back in order for the merge. A
+//! draw's result depends only on its base and its place in the base's draw list, never
+//! on the block it falls in, so the cut changes how the work is spread, not what it
+//! gives. Per-data-set stages: one unit per data set, whose tables the merge stacks.
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -99,6 +100,23 @@ pub fn draw_units(bases: usize, draws: usize, per_unit: usize) -> Vec<Unit> {
         .collect()
 }
 
+/// One unit per data set of a stage that reads `inputs` folders, `per_set` of them a
+/// set (a thermal print is a sequence and its monitor); a last, incomplete set is a unit
+/// too, so that the stage can refuse it when it runs.
+pub fn data_set_units(inputs: usize, per_set: usize) -> Vec<Unit> {
+    (0..inputs.div_ceil(per_set.max(1))).map(|u| Unit { key: format!("data set {u}"), cost: 1.0 }).collect()
+}
+
+/// Merges the parts of a per-data-set stage: each table of `names` is the parts' rows
+/// stacked in unit order.
+pub fn merge_tables(ctx: &mut StageContext, parts: &[PathBuf], names: &[&str]) -> Result<(), StageError> {
+    for name in names {
+        let files: Vec<PathBuf> = parts.iter().map(|p| p.join(format!("{name}.parquet"))).collect();
+        ctx.write_table(name, &mut stack(&files)?)?;
+    }
+    Ok(())
+}
+
 /// Unit `index` of [`draw_units`] as (base, range of its draws).
 pub fn unit_draws(index: usize, draws: usize, per_unit: usize) -> (usize, Range<usize>) {
     let per_base = block_ranges(draws, per_unit).count();
@@ -114,14 +132,18 @@ fn block_ranges(draws: usize, per_unit: usize) -> impl Iterator<Item = Range<usi
 
 /// The parts, stacked in unit order into one single-chunk table.
 pub fn read_parts(parts: &[PathBuf]) -> Result<DataFrame, StageError> {
+    stack(&parts.iter().map(|dir| dir.join(format!("{PART_TABLE}.parquet"))).collect::<Vec<_>>())
+}
+
+/// The Parquet files, stacked in order into one single-chunk table.
+fn stack(files: &[PathBuf]) -> Result<DataFrame, StageError> {
     let mut stacked: Option<DataFrame> = None;
-    for dir in parts {
-        let path = dir.join(format!("{PART_TABLE}.parquet"));
-        let part = read_parquet(&path)?;
+    for path in files {
+        let part = read_parquet(path)?;
         match &mut stacked {
             None => stacked = Some(part),
             Some(all) => {
-                all.vstack_mut(&part).map_err(|source| StageError::Table { path: path.clone(), source })?;
+                all.vstack_mut(&part).map_err(|source| StageError::Table { path: path.to_path_buf(), source })?;
             }
         }
     }

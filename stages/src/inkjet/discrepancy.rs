@@ -34,7 +34,9 @@ use crate::discrepancy_tables::{
     ALPHA, BINS, BOOTSTRAP_DRAWS,
 };
 use crate::effects::strength_list;
-use crate::parts::{draw_units, listed, merge_study, unit_draws, write_study_part, DRAWS_PER_UNIT};
+use crate::parts::{
+    data_set_units, draw_units, listed, merge_study, merge_tables, unit_draws, write_study_part, DRAWS_PER_UNIT,
+};
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
 const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
@@ -74,26 +76,41 @@ impl StageKind for DiscrepancyStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: one per dataset, each discovery independent of the others.
+impl Split for DiscrepancyStage {
+    fn units(&self, _params: &Params, inputs: usize) -> Vec<Unit> {
+        data_set_units(inputs, 1)
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let settings = engine_settings(ctx)?;
         let per_group = ctx.params.i64("layers_per_group") as usize;
         let mut tables = DiscrepancyTables::new(INKJET, settings.alpha);
-        for input in &ctx.inputs {
-            let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
-            let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
-            let blocks = model.print().blocks(per_group);
-            let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
-                StageError::Domain(
-                    format!(
-                        "discrepancy engine on dataset `{}` ({} groups of {per_group} layers): {e}",
-                        input.name,
-                        blocks.len()
-                    )
+        let input = &ctx.inputs[index];
+        let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
+        let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
+        let blocks = model.print().blocks(per_group);
+        let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
+            let groups = blocks.len();
+            StageError::Domain(
+                format!("discrepancy engine on dataset `{}` ({groups} groups of {per_group} layers): {e}", input.name)
                     .into(),
-                )
-            })?;
-            tables.add(&input.name, &model, blocks.len(), &found);
-        }
+            )
+        })?;
+        tables.add(&input.name, &model, blocks.len(), &found);
         tables.write(ctx)
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        merge_tables(ctx, parts, &DiscrepancyTables::NAMES)
     }
 }
 

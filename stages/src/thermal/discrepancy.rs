@@ -13,7 +13,7 @@
 //! `fdm.discrepancy` with `dataset` for `printer`; residuals and RMSEs are in noise
 //! standard deviations (`_sd`: each observation divided by its kind's noise scale).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use datasets::thermal::ThermalSequence;
 use discrepancy::discover;
@@ -23,11 +23,13 @@ use models::thermal::discrepancy::{
 };
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
 use polars::prelude::DataFrame;
 
 use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
 use crate::discrepancy_tables::{engine_settings, max_rounds, DiscrepancyTables, Domain, ALPHA, BINS, BOOTSTRAP_DRAWS};
+use crate::parts::{data_set_units, merge_tables};
 
 /// The thermal tables' names: one discovery per dataset, residuals in noise std's.
 const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
@@ -67,6 +69,22 @@ impl StageKind for DiscrepancyStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: one per filmed print (a sequence and its monitor), each discovery
+/// independent of the others.
+impl Split for DiscrepancyStage {
+    fn units(&self, _params: &Params, inputs: usize) -> Vec<Unit> {
+        data_set_units(inputs, 2)
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         if !ctx.inputs.len().is_multiple_of(2) {
             return Err(StageError::Params {
                 stage: ctx.stage.clone(),
@@ -79,20 +97,22 @@ impl StageKind for DiscrepancyStage {
         }
         let settings = engine_settings(ctx)?;
         let mut tables = DiscrepancyTables::new(THERMAL, settings.alpha);
-        for pair in ctx.inputs.chunks(2) {
-            let (sequence, monitor) = (&pair[0], &pair[1]);
-            let clearance_mm = ctx.params.f64(WIDTH_CLEARANCE.name);
-            let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, clearance_mm)?);
-            let blocks = model.record().layer_groups();
-            let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
-                StageError::Domain(
-                    format!("discrepancy engine on dataset `{}` ({} filmed layers): {e}", sequence.name, blocks.len())
-                        .into(),
-                )
-            })?;
-            tables.add(&sequence.name, &model, blocks.len(), &found);
-        }
+        let (sequence, monitor) = (&ctx.inputs[2 * index], &ctx.inputs[2 * index + 1]);
+        let clearance_mm = ctx.params.f64(WIDTH_CLEARANCE.name);
+        let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, clearance_mm)?);
+        let blocks = model.record().layer_groups();
+        let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
+            StageError::Domain(
+                format!("discrepancy engine on dataset `{}` ({} filmed layers): {e}", sequence.name, blocks.len())
+                    .into(),
+            )
+        })?;
+        tables.add(&sequence.name, &model, blocks.len(), &found);
         tables.write(ctx)
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        merge_tables(ctx, parts, &DiscrepancyTables::NAMES)
     }
 }
 
