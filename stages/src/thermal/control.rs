@@ -130,12 +130,16 @@ impl StageKind for ControlGainStage {
         let jobs: Vec<(usize, f64, usize)> = (design.strengths.iter().enumerate())
             .flat_map(|(c, &s)| (0..design.prints).map(move |p| (c, s, p)))
             .collect();
+        let bar = ctx.progress(jobs.len() as u64);
         let trials: Vec<Trial> = jobs
             .par_iter()
             .map(|&(cell, strength, print)| {
-                design.trial(cell, strength, print, &scratch.join(format!("print_{cell}_{print}")))
+                let trial = design.trial(cell, strength, print, &scratch.join(format!("print_{cell}_{print}")));
+                bar.inc(1);
+                trial
             })
             .collect::<Result<_, _>>()?;
+        bar.finish_and_clear();
         std::fs::remove_dir_all(&scratch).ok();
         ctx.write_table("control_gain", &mut gain_frame(&trials)?)?;
         ctx.write_table("control_trials", &mut trials_frame(&trials)?)?;
