@@ -116,6 +116,13 @@ impl MatrixMethod {
         }
     }
 
+    /// The method called `name` ([`MatrixMethod::name`]).
+    pub fn parse(name: &str) -> Option<Self> {
+        [Self::Single, Self::TransferZeroMean, Self::TransferSourceMean, Self::Guarded, Self::CoLearning]
+            .into_iter()
+            .find(|m| m.name() == name)
+    }
+
     /// The methods of a task with `n_sources` sources, in row order.
     pub fn for_sources(n_sources: usize) -> &'static [MatrixMethod] {
         if n_sources == 1 {
@@ -156,36 +163,46 @@ pub fn transfer_matrix(
     tasks: &[TransferTask],
     transfer: &TransferValidParams,
 ) -> Result<Vec<MatrixRow>, FitError> {
-    transfer_matrix_observed(printers, tasks, transfer, &|_, _| {})
-}
-
-/// [`transfer_matrix`], calling `target_done(done, of)` after each target printer's
-/// rows (for a progress bar).
-pub fn transfer_matrix_observed(
-    printers: &[StudyPrinter],
-    tasks: &[TransferTask],
-    transfer: &TransferValidParams,
-    target_done: &dyn Fn(usize, usize),
-) -> Result<Vec<MatrixRow>, FitError> {
     check_tasks(printers, tasks)?;
-    let mut used: Vec<usize> = tasks.iter().flat_map(|t| t.sources.iter().copied()).collect();
-    used.sort_unstable();
-    used.dedup();
-    let built: Vec<(usize, SourcePrior)> = used
-        .iter()
-        .map(|&s| Ok((s, SourcePrior::build(printers[s].lines, printers[s].params, transfer)?)))
-        .collect::<Result<_, FitError>>()?;
-    let sources: HashMap<usize, SourcePrior> = built.into_iter().collect();
+    let sources = source_priors(printers, tasks.iter(), transfer)?;
     let mut targets: Vec<usize> = tasks.iter().map(|t| t.target).collect();
     targets.sort_unstable();
     targets.dedup();
     let mut rows = Vec::new();
-    for (done, &target) in targets.iter().enumerate() {
+    for target in targets {
         rows.extend(target_rows(printers, tasks, target, &sources, transfer)?);
-        target_done(done + 1, targets.len());
     }
     rows.sort_by_key(|r| r.task);
     Ok(rows)
+}
+
+/// The rows of the tasks whose target is printer `target`, as [`transfer_matrix`]
+/// gives them: the study split by target printer. The rows of every target,
+/// concatenated in target order and stably sorted by task, are [`transfer_matrix`]'s
+/// (each target's rows depend only on its own tasks and their sources' priors).
+pub fn transfer_matrix_for_target(
+    printers: &[StudyPrinter],
+    tasks: &[TransferTask],
+    transfer: &TransferValidParams,
+    target: usize,
+) -> Result<Vec<MatrixRow>, FitError> {
+    check_tasks(printers, tasks)?;
+    let sources = source_priors(printers, tasks.iter().filter(|t| t.target == target), transfer)?;
+    let mut rows = target_rows(printers, tasks, target, &sources, transfer)?;
+    rows.sort_by_key(|r| r.task);
+    Ok(rows)
+}
+
+/// The prior of every source printer of `tasks`.
+fn source_priors<'t>(
+    printers: &[StudyPrinter],
+    tasks: impl Iterator<Item = &'t TransferTask>,
+    transfer: &TransferValidParams,
+) -> Result<HashMap<usize, SourcePrior>, FitError> {
+    let mut used: Vec<usize> = tasks.flat_map(|t| t.sources.iter().copied()).collect();
+    used.sort_unstable();
+    used.dedup();
+    used.iter().map(|&s| Ok((s, SourcePrior::build(printers[s].lines, printers[s].params, transfer)?))).collect()
 }
 
 fn check_tasks(printers: &[StudyPrinter], tasks: &[TransferTask]) -> Result<(), FitError> {
@@ -670,6 +687,10 @@ mod tests {
         .check()
         .unwrap();
         let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
+        let mut by_target: Vec<MatrixRow> =
+            [3, 4].iter().flat_map(|&t| transfer_matrix_for_target(&printers, &tasks, &transfer, t).unwrap()).collect();
+        by_target.sort_by_key(|r| r.task);
+        assert_eq!(by_target, rows, "the study split by target printer gives the same rows");
         let summary = summarise(&rows, 500, 7);
         for s in summary.iter().filter(|s| matches!(s.method, MatrixMethod::Guarded | MatrixMethod::CoLearning)) {
             assert!(s.ci_hi_pct >= 0.0, "task {} n = {}: {s:?}", s.task, s.n_train);

@@ -43,7 +43,7 @@ pub mod transfer_cv;
 mod test_support;
 
 pub use colearn::{
-    default_tasks, summarise, transfer_matrix, transfer_matrix_observed, MatrixMethod, MatrixRow, MatrixSummary,
+    default_tasks, summarise, transfer_matrix, transfer_matrix_for_target, MatrixMethod, MatrixRow, MatrixSummary,
     StudyPrinter, TransferTask,
 };
 pub use errors::{FitError, KinematicsError, ParamError};

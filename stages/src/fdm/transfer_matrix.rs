@@ -12,17 +12,27 @@
 //!   lines gives the interval).
 //! - `transfer_matrix_rows.parquet`: sources, target, n_train, subset, test_condition,
 //!   method, rmse_mm, lambda, prior (one row per prediction).
+//!
+//! It splits into one work unit per target printer ([`pipeline::Split`]): each unit
+//! fits its target's tasks (building the priors of their sources: one more build per
+//! source and target than the whole study in one go, too cheap to measure on the
+//! shipped spec), and the merge stacks the units' rows in task order and summarises
+//! them. The rows are those of the whole study (`models::fdm::transfer_matrix_for_target`).
+
+use std::path::PathBuf;
 
 use models::fdm::{
-    default_tasks, summarise, transfer_matrix_observed, MatrixRow, PiecewiseParams, PiecewiseValidParams, StudyPrinter,
-    TransferParams, TransferTask,
+    default_tasks, summarise, transfer_matrix_for_target, MatrixMethod, MatrixRow, PiecewiseParams,
+    PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
-use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::parts::{read_parts, PART_TABLE};
+use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
 
 /// The `fdm.transfer_matrix` stage kind.
 pub struct TransferMatrixStage;
@@ -75,45 +85,133 @@ impl StageKind for TransferMatrixStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printers =
-            ctx.inputs.iter().map(|i| PrinterLines::read(&i.dir)).collect::<Result<Vec<PrinterLines>, _>>()?;
-        let params = model_params(&printers, ctx.params.str("blob_printers"))
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: one per target printer (every task learning it, from each source and
+/// from all the others); the merge stacks their rows and summarises them.
+impl Split for TransferMatrixStage {
+    fn units(&self, _params: &Params, inputs: usize) -> Vec<Unit> {
+        (0..inputs).map(|t| Unit { key: format!("target printer {t}"), cost: inputs as f64 }).collect()
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
+        let study = Study::read(ctx)?;
+        let printers = study.printers();
+        let rows = transfer_matrix_for_target(&printers, &study.tasks, &study.transfer, index)
+            .map_err(|e| fit_failed("transfer matrix", e))?;
+        ctx.write_table(PART_TABLE, &mut part_table(&rows)?)?;
+        Ok(())
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        let study = Study::read(ctx)?;
+        let mut rows = part_rows(ctx, &read_parts(parts)?)?;
+        rows.sort_by_key(|r| r.task);
+        write_tables(ctx, &study, &rows)
+    }
+}
+
+/// `transfer_matrix.parquet` (the rows summarised) and `transfer_matrix_rows.parquet`.
+fn write_tables(ctx: &mut StageContext, study: &Study, rows: &[MatrixRow]) -> Result<(), StageError> {
+    let draws = ctx.params.i64("bootstrap_draws") as usize;
+    let summary = summarise(rows, draws, ctx.seed);
+    let names = task_names(&study.tasks, &study.lines);
+    let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names[s.task].clone()).unzip();
+    let mut table = frame(vec![
+        str_col("sources", s_src),
+        str_col("target", s_tgt),
+        i64_col("n_train", summary.iter().map(|s| s.n_train as i64).collect()),
+        str_col("method", summary.iter().map(|s| s.method.name().to_string()).collect()),
+        f64_col("median_rmse_mm", summary.iter().map(|s| s.median_rmse_mm).collect()),
+        f64_col("improvement_pct", summary.iter().map(|s| s.improvement_pct).collect()),
+        f64_col("ci_lo_pct", summary.iter().map(|s| s.ci_lo_pct).collect()),
+        f64_col("ci_hi_pct", summary.iter().map(|s| s.ci_hi_pct).collect()),
+        i64_col("rows", summary.iter().map(|s| s.rows as i64).collect()),
+    ])?;
+    ctx.write_table("transfer_matrix", &mut table)?;
+    ctx.write_table("transfer_matrix_rows", &mut rows_table(rows, &study.tasks, &study.lines, &names)?)?;
+    Ok(())
+}
+
+/// The study as the spec sets it: every input printer's lines and model settings, the
+/// transfer settings and the tasks.
+struct Study {
+    lines: Vec<PrinterLines>,
+    params: Vec<PiecewiseValidParams>,
+    transfer: TransferValidParams,
+    tasks: Vec<TransferTask>,
+}
+
+impl Study {
+    fn read(ctx: &StageContext) -> Result<Self, StageError> {
+        let lines = ctx.inputs.iter().map(|i| PrinterLines::read(&i.dir)).collect::<Result<Vec<PrinterLines>, _>>()?;
+        let params = model_params(&lines, ctx.params.str("blob_printers"))
             .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
-        let study: Vec<StudyPrinter> = printers
-            .iter()
-            .zip(&params)
-            .map(|(p, params)| StudyPrinter { name: &p.printer, lines: &p.lines, params })
-            .collect();
         let transfer = lambda_grid(ctx.params.f64("lambda_step_decades"))
             .check()
             .map_err(|e| fit_failed("transfer parameters", e))?;
-        let tasks = default_tasks(study.len(), ctx.params.bool("co_learning"));
-        let bar = ctx.progress(printers.len() as u64);
-        let rows = transfer_matrix_observed(&study, &tasks, &transfer, &|done, of| {
-            bar.set_length(of as u64);
-            bar.set_position(done as u64);
-        })
-        .map_err(|e| fit_failed("transfer matrix", e))?;
-        bar.finish_and_clear();
-        let draws = ctx.params.i64("bootstrap_draws") as usize;
-        let summary = summarise(&rows, draws, ctx.seed);
-        let names = task_names(&tasks, &printers);
-        let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names[s.task].clone()).unzip();
-        let mut table = frame(vec![
-            str_col("sources", s_src),
-            str_col("target", s_tgt),
-            i64_col("n_train", summary.iter().map(|s| s.n_train as i64).collect()),
-            str_col("method", summary.iter().map(|s| s.method.name().to_string()).collect()),
-            f64_col("median_rmse_mm", summary.iter().map(|s| s.median_rmse_mm).collect()),
-            f64_col("improvement_pct", summary.iter().map(|s| s.improvement_pct).collect()),
-            f64_col("ci_lo_pct", summary.iter().map(|s| s.ci_lo_pct).collect()),
-            f64_col("ci_hi_pct", summary.iter().map(|s| s.ci_hi_pct).collect()),
-            i64_col("rows", summary.iter().map(|s| s.rows as i64).collect()),
-        ])?;
-        ctx.write_table("transfer_matrix", &mut table)?;
-        ctx.write_table("transfer_matrix_rows", &mut rows_table(&rows, &tasks, &printers, &names)?)?;
-        Ok(())
+        let tasks = default_tasks(lines.len(), ctx.params.bool("co_learning"));
+        Ok(Self { lines, params, transfer, tasks })
     }
+
+    fn printers(&self) -> Vec<StudyPrinter<'_>> {
+        self.lines
+            .iter()
+            .zip(&self.params)
+            .map(|(p, params)| StudyPrinter { name: &p.printer, lines: &p.lines, params })
+            .collect()
+    }
+}
+
+/// A unit's rows, exactly (indices, not names: the merge needs them back).
+fn part_table(rows: &[MatrixRow]) -> Result<polars::prelude::DataFrame, StageError> {
+    frame(vec![
+        i64_col("task", rows.iter().map(|r| r.task as i64).collect()),
+        i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
+        str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
+        i64_col("test_index", rows.iter().map(|r| r.test_index as i64).collect()),
+        str_col("method", rows.iter().map(|r| r.method.name().to_string()).collect()),
+        f64_col("rmse_mm", rows.iter().map(|r| r.rmse_mm).collect()),
+        f64_col("lambda", rows.iter().map(|r| r.lambda).collect()),
+        str_col("prior", rows.iter().map(|r| r.prior.clone()).collect()),
+    ])
+}
+
+/// The rows of [`part_table`]s, stacked.
+fn part_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Vec<MatrixRow>, StageError> {
+    let file = ctx.output_dir().join("parts");
+    let index = |name: &str| -> Result<Vec<usize>, StageError> {
+        Ok(i64_column(all, &file, name)?.into_iter().map(|v| v as usize).collect())
+    };
+    let (task, n_train, test_index) = (index("task")?, index("n_train")?, index("test_index")?);
+    let (subset, method, prior) =
+        (str_column(all, &file, "subset")?, str_column(all, &file, "method")?, str_column(all, &file, "prior")?);
+    let (rmse_mm, lambda) = (f64_column(all, &file, "rmse_mm")?, f64_column(all, &file, "lambda")?);
+    (0..all.height())
+        .map(|i| {
+            let method = MatrixMethod::parse(&method[i]).ok_or_else(|| StageError::BadInput {
+                file: file.clone(),
+                location: None,
+                expected: format!("a transfer method, got `{}`", method[i]),
+            })?;
+            Ok(MatrixRow {
+                task: task[i],
+                n_train: n_train[i],
+                subset: subset[i].clone(),
+                test_index: test_index[i],
+                method,
+                rmse_mm: rmse_mm[i],
+                lambda: lambda[i],
+                prior: prior[i].clone(),
+            })
+        })
+        .collect()
 }
 
 /// Each printer's model settings: the paper's, with the start blob where named.
