@@ -33,7 +33,7 @@ pub const DRAWS_PER_UNIT: ParamSpec = ParamSpec {
 
 /// How many strengths the text parameter `name` lists (the cells of one effect),
 /// counted before they are checked (a bad one fails the unit that parses it).
-pub fn listed(params: &Params, name: &str) -> usize {
+fn listed(params: &Params, name: &str) -> usize {
     params.str(name).split(',').filter(|s| !s.trim().is_empty()).count()
 }
 
@@ -98,6 +98,25 @@ pub fn draw_units(bases: usize, draws: usize, per_unit: usize) -> Vec<Unit> {
             })
         })
         .collect()
+}
+
+/// The units of a power study from its parameters: `null_draws` plus `draws` per
+/// strength listed for each of `effects`, on each of `bases` bases, in blocks of
+/// `draws_per_unit` ([`draw_units`]).
+pub fn study_units<'a>(params: &Params, bases: usize, effects: impl IntoIterator<Item = &'a str>) -> Vec<Unit> {
+    let cells: usize = effects.into_iter().map(|e| listed(params, e)).sum();
+    let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
+    draw_units(bases, draws, per_unit(params))
+}
+
+/// Unit `index` of [`study_units`] as (base, range of its draws) in a study of `draws`
+/// draws per base.
+pub fn study_unit_draws(params: &Params, index: usize, draws: usize) -> (usize, Range<usize>) {
+    unit_draws(index, draws, per_unit(params))
+}
+
+fn per_unit(params: &Params) -> usize {
+    params.i64(DRAWS_PER_UNIT.name) as usize
 }
 
 /// One unit per data set of a stage that reads `inputs` folders, `per_set` of them a

@@ -30,7 +30,7 @@ use polars::prelude::{IntoColumn, NamedFrom, Series};
 
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
-use crate::parts::{draw_units, listed, read_parts, unit_draws, without, COVERED, DRAWS_PER_UNIT, PART_TABLE};
+use crate::parts::{read_parts, study_unit_draws, study_units, without, COVERED, DRAWS_PER_UNIT, PART_TABLE};
 use crate::table::{f64_col, f64_column, frame, i64_col, opt_bool_column, str_col, str_column};
 
 /// The `fdm.discovery_power` stage kind.
@@ -133,16 +133,14 @@ impl StageKind for DiscoveryPowerStage {
 
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, inputs: usize) -> Vec<Unit> {
-        let cells: usize = STUDIED.iter().map(|e| listed(params, e.name())).sum();
-        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
-        draw_units(inputs, draws, params.i64("draws_per_unit") as usize)
+        study_units(params, inputs, STUDIED.map(|e| e.name()))
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let printers = read_printers(ctx)?;
         let blob = StartBlob::parse(ctx, &printers)?;
         let design = design(ctx)?;
-        let (b, range) = unit_draws(index, design.draw_count(), ctx.params.i64("draws_per_unit") as usize);
+        let (b, range) = study_unit_draws(&ctx.params, index, design.draw_count());
         let mut rows = DrawRows::default();
         if let Some((printer, lines)) = printers.into_iter().nth(b) {
             let model = FdmModel::new(&lines, blob.has(&printer), ctx.params.f64("smoothing_mm"));

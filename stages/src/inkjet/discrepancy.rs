@@ -35,7 +35,7 @@ use crate::discrepancy_tables::{
 };
 use crate::effects::strength_list;
 use crate::parts::{
-    data_set_units, draw_units, listed, merge_study, merge_tables, unit_draws, write_study_part, DRAWS_PER_UNIT,
+    data_set_units, merge_study, merge_tables, study_unit_draws, study_units, write_study_part, DRAWS_PER_UNIT,
 };
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
@@ -243,14 +243,12 @@ impl StageKind for DiscoveryPowerStage {
 /// Work units: blocks of `draws_per_unit` consecutive draws ([`crate::parts`]).
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
-        let cells: usize = STUDIED.iter().map(|e| listed(params, e.name())).sum();
-        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
-        draw_units(1, draws, params.i64("draws_per_unit") as usize)
+        study_units(params, 1, STUDIED.map(|e| e.name()))
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let design = power_design(ctx)?;
-        let (_, range) = unit_draws(index, design.draw_count(), ctx.params.i64("draws_per_unit") as usize);
+        let (_, range) = study_unit_draws(&ctx.params, index, design.draw_count());
         let results = run_draw_range(&design, range).map_err(StageError::domain)?;
         let base = format!("cylinder r{} × {} layers", design.print.radius_cells, design.print.layers);
         let covered = results.iter().map(|d| d.score().covered).collect();

@@ -33,7 +33,7 @@ use super::filmed_print::{named_list, FilmedPrint, Filming};
 use super::monitor;
 use crate::discrepancy_tables::{draws_frame, max_rounds, DrawRow, ALPHA};
 use crate::effects::strength_list;
-use crate::parts::{draw_units, listed, merge_study, unit_draws, write_study_part, DRAWS_PER_UNIT};
+use crate::parts::{merge_study, study_unit_draws, study_units, write_study_part, DRAWS_PER_UNIT};
 
 /// The `thermal.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
@@ -139,15 +139,13 @@ impl StageKind for DiscoveryPowerStage {
 /// Work units: blocks of `draws_per_unit` consecutive prints ([`crate::parts`]).
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
-        let cells: usize = STUDIED.iter().map(|(effect, _, _)| listed(params, effect)).sum();
-        let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
-        draw_units(1, draws, params.i64("draws_per_unit") as usize)
+        study_units(params, 1, STUDIED.iter().map(|(effect, _, _)| *effect))
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let design = Design::from_params(ctx)?;
         let jobs = design.jobs();
-        let (_, range) = unit_draws(index, jobs.len(), ctx.params.i64("draws_per_unit") as usize);
+        let (_, range) = study_unit_draws(&ctx.params, index, jobs.len());
         let scratch = ctx.output_dir().join("scratch");
         let draws: Vec<Draw> = jobs[range]
             .par_iter()
