@@ -10,9 +10,11 @@
 //! - [`thermal`]: Chen et al. 2024 (paper 003): path geometry, deposition direction
 //!   allocation, filtered-B-spline compensation and the evaluation metrics.
 //! - [`stats`]: the shared median.
+//! - [`progress`]: how a long computation tells its progress.
 #![deny(missing_docs)]
 
 pub mod fdm;
 pub mod inkjet;
+pub mod progress;
 pub mod stats;
 pub mod thermal;

@@ -10,6 +10,7 @@ pub mod effects;
 pub mod fdm;
 pub mod inkjet;
 pub mod parts;
+pub mod progress;
 pub mod table;
 pub mod thermal;
 

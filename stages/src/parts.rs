@@ -33,7 +33,7 @@ pub const DRAWS_PER_UNIT: ParamSpec = ParamSpec {
 
 /// How many strengths the text parameter `name` lists (the cells of one effect),
 /// counted before they are checked (a bad one fails the unit that parses it).
-fn listed(params: &Params, name: &str) -> usize {
+pub fn listed(params: &Params, name: &str) -> usize {
     params.str(name).split(',').filter(|s| !s.trim().is_empty()).count()
 }
 

@@ -65,6 +65,7 @@
 //! 1.75 mm is ±2.3 % in area, 0.5 % is its layer-to-layer part); the flow lag starts
 //! from rest at every layer (the travel between layers lets the melt pressure relax).
 
+use models::progress::Progress;
 use models::thermal::dda::{allocate_directions, boundary_points, DdaParams, DepositionDirections};
 use models::thermal::dynamics::first_order_lag;
 use models::thermal::{DepositGrid, PrintSetup, ThermalError, Trajectory};
@@ -125,6 +126,19 @@ pub fn print_part<R: Rng>(
     effects: &Effects,
     rng: &mut R,
 ) -> Result<Vec<LayerDeposit>, ThermalError> {
+    print_part_observed(setup, trajectory, deposition_velocity_mm_s, layers, effects, rng, &())
+}
+
+/// [`print_part`], telling `progress` of each layer as it is printed.
+pub fn print_part_observed<R: Rng>(
+    setup: &PrintSetup,
+    trajectory: &Trajectory,
+    deposition_velocity_mm_s: &[f64],
+    layers: usize,
+    effects: &Effects,
+    rng: &mut R,
+    progress: &dyn Progress,
+) -> Result<Vec<LayerDeposit>, ThermalError> {
     let setup = setup.check()?;
     if deposition_velocity_mm_s.len() != trajectory.len() {
         return Err(ThermalError::BadTrajectory {
@@ -145,6 +159,7 @@ pub fn print_part<R: Rng>(
     let printer = LayerPrinter::new(trajectory, &setup, effects.melt_squeeze_out);
     let mut stack = PartStack::new(grid_for(trajectory), setup.nozzle_mm / 2.0);
     let mut printed = Vec::with_capacity(layers);
+    progress.add(layers as u64);
     for (layer, &factor) in factors.iter().enumerate() {
         let flow: Vec<f64> = nominal_flow.iter().map(|e| e * factor).collect();
         let nozzle_z_mm = (layer + 1) as f64 * setup.layer_height_mm;
@@ -153,6 +168,7 @@ pub fn print_part<R: Rng>(
         let deposit = printer.print(layer, flow, &gap_mm, headroom, factor)?;
         stack.add(&deposit.grid, setup.layer_height_mm);
         printed.push(deposit);
+        progress.done(1);
     }
     Ok(printed)
 }

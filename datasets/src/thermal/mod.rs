@@ -28,6 +28,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use models::progress::Progress;
 use models::thermal::{setup::corner_test_path, PrintSetup, Trajectory};
 use rand::Rng;
 use rayon::prelude::*;
@@ -112,6 +113,15 @@ pub fn generate(config: &GenerateConfig, out: &Path) -> Result<GenerateSummary, 
 /// [`generate`] into the empty folder `out_dir` (a stage's output folder, which the
 /// engine swaps in).
 pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<GenerateSummary, DatasetError> {
+    generate_into_observed(config, out_dir, &())
+}
+
+/// [`generate_into`], telling `progress` of each layer printed and each frame shot.
+pub fn generate_into_observed(
+    config: &GenerateConfig,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<GenerateSummary, DatasetError> {
     let model_error = |e: models::thermal::ThermalError| DatasetError::Malformed {
         file: out_dir.to_path_buf(),
         location: None,
@@ -123,8 +133,9 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
     let trajectory = Trajectory::corner_test(&setup).map_err(model_error)?;
     let v_e = setup.conventional_command(&trajectory);
     let mut rng_print = stream(config.seed, 1);
-    let deposits = deposition::print_part(&setup, &trajectory, &v_e, layers, &config.effects, &mut rng_print)
-        .map_err(model_error)?;
+    let deposits =
+        deposition::print_part_observed(&setup, &trajectory, &v_e, layers, &config.effects, &mut rng_print, progress)
+            .map_err(model_error)?;
     let heats = layer_heats(&setup, &trajectory, &deposits, &config.effects);
     let (intrinsics, distortion) = (Intrinsics::lepton35(), Distortion::lepton35());
     let true_mount = Mount::nominal().with_mounting_error(&mut stream(config.seed, 2));
@@ -145,11 +156,12 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
         .enumerate()
         .flat_map(|(l, s)| s.iter().filter(|f| f.source == f.frame).map(move |f| (l, *f)))
         .collect();
+    progress.add(jobs.len() as u64);
     let shots: Vec<Shot> = jobs
         .par_iter()
         .map(|&(layer, capture)| {
             let mut rng = stream(config.seed, 1000 + (layer as u64) * 100_000 + capture.frame as u64);
-            shoot(
+            let shot = shoot(
                 &heats[layer],
                 &trajectory,
                 &true_mount,
@@ -158,7 +170,9 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<Generate
                 &rays,
                 capture.capture_time_s,
                 &mut rng,
-            )
+            );
+            progress.done(1);
+            shot
         })
         .collect();
     let shot_of: BTreeMap<(usize, usize), &Shot> = jobs.iter().map(|(l, f)| (*l, f.frame)).zip(&shots).collect();

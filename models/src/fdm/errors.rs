@@ -64,4 +64,8 @@ pub enum FitError {
     /// Dimensions of the inputs disagree.
     #[error("dimension mismatch: {0}")]
     Dimension(String),
+    /// A failure another process met and recorded as its text (a work unit of a
+    /// spread-out run, e.g. [`GridPart`](super::transfer_cv::GridPart)).
+    #[error("{0}")]
+    Recorded(String),
 }

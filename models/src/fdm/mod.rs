@@ -60,4 +60,7 @@ pub use transfer::{
     transfer_zero_mean, ConditionSubset, LambdaRule, ParameterCovariance, PriorMean, SourcePrior, TransferFit,
     TransferParams, TransferValidParams,
 };
-pub use transfer_cv::{transfer_cv, TransferCvRow, TransferMethod, MAX_TARGET_LINES};
+pub use transfer_cv::{
+    transfer_cv, transfer_cv_blocks, transfer_cv_from_parts, transfer_cv_part, GridPart, GridWinner, TransferCvRow,
+    TransferMethod, MAX_TARGET_LINES,
+};

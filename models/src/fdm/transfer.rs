@@ -214,13 +214,9 @@ impl SourcePrior {
         source_params: &PiecewiseValidParams,
         transfer: &TransferValidParams,
     ) -> Result<Self, FitError> {
-        if source_lines.len() < 3 {
-            return Err(FitError::NotEnoughData("the source printer needs at least three lines".into()));
-        }
-        let source_fit = super::fit::fit(source_lines, source_params)?;
-        let per_line = per_line_parameters(source_lines, source_params, source_fit.r_a, source_fit.r_f)?;
-        let covariance = estimate_covariance(&per_line)?;
-        let simulate = |mean| simulate_single_line_lambda(source_lines, source_params, &per_line, transfer, mean);
+        let (source_fit, covariance) = source_covariance(source_lines, source_params)?;
+        let per_line = &covariance.per_line;
+        let simulate = |mean| simulate_single_line_lambda(source_lines, source_params, per_line, transfer, mean);
         Ok(Self {
             single_line_lambda_zero: simulate(PriorMean::Zero)?,
             single_line_lambda_source: simulate(PriorMean::SourceMean)?,
@@ -235,6 +231,20 @@ impl SourcePrior {
             PriorMean::SourceMean => self.single_line_lambda_source,
         }
     }
+}
+
+/// The source fit on all lines and Algorithm 1 at its selected `(r_a, r_F)`: the part of
+/// [`SourcePrior::build`] that the priors need (without the single-line `λ`).
+pub(crate) fn source_covariance(
+    source_lines: &[MeasuredLine],
+    source_params: &PiecewiseValidParams,
+) -> Result<(FittedPiecewise, ParameterCovariance), FitError> {
+    if source_lines.len() < 3 {
+        return Err(FitError::NotEnoughData("the source printer needs at least three lines".into()));
+    }
+    let source_fit = super::fit::fit(source_lines, source_params)?;
+    let per_line = per_line_parameters(source_lines, source_params, source_fit.r_a, source_fit.r_f)?;
+    Ok((source_fit, estimate_covariance(&per_line)?))
 }
 
 /// How `λ` was chosen.

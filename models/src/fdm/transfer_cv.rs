@@ -40,6 +40,12 @@
 //! in grid order on ties, exactly as `fit` does. Contiguous chunks of pairs run in
 //! parallel (rayon), and their winners are merged in grid order. This merge is
 //! associative, so the result does not depend on the chunking or the number of threads.
+//! The same cut spreads the study over processes: [`transfer_cv_part`] searches one
+//! block of pairs ([`transfer_cv_blocks`]: one per `r_a`) into a [`GridPart`], and
+//! [`transfer_cv_from_parts`] merges the blocks in grid order and finishes the study,
+//! with the same rows bit for bit. A block needs the source's covariance, so each one
+//! fits the source printer (one 441-pair fit of its lines); the single-line `λ`, which
+//! simulates transfer on the source, is left to the merge.
 //! The arithmetic of every fit, prediction and `λ` choice is the same, in the same
 //! order, as in `fit`, `predict` and `transfer_fit`. So every RMSE and `λ` is
 //! bit-identical to the direct loop, and a test checks this against such a loop. The
@@ -53,6 +59,7 @@
 
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
+use std::ops::Range;
 
 use rayon::prelude::*;
 
@@ -66,7 +73,8 @@ use super::line::{rmse, MeasuredLine};
 use super::piecewise::Bp1PowerLaw;
 use super::predict::FittedPiecewise;
 use super::transfer::{
-    all_condition_subsets, argmin, segment_prior, ConditionSubset, PriorMean, SourcePrior, TransferValidParams,
+    all_condition_subsets, argmin, segment_prior, source_covariance, ConditionSubset, ParameterCovariance, PriorMean,
+    SourcePrior, TransferValidParams,
 };
 
 /// Most target lines [`transfer_cv`] accepts. There are `2^N − 2` subsets, each fitted
@@ -138,23 +146,134 @@ pub fn transfer_cv(
     target_params: &PiecewiseValidParams,
     transfer: &TransferValidParams,
 ) -> Result<Vec<TransferCvRow>, FitError> {
-    let n = target_lines.len();
+    check_target_count(target_lines.len())?;
+    let source = SourcePrior::build(source_lines, source_params, transfer)?;
+    let cv = CvSetup::new(target_lines, target_params, &source.covariance, transfer)?;
+    let whole = cv.grid_part(0..full_grid(target_params).len());
+    cv.rows(&source, vec![whole])
+}
+
+/// The blocks of grid pairs [`transfer_cv`] is cut into for a spread-out run (work
+/// units, [`transfer_cv_part`]): one block per `r_a` of the target's grid.
+pub fn transfer_cv_blocks(target_params: &PiecewiseValidParams) -> Vec<Range<usize>> {
+    let per_row = target_params.r_values().len();
+    (0..per_row).map(|k| k * per_row..(k + 1) * per_row).collect()
+}
+
+/// One block of [`transfer_cv`]'s grid search (module docs, point 2): every training
+/// subset of `target_lines` under every configuration, over the grid pairs `pairs` only.
+/// It needs the source's covariance, not its single-line `λ`, so it fits the source but
+/// does not simulate single-line transfer. Errors as [`transfer_cv`] does before its
+/// grid search, and on a range outside the grid.
+pub fn transfer_cv_part(
+    source_lines: &[MeasuredLine],
+    target_lines: &[MeasuredLine],
+    source_params: &PiecewiseValidParams,
+    target_params: &PiecewiseValidParams,
+    transfer: &TransferValidParams,
+    pairs: Range<usize>,
+) -> Result<GridPart, FitError> {
+    check_target_count(target_lines.len())?;
+    let pairs_in_grid = full_grid(target_params).len();
+    if pairs.start > pairs.end || pairs.end > pairs_in_grid {
+        return Err(FitError::Dimension(format!("grid pairs {pairs:?} of a grid of {pairs_in_grid}")));
+    }
+    let (_, covariance) = source_covariance(source_lines, source_params)?;
+    Ok(CvSetup::new(target_lines, target_params, &covariance, transfer)?.grid_part(pairs))
+}
+
+/// [`transfer_cv`]'s rows from the [`GridPart`]s of consecutive blocks that cover the
+/// grid, given in grid order: the same rows, bit for bit, however the grid was cut.
+pub fn transfer_cv_from_parts(
+    source_lines: &[MeasuredLine],
+    target_lines: &[MeasuredLine],
+    source_params: &PiecewiseValidParams,
+    target_params: &PiecewiseValidParams,
+    transfer: &TransferValidParams,
+    parts: Vec<GridPart>,
+) -> Result<Vec<TransferCvRow>, FitError> {
+    check_target_count(target_lines.len())?;
+    let source = SourcePrior::build(source_lines, source_params, transfer)?;
+    CvSetup::new(target_lines, target_params, &source.covariance, transfer)?.rows(&source, parts)
+}
+
+fn check_target_count(n: usize) -> Result<(), FitError> {
     if n < 2 {
         return Err(FitError::NotEnoughData("the transfer cross-validation needs at least two target lines".into()));
     }
     if n > MAX_TARGET_LINES {
         return Err(FitError::Dimension(format!("{n} target lines: at most {MAX_TARGET_LINES} (2^N − 2 subsets)")));
     }
-    let source = SourcePrior::build(source_lines, source_params, transfer)?;
-    let lambdas = &transfer.get().lambda_grid;
-    let priors = [
-        segment_prior(&source.covariance, PriorMean::Zero, transfer)?,
-        segment_prior(&source.covariance, PriorMean::SourceMean, transfer)?,
-    ];
-    let configs = Configs::new(&priors, lambdas);
-    let subsets = all_condition_subsets(n);
-    let table = held_out_table(target_lines, target_params, &subsets, &configs)?;
-    assemble_rows(&subsets, &configs, &source, &table)
+    Ok(())
+}
+
+/// What every block of the cross-validation shares: the target lines prepared, the
+/// subsets and the two priors built from the source covariance.
+struct CvSetup<'a> {
+    lines: &'a [MeasuredLine],
+    params: &'a PiecewiseValidParams,
+    prepared: Vec<PreparedLine<'a>>,
+    subsets: Vec<ConditionSubset>,
+    priors: [SegmentPrior; 2],
+    lambdas: &'a [f64],
+}
+
+impl<'a> CvSetup<'a> {
+    fn new(
+        lines: &'a [MeasuredLine],
+        params: &'a PiecewiseValidParams,
+        covariance: &ParameterCovariance,
+        transfer: &'a TransferValidParams,
+    ) -> Result<Self, FitError> {
+        let priors = [
+            segment_prior(covariance, PriorMean::Zero, transfer)?,
+            segment_prior(covariance, PriorMean::SourceMean, transfer)?,
+        ];
+        let subsets = all_condition_subsets(lines.len());
+        let prepared = prepare_lines(lines, params, &subsets)?;
+        Ok(Self { lines, params, prepared, subsets, priors, lambdas: &transfer.get().lambda_grid })
+    }
+
+    fn configs(&self) -> Configs<'_> {
+        Configs::new(&self.priors, self.lambdas)
+    }
+
+    fn grid_part(&self, pairs: Range<usize>) -> GridPart {
+        fit_grid_block(&self.prepared, self.params, &self.subsets, &self.configs(), pairs)
+    }
+
+    /// The parts merged in grid order, the held-out table and the rows.
+    fn rows(&self, source: &SourcePrior, parts: Vec<GridPart>) -> Result<Vec<TransferCvRow>, FitError> {
+        let configs = self.configs();
+        let expected = self.subsets.len() * configs.len();
+        if let Some(bad) = parts.iter().find(|p| p.winners.len() != expected) {
+            return Err(FitError::Dimension(format!(
+                "a grid part of {} winners for {} subsets × {} configurations",
+                bad.winners.len(),
+                self.subsets.len(),
+                configs.len()
+            )));
+        }
+        let merged =
+            parts.into_iter().reduce(GridPart::merge).ok_or_else(|| FitError::Dimension("no grid part".into()))?;
+        let table = held_out_from(self.lines, &self.prepared, self.params, &self.subsets, &configs, merged)?;
+        assemble_rows(&self.subsets, &configs, source, &table)
+    }
+}
+
+/// Every target line prepared for the grid loop, with each subset's p1 count checked.
+fn prepare_lines<'a>(
+    lines: &'a [MeasuredLine],
+    params: &PiecewiseValidParams,
+    subsets: &[ConditionSubset],
+) -> Result<Vec<PreparedLine<'a>>, FitError> {
+    let prepared: Vec<PreparedLine> =
+        lines.iter().enumerate().map(|(i, l)| prepare_line(l, i, params)).collect::<Result<_, _>>()?;
+    for subset in subsets {
+        let refs: Vec<&PreparedLine> = subset.indices.iter().map(|&i| &prepared[i]).collect();
+        check_p1_count(&refs, params)?;
+    }
+    Ok(prepared)
 }
 
 /// Fits every subset of `target_lines` under every configuration and predicts every
@@ -165,15 +284,23 @@ pub(crate) fn held_out_table(
     subsets: &[ConditionSubset],
     configs: &Configs,
 ) -> Result<HeldOut, FitError> {
-    let prepared: Vec<PreparedLine> =
-        target_lines.iter().enumerate().map(|(i, l)| prepare_line(l, i, target_params)).collect::<Result<_, _>>()?;
-    for subset in subsets {
-        let refs: Vec<&PreparedLine> = subset.indices.iter().map(|&i| &prepared[i]).collect();
-        check_p1_count(&refs, target_params)?;
-    }
-    let fits = fit_every_subset(&prepared, target_params, subsets, configs)?;
-    let rmse_mm = held_out_rmse(target_lines, subsets, &fits, configs.len())?;
-    Ok(HeldOut { n_lines: target_lines.len(), n_configs: configs.len(), rmse_mm, models: fits.models })
+    let prepared = prepare_lines(target_lines, target_params, subsets)?;
+    let whole = fit_grid_block(&prepared, target_params, subsets, configs, 0..full_grid(target_params).len());
+    held_out_from(target_lines, &prepared, target_params, subsets, configs, whole)
+}
+
+/// The held-out table from the grid's winners.
+fn held_out_from(
+    lines: &[MeasuredLine],
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    subsets: &[ConditionSubset],
+    configs: &Configs,
+    best: GridPart,
+) -> Result<HeldOut, FitError> {
+    let fits = best.into_fits(prepared, params, subsets, &full_grid(params), configs)?;
+    let rmse_mm = held_out_rmse(lines, subsets, &fits, configs.len())?;
+    Ok(HeldOut { n_lines: lines.len(), n_configs: configs.len(), rmse_mm, models: fits.models })
 }
 
 /// The prior configurations of one training set: index 0 without prior, then each
@@ -228,33 +355,34 @@ struct SubsetFits {
     pairs: Vec<usize>,
 }
 
-/// Grid search of every subset under every configuration, grid pairs outer (see the
-/// module docs, points 1 and 2).
-fn fit_every_subset(
+/// Grid search of every subset under every configuration over the grid pairs `pairs`,
+/// grid pairs outer (see the module docs, points 1 and 2).
+fn fit_grid_block(
     prepared: &[PreparedLine],
     params: &PiecewiseValidParams,
     subsets: &[ConditionSubset],
     configs: &Configs,
-) -> Result<SubsetFits, FitError> {
+    pairs: Range<usize>,
+) -> GridPart {
     let grid = full_grid(params);
-    let empty = || GridBest::new(subsets.len(), configs.len());
+    let empty = || GridPart::new(subsets.len(), configs.len());
     // Each rayon split folds a contiguous run of pairs in grid order; rayon's reduce
     // joins neighbouring runs in order, and `merge` is associative with `empty()` as
     // identity, so the winners are those of one pass in grid order.
-    let best = grid
+    let start = pairs.start;
+    grid[pairs]
         .par_iter()
         .enumerate()
         .with_min_len(8)
         .fold(
             || (PairWork::new(prepared), empty()),
-            |(mut work, mut best), (pair, &r)| {
-                work.evaluate(pair, r, subsets, params, &configs.priors, &mut best);
+            |(mut work, mut best), (k, &r)| {
+                work.evaluate(start + k, r, subsets, params, &configs.priors, &mut best);
                 (work, best)
             },
         )
         .map(|(_, best)| best)
-        .reduce(empty, GridBest::merge);
-    best.into_fits(prepared, params, subsets, &grid, configs)
+        .reduce(empty, GridPart::merge)
 }
 
 /// Per-thread state of the grid loop: every target line at the current pair.
@@ -283,7 +411,7 @@ impl<'p> PairWork<'p> {
         subsets: &[ConditionSubset],
         params: &PiecewiseValidParams,
         configs: &[ChainPrior],
-        best: &mut GridBest,
+        best: &mut GridPart,
     ) {
         for (line, status) in self.lines.iter_mut().zip(&mut self.status) {
             *status = line.update(r_a, r_f);
@@ -306,28 +434,40 @@ impl<'p> PairWork<'p> {
 }
 
 /// The best grid pair so far of one (subset, configuration).
-#[derive(Debug, Clone, Copy)]
-struct Winner {
-    sse: f64,
-    pair: usize,
-    alpha: (f64, f64),
-    theta: [f64; NP],
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridWinner {
+    /// Its training SSE (infinite while no pair gave a finite one).
+    pub sse: f64,
+    /// Index of the pair in the target's grid (`None` while no pair gave a finite SSE).
+    pub pair: Option<usize>,
+    /// The bp1 law's `(α1, α2)` at that pair (NaN without one).
+    pub alpha: (f64, f64),
+    /// The fitted `(β, γ, c, ρ, w_start)`.
+    pub theta: [f64; 5],
 }
 
-const NO_PAIR: usize = usize::MAX;
-
-/// Winners over a contiguous run of grid pairs, and each subset's first failure (with
-/// its pair index).
-struct GridBest {
-    n_configs: usize,
-    winners: Vec<Winner>,
-    first_error: Vec<Option<(usize, FitError)>>,
+impl GridWinner {
+    /// No pair yet.
+    pub const NONE: Self = Self { sse: f64::INFINITY, pair: None, alpha: (f64::NAN, f64::NAN), theta: [f64::NAN; NP] };
 }
 
-impl GridBest {
-    fn new(n_subsets: usize, n_configs: usize) -> Self {
-        let none = Winner { sse: f64::INFINITY, pair: NO_PAIR, alpha: (f64::NAN, f64::NAN), theta: [f64::NAN; NP] };
-        Self { n_configs, winners: vec![none; n_subsets * n_configs], first_error: vec![None; n_subsets] }
+/// The grid search over a contiguous block of grid pairs ([`transfer_cv_part`]): the
+/// winner of every (subset, configuration), `[subset · configurations + config]`, and
+/// each subset's first failing pair. Blocks merge in grid order ([`GridPart::merge`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridPart {
+    /// Configurations per subset.
+    pub n_configs: usize,
+    /// The winners.
+    pub winners: Vec<GridWinner>,
+    /// Per subset, the first pair of the block at which its fit failed, and why.
+    pub first_error: Vec<Option<(usize, FitError)>>,
+}
+
+impl GridPart {
+    /// A block with no pairs (the merge's identity).
+    pub fn new(n_subsets: usize, n_configs: usize) -> Self {
+        Self { n_configs, winners: vec![GridWinner::NONE; n_subsets * n_configs], first_error: vec![None; n_subsets] }
     }
 
     /// A pair's per-configuration results for a subset; pairs come in grid order, so a
@@ -336,7 +476,7 @@ impl GridBest {
         let row = &mut self.winners[subset * self.n_configs..(subset + 1) * self.n_configs];
         for (w, &(theta, sse)) in row.iter_mut().zip(per_config) {
             if sse.is_finite() && sse < w.sse {
-                *w = Winner { sse, pair, alpha, theta };
+                *w = GridWinner { sse, pair: Some(pair), alpha, theta };
             }
         }
     }
@@ -347,8 +487,9 @@ impl GridBest {
         }
     }
 
-    /// Merges the winners of the pairs that follow this run (associative).
-    fn merge(mut self, later: Self) -> Self {
+    /// Merges the winners of the pairs that follow this block (associative; a strictly
+    /// smaller SSE wins, so ties stay with the earlier pair).
+    pub fn merge(mut self, later: Self) -> Self {
         for (w, l) in self.winners.iter_mut().zip(later.winners) {
             if l.sse < w.sse {
                 *w = l;
@@ -375,12 +516,12 @@ impl GridBest {
         let mut fits = SubsetFits { models: Vec::with_capacity(self.winners.len()), pairs: Vec::new() };
         for (i, w) in self.winners.iter().enumerate() {
             let (s, c) = (i / self.n_configs, i % self.n_configs);
-            if w.pair == NO_PAIR {
+            let Some(pair) = w.pair else {
                 let first = self.first_error[s].as_ref().map(|(_, e)| e.clone());
                 return Err(first.unwrap_or_else(|| FitError::Singular("no grid pair gave a solvable fit".into())));
-            }
-            let (r_a, r_f) = grid[w.pair];
-            let law = match (params.has_start_blob(), laws.entry((s, w.pair))) {
+            };
+            let (r_a, r_f) = *grid.get(pair).ok_or_else(|| FitError::Dimension(format!("grid pair {pair}")))?;
+            let law = match (params.has_start_blob(), laws.entry((s, pair))) {
                 (false, _) => None,
                 (true, Entry::Occupied(e)) => Some(*e.get()),
                 (true, Entry::Vacant(e)) => {
@@ -391,7 +532,7 @@ impl GridBest {
             let mut model = fitted_model(params, (r_a, r_f), w.alpha, &w.theta, law, configs.lambda(c));
             model.training_rmse_mm = f64::NAN;
             fits.models.push(model);
-            fits.pairs.push(w.pair);
+            fits.pairs.push(pair);
         }
         Ok(fits)
     }
@@ -432,6 +573,9 @@ fn held_out_rmse(
     }
     Ok(table)
 }
+
+/// A prediction buffer not filled at any grid pair yet.
+const NO_PAIR: usize = usize::MAX;
 
 /// Per-thread buffers of the predictions: each line's actual times and speeds at the
 /// grid pair last used for it.
@@ -752,6 +896,30 @@ mod tests {
         let (one, two) = (with(1), with(2));
         assert_eq!(one, two);
         assert_eq!(one, with(3));
+    }
+
+    #[test]
+    fn blocks_of_the_grid_merged_in_order_equal_the_whole_run() {
+        // The work units of a spread-out run: the grid cut into its r_a rows, or into
+        // uneven blocks, each searched alone and merged in grid order, must give the
+        // rows of one call bit for bit; a block past the grid is an error.
+        let case = Case::coarse(&[0, 2, 3, 5, 8], 0.25);
+        let whole = case.run();
+        let part = |r: Range<usize>| {
+            transfer_cv_part(&case.source, &case.target, &case.sp, &case.tp, &case.transfer, r).unwrap()
+        };
+        let from = |parts| {
+            transfer_cv_from_parts(&case.source, &case.target, &case.sp, &case.tp, &case.transfer, parts).unwrap()
+        };
+        let rows = transfer_cv_blocks(&case.tp);
+        assert_eq!(rows, vec![0..3, 3..6, 6..9]);
+        assert_eq!(from(rows.into_iter().map(part).collect()), whole);
+        assert_eq!(from(vec![part(0..1), part(1..1), part(1..7), part(7..9)]), whole);
+        let past = transfer_cv_part(&case.source, &case.target, &case.sp, &case.tp, &case.transfer, 8..10);
+        assert!(matches!(past, Err(FitError::Dimension(_))));
+        let short = GridPart::new(1, 1);
+        let err = transfer_cv_from_parts(&case.source, &case.target, &case.sp, &case.tp, &case.transfer, vec![short]);
+        assert!(matches!(err, Err(FitError::Dimension(_))));
     }
 
     #[test]

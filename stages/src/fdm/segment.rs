@@ -254,6 +254,7 @@ impl StageKind for SegmentAccuracyStage {
         let step_mm = ctx.params.f64("step_mm");
         let mut rows = AccuracyRows::default();
         let mut sets = PhotoSets::default();
+        let bar = ctx.progress((ctx.inputs.len() * METHODS.len()) as u64);
         for input in &ctx.inputs {
             let data = read_lines(&input.dir)?;
             let truth = read_truth(&input.dir).map_err(StageError::domain)?;
@@ -262,8 +263,10 @@ impl StageKind for SegmentAccuracyStage {
                 for m in segment_all(&data, method, step_mm) {
                     rows.push(&data.manifest.printer, method, &m, truth.get(&m.line.line_id));
                 }
+                bar.inc(1);
             }
         }
+        bar.finish_and_clear();
         ctx.write_table("segment_accuracy", &mut rows.frame()?)?;
         ctx.write_table("photo_sets", &mut sets.frame()?)?;
         Ok(())

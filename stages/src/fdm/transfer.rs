@@ -11,13 +11,33 @@
 //! λ is chosen by inner leave-one-out on the training lines; with one training line,
 //! by simulating single-line transfer on the source printer (see `models::fdm::transfer`).
 //! Output `transfer_cv.parquet`: n_train, subset, test_condition, method, rmse_mm, lambda.
+//!
+//! Work units (`pipeline::units`, docs/SCALE.md): one per `r_a` of the target's grid
+//! (`models::fdm::transfer_cv_blocks`, 21 with the paper's grid). A unit searches its
+//! block of grid pairs for every training subset under every prior configuration and
+//! writes the winners exactly (`part.parquet`, one row per subset and configuration;
+//! `part_errors.parquet`, each subset's first failing pair); the merge joins the
+//! blocks in grid order and finishes the study (`models::fdm::transfer_cv_from_parts`),
+//! so the rows are those of one call bit for bit.
 
-use models::fdm::{transfer_cv, PiecewiseParams, TransferParams};
+use std::path::{Path, PathBuf};
+
+use models::fdm::{
+    transfer_cv_blocks, transfer_cv_from_parts, transfer_cv_part, FitError, GridPart, GridWinner, PiecewiseParams,
+    PiecewiseValidParams, TransferParams, TransferValidParams,
+};
+use pipeline::artifact::read_parquet;
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, Params, Split, StageContext, StageError, StageKind, Unit};
+use polars::prelude::DataFrame;
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
-use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::parts::PART_TABLE;
+use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
+
+/// A unit's failures: per subset, the first grid pair of its block at which the fit failed.
+const PART_ERRORS: &str = "part_errors";
 
 /// The `fdm.transfer_cv` stage kind.
 pub struct TransferCvStage;
@@ -43,14 +63,55 @@ impl StageKind for TransferCvStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let source = PrinterLines::read(&ctx.inputs[0].dir)?;
-        let target = PrinterLines::read(&ctx.inputs[1].dir)?;
-        let check = |p: PiecewiseParams| p.check().map_err(|e| fit_failed("piecewise parameters", e));
-        let source_params = check(PiecewiseParams::paper_defaults())?;
-        let target_params = check(PiecewiseParams::paper_defaults_without_blob())?;
-        let transfer = TransferParams::paper_defaults().check().map_err(|e| fit_failed("transfer parameters", e))?;
-        let rows = transfer_cv(&source.lines, &target.lines, &source_params, &target_params, &transfer)
-            .map_err(|e| fit_failed("transfer cross-validation", e))?;
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: one block of the target's grid pairs each (module docs).
+impl Split for TransferCvStage {
+    fn units(&self, _params: &Params, _inputs: usize) -> Vec<Unit> {
+        let blocks = Study::target_params().map(|p| transfer_cv_blocks(&p)).unwrap_or_default();
+        blocks.iter().map(|r| Unit { key: format!("grid pairs {}-{}", r.start, r.end - 1), cost: 1.0 }).collect()
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
+        let study = Study::read(ctx)?;
+        let blocks = transfer_cv_blocks(&study.target_params);
+        let pairs = blocks.get(index).cloned().ok_or_else(|| StageError::Params {
+            stage: ctx.stage.clone(),
+            message: format!("work unit {index} is past the grid's {} blocks", blocks.len()),
+        })?;
+        let part = transfer_cv_part(
+            &study.source.lines,
+            &study.target.lines,
+            &study.source_params,
+            &study.target_params,
+            &study.transfer,
+            pairs,
+        )
+        .map_err(|e| fit_failed("transfer cross-validation", e))?;
+        ctx.write_table(PART_TABLE, &mut winners_frame(&part)?)?;
+        ctx.write_table(PART_ERRORS, &mut errors_frame(&part)?)?;
+        Ok(())
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        let study = Study::read(ctx)?;
+        let parts = parts.iter().map(|dir| read_part(dir)).collect::<Result<Vec<_>, _>>()?;
+        let rows = transfer_cv_from_parts(
+            &study.source.lines,
+            &study.target.lines,
+            &study.source_params,
+            &study.target_params,
+            &study.transfer,
+            parts,
+        )
+        .map_err(|e| fit_failed("transfer cross-validation", e))?;
+        let target = &study.target;
         let mut table = frame(vec![
             i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
             str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
@@ -62,4 +123,97 @@ impl StageKind for TransferCvStage {
         ctx.write_table("transfer_cv", &mut table)?;
         Ok(())
     }
+}
+
+/// The study: the source (first input) and target (second) lines and the paper's
+/// settings.
+struct Study {
+    source: PrinterLines,
+    target: PrinterLines,
+    source_params: PiecewiseValidParams,
+    target_params: PiecewiseValidParams,
+    transfer: TransferValidParams,
+}
+
+impl Study {
+    fn read(ctx: &StageContext) -> Result<Self, StageError> {
+        Ok(Self {
+            source: PrinterLines::read(&ctx.inputs[0].dir)?,
+            target: PrinterLines::read(&ctx.inputs[1].dir)?,
+            source_params: PiecewiseParams::paper_defaults()
+                .check()
+                .map_err(|e| fit_failed("piecewise parameters", e))?,
+            target_params: Self::target_params()?,
+            transfer: TransferParams::paper_defaults().check().map_err(|e| fit_failed("transfer parameters", e))?,
+        })
+    }
+
+    /// The target's model settings: the paper's, without the start blob (the Taz 6).
+    fn target_params() -> Result<PiecewiseValidParams, StageError> {
+        PiecewiseParams::paper_defaults_without_blob().check().map_err(|e| fit_failed("piecewise parameters", e))
+    }
+}
+
+/// A unit's winners, exactly: one row per (subset, configuration) in that order; `pair`
+/// is −1 where no pair of the block gave a finite SSE.
+fn winners_frame(part: &GridPart) -> Result<DataFrame, StageError> {
+    let w = &part.winners;
+    let mut columns = vec![
+        i64_col("configurations", vec![part.n_configs as i64; w.len()]),
+        f64_col("sse", w.iter().map(|w| w.sse).collect()),
+        i64_col("pair", w.iter().map(|w| w.pair.map_or(-1, |p| p as i64)).collect()),
+        f64_col("alpha_1", w.iter().map(|w| w.alpha.0).collect()),
+        f64_col("alpha_2", w.iter().map(|w| w.alpha.1).collect()),
+    ];
+    columns.extend((0..THETA).map(|k| f64_col(&format!("theta_{k}"), w.iter().map(|w| w.theta[k]).collect())));
+    frame(columns)
+}
+
+/// Entries of a winner's `θ = (β, γ, c, ρ, w_start)`.
+const THETA: usize = GridWinner::NONE.theta.len();
+
+/// A unit's failures: each subset's first failing pair and the failure's text.
+fn errors_frame(part: &GridPart) -> Result<DataFrame, StageError> {
+    let failed: Vec<(usize, &(usize, FitError))> =
+        part.first_error.iter().enumerate().filter_map(|(s, e)| e.as_ref().map(|e| (s, e))).collect();
+    frame(vec![
+        i64_col("subset", failed.iter().map(|(s, _)| *s as i64).collect()),
+        i64_col("pair", failed.iter().map(|(_, (p, _))| *p as i64).collect()),
+        str_col("error", failed.iter().map(|(_, (_, e))| e.to_string()).collect()),
+    ])
+}
+
+/// A unit's [`GridPart`] back from its two tables.
+fn read_part(dir: &Path) -> Result<GridPart, StageError> {
+    let file = dir.join(format!("{PART_TABLE}.parquet"));
+    let winners = read_parquet(&file)?;
+    let n_configs = i64_column(&winners, &file, "configurations")?.first().copied().unwrap_or(1).max(1) as usize;
+    let (sse, pair) = (f64_column(&winners, &file, "sse")?, i64_column(&winners, &file, "pair")?);
+    let (a1, a2) = (f64_column(&winners, &file, "alpha_1")?, f64_column(&winners, &file, "alpha_2")?);
+    let theta: Vec<Vec<f64>> =
+        (0..THETA).map(|k| f64_column(&winners, &file, &format!("theta_{k}"))).collect::<Result<_, _>>()?;
+    let winners = (0..winners.height())
+        .map(|i| GridWinner {
+            sse: sse[i],
+            pair: usize::try_from(pair[i]).ok(),
+            alpha: (a1[i], a2[i]),
+            theta: std::array::from_fn(|k| theta[k][i]),
+        })
+        .collect::<Vec<_>>();
+    let file = dir.join(format!("{PART_ERRORS}.parquet"));
+    let errors = read_parquet(&file)?;
+    let n_subsets = winners.len() / n_configs;
+    let mut first_error = vec![None; n_subsets];
+    let (subset, pair) = (i64_column(&errors, &file, "subset")?, i64_column(&errors, &file, "pair")?);
+    for (i, text) in str_column(&errors, &file, "error")?.into_iter().enumerate() {
+        let slot = usize::try_from(subset[i]).ok().and_then(|s| first_error.get_mut(s)).ok_or_else(|| {
+            StageError::BadInput {
+                file: file.clone(),
+                location: Some(format!("row {i}, column `subset`")),
+                expected: format!("a subset index below {n_subsets}, got {}", subset[i]),
+            }
+        })?;
+        *slot = Some((pair[i].max(0) as usize, FitError::Recorded(text)));
+    }
+    Ok(GridPart { n_configs, winners, first_error })
 }

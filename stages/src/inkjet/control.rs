@@ -12,7 +12,8 @@
 //! paper's controller with its interval) and `control_trials.parquet` (one row per
 //! production print).
 
-use models::inkjet::discrepancy::control::{run_trials, summarize, ControlDesign, ControlRow, ControlSummary};
+use crate::progress::StageProgress;
+use models::inkjet::discrepancy::control::{run_trials_observed, summarize, ControlDesign, ControlRow, ControlSummary};
 use models::inkjet::discrepancy::power::PrintDesign;
 use models::inkjet::printer::Effect;
 use pipeline::params::ParamDefault;
@@ -99,7 +100,7 @@ impl StageKind for ControlGainStage {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let design = design(ctx)?;
-        let rows = run_trials(&design).map_err(StageError::domain)?;
+        let rows = run_trials_observed(&design, &StageProgress::new(ctx)).map_err(StageError::domain)?;
         let mut gain = gain_frame(&summarize(&rows))?;
         ctx.write_table("control_gain", &mut gain)?;
         let mut trials = trials_frame(&rows)?;

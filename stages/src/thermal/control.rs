@@ -22,8 +22,13 @@
 //! metric's mean over prints with a 95 % Student-t interval, and the mean paired
 //! difference to the paper's controller with its interval) and `control_trials.parquet`
 //! (one row per print and controller, with what the engine named and fitted).
+//!
+//! Work units (`pipeline::units`, docs/SCALE.md): one per print. A print's seed comes
+//! from its strength's place in the list and its own index, never from the unit it runs
+//! in, and its part is its three rows of `control_trials.parquet`, from which the merge
+//! rebuilds every trial exactly (Parquet keeps each `f64` bit for bit).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use datasets::thermal::deposition::print_part;
 use datasets::thermal::Effects;
@@ -32,7 +37,9 @@ use models::thermal::discrepancy::TAU_MISMATCH;
 use models::thermal::metrics::{print_quality, IdealBead, PrintQuality};
 use pipeline::params::{ParamDefault, Params};
 use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::units::run_split;
+use pipeline::{ParamSpec, ParamType, Split, StageContext, StageError, StageKind, Unit};
+use polars::prelude::DataFrame;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -44,7 +51,8 @@ use super::filmed_print::{named_list, FilmedPrint, Filming};
 use super::monitor;
 use crate::discrepancy_tables::{max_rounds, ALPHA};
 use crate::effects::strength_list;
-use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::parts::{listed, read_parts, PART_TABLE};
+use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
 
 /// The `thermal.control_gain` stage kind.
 pub struct ControlGainStage;
@@ -125,22 +133,39 @@ impl StageKind for ControlGainStage {
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        run_split(self, ctx)
+    }
+
+    fn split(&self) -> Option<&dyn Split> {
+        Some(self)
+    }
+}
+
+/// Work units: one per print, strength-major (the order of the tables' rows).
+impl Split for ControlGainStage {
+    fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
+        let prints = params.i64("prints") as usize;
+        (0..listed(params, EFFECT))
+            .flat_map(|c| (0..prints).map(move |p| Unit { key: format!("strength {c} print {p}"), cost: 1.0 }))
+            .collect()
+    }
+
+    fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
         let design = Design::from_params(ctx)?;
+        let (cell, print) = (index / design.prints, index % design.prints);
+        let strength = *design.strengths.get(cell).ok_or_else(|| StageError::Params {
+            stage: ctx.stage.clone(),
+            message: format!("work unit {index} is past the study's {} strengths", design.strengths.len()),
+        })?;
         let scratch = ctx.output_dir().join("scratch");
-        let jobs: Vec<(usize, f64, usize)> = (design.strengths.iter().enumerate())
-            .flat_map(|(c, &s)| (0..design.prints).map(move |p| (c, s, p)))
-            .collect();
-        let bar = ctx.progress(jobs.len() as u64);
-        let trials: Vec<Trial> = jobs
-            .par_iter()
-            .map(|&(cell, strength, print)| {
-                let trial = design.trial(cell, strength, print, &scratch.join(format!("print_{cell}_{print}")));
-                bar.inc(1);
-                trial
-            })
-            .collect::<Result<_, _>>()?;
-        bar.finish_and_clear();
+        let trial = design.trial(cell, strength, print, &scratch)?;
         std::fs::remove_dir_all(&scratch).ok();
+        ctx.write_table(PART_TABLE, &mut trials_frame(&[trial])?)?;
+        Ok(())
+    }
+
+    fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        let trials = trials_from_frame(&read_parts(parts)?, &ctx.output_dir().join("parts"))?;
         ctx.write_table("control_gain", &mut gain_frame(&trials)?)?;
         ctx.write_table("control_trials", &mut trials_frame(&trials)?)?;
         Ok(())
@@ -307,4 +332,50 @@ fn trials_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageErr
         cols.push(f64_col(name, rows.iter().map(|(t, c)| metric(&t.quality[*c])).collect()));
     }
     frame(cols)
+}
+
+/// The trials of [`trials_frame`]'s rows (three per print, in [`CONTROLLERS`] order),
+/// exactly: a `tau_excess` of NaN is a print on which the engine did not name τ.
+fn trials_from_frame(all: &DataFrame, file: &Path) -> Result<Vec<Trial>, StageError> {
+    let bad = |row: usize, expected: String| StageError::BadInput {
+        file: file.to_path_buf(),
+        location: Some(format!("row {row}")),
+        expected,
+    };
+    let (strength, print) = (f64_column(all, file, "strength")?, i64_column(all, file, "print")?);
+    let (seed, named, controller) =
+        (str_column(all, file, "seed")?, str_column(all, file, "named")?, str_column(all, file, "controller")?);
+    let [tau, tau_lo, tau_hi] =
+        ["tau_excess", "tau_excess_ci_lo", "tau_excess_ci_hi"].map(|c| f64_column(all, file, c));
+    let (tau, tau_lo, tau_hi) = (tau?, tau_lo?, tau_hi?);
+    let [oe, rms, max] = METRICS.map(|(name, _)| f64_column(all, file, name));
+    let (oe, rms, max) = (oe?, rms?, max?);
+    if !all.height().is_multiple_of(CONTROLLERS.len()) {
+        return Err(bad(all.height(), format!("{} rows per print", CONTROLLERS.len())));
+    }
+    (0..all.height())
+        .step_by(CONTROLLERS.len())
+        .map(|first| {
+            for (c, name) in CONTROLLERS.iter().enumerate() {
+                if controller[first + c] != *name {
+                    return Err(bad(first + c, format!("controller `{name}`, got `{}`", controller[first + c])));
+                }
+            }
+            let seed = u64::from_str_radix(&seed[first], 16)
+                .map_err(|_| bad(first, format!("a seed in hexadecimal, got `{}`", seed[first])))?;
+            let quality = [0, 1, 2].map(|c| PrintQuality {
+                mean_oe_pct: oe[first + c],
+                contour_max_mm: max[first + c],
+                contour_rms_mm: rms[first + c],
+            });
+            Ok(Trial {
+                strength: strength[first],
+                print: print[first] as usize,
+                seed,
+                named: named[first].clone(),
+                fitted: (!tau[first].is_nan()).then(|| (tau[first], tau_lo[first], tau_hi[first])),
+                quality,
+            })
+        })
+        .collect()
 }

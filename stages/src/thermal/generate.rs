@@ -4,7 +4,9 @@
 //! the analysis stages downstream read it exactly as they would read a measured one.
 
 use datasets::thermal::effects::Effects;
-use datasets::thermal::{generate_into, GenerateConfig, LeptonHabits};
+use datasets::thermal::{generate_into_observed, GenerateConfig, LeptonHabits};
+
+use crate::progress::StageProgress;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
@@ -63,7 +65,7 @@ impl StageKind for GenerateSequenceStage {
             effects,
             lepton_habits: LeptonHabits { repeated_frames: habits, shutter_freeze: habits },
         };
-        generate_into(&config, ctx.output_dir()).map_err(StageError::domain)?;
+        generate_into_observed(&config, ctx.output_dir(), &StageProgress::new(ctx)).map_err(StageError::domain)?;
         Ok(())
     }
 }

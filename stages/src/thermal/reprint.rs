@@ -28,7 +28,7 @@
 //! CAD polygon.
 
 use datasets::manifest::Provenance;
-use datasets::thermal::deposition::print_part;
+use datasets::thermal::deposition::print_part_observed;
 use datasets::thermal::effects::Effects;
 use datasets::thermal::sequence::ThermalSequence;
 use models::thermal::metrics::{
@@ -43,6 +43,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::common::{f64_column, open_sequence, read_table, trajectory_of};
+use crate::progress::StageProgress;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 use models::thermal::setup::{convex_vertices, interior_angles_deg};
 
@@ -103,13 +104,14 @@ impl StageKind for ReprintEvaluateStage {
         let (effects, dataset_seed) = virtual_printer(&seq)?;
         let commands = read_commands(&ctx.inputs[1].dir, trajectory.len())?;
         let layers = ctx.params.i64("layers") as usize;
+        let progress = StageProgress::new(ctx);
         let print = |command: &[f64]| -> Result<Vec<DepositGrid>, StageError> {
             // Seeded from the dataset, not the stage: every re-print of one dataset (the
             // paper's method, the extension) draws the same flow factors, so their
             // conventional prints are the same print.
             let mut rng = ChaCha8Rng::seed_from_u64(dataset_seed ^ REPRINT_SEED_SALT);
-            let printed =
-                print_part(&setup, &trajectory, command, layers, &effects, &mut rng).map_err(StageError::domain)?;
+            let printed = print_part_observed(&setup, &trajectory, command, layers, &effects, &mut rng, &progress)
+                .map_err(StageError::domain)?;
             Ok(printed.into_iter().map(|l| l.grid).collect())
         };
         let (before, after) = rayon::join(|| print(&commands.0), || print(&commands.1));

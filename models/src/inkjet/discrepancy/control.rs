@@ -34,6 +34,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+use crate::progress::Progress;
+
 use super::mechanisms::{ANISOTROPIC_SPREAD, LEVELLING_FLOW};
 use super::power::{names, print_of, PowerError, PrintDesign};
 use super::{InkjetFit, InkjetModel};
@@ -160,16 +162,24 @@ pub struct ControlRow {
 /// Runs every trial of `design` in parallel; rows in design order (cell, trial,
 /// predictor), independent of the number of threads.
 pub fn run_trials(design: &ControlDesign) -> Result<Vec<ControlRow>, PowerError> {
+    run_trials_observed(design, &())
+}
+
+/// [`run_trials`], telling `progress` of each trial (printer) as it finishes.
+pub fn run_trials_observed(design: &ControlDesign, progress: &dyn Progress) -> Result<Vec<ControlRow>, PowerError> {
     let jobs: Vec<(usize, Effect, f64, usize)> = design
         .cells
         .iter()
         .enumerate()
         .flat_map(|(c, &(effect, strength))| (0..design.seeds).map(move |t| (c, effect, strength, t)))
         .collect();
+    progress.add(jobs.len() as u64);
     let trials: Result<Vec<Vec<ControlRow>>, PowerError> = jobs
         .par_iter()
         .map(|&(cell, effect, strength, trial)| {
-            one_trial(design, effect, strength, trial, mix_seed(design.seed, cell as u64, trial as u64))
+            let rows = one_trial(design, effect, strength, trial, mix_seed(design.seed, cell as u64, trial as u64));
+            progress.done(1);
+            rows
         })
         .collect();
     Ok(trials?.into_iter().flatten().collect())
