@@ -164,19 +164,29 @@ impl StageContext {
 
     /// A progress bar for `len` steps of work, drawn while the stage is running for
     /// more than a second (hidden when output is not a terminal or with `--quiet`).
+    /// With `len` 0 it says the work is being counted until it is given
+    /// [`bar_style`] (the length of work known so far is then set on it).
     pub fn progress(&self, len: u64) -> indicatif::ProgressBar {
         let bar = indicatif::ProgressBar::new(len);
         let Some(multi) = &self.progress else {
             return indicatif::ProgressBar::hidden();
         };
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{prefix:>18} [{bar:30}] {pos}/{len} {elapsed}, about {eta} left")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
+        bar.set_style(if len == 0 { counting_style() } else { bar_style() });
         bar.set_prefix(self.stage.clone());
         multi.add(bar)
     }
+}
+
+/// The style of a stage's progress bar: count, elapsed time and ETA.
+pub fn bar_style() -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template("{prefix:>18} [{bar:30}] {pos}/{len} {elapsed}, about {eta} left")
+        .expect("valid template")
+        .progress_chars("=> ")
+}
+
+/// The style of a bar whose work is not known yet (not an empty bar drawn full).
+fn counting_style() -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template("{prefix:>18} counting the work, {elapsed}").expect("valid template")
 }
 
 /// All registered stage kinds, by name.

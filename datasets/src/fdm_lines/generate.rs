@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use models::fdm::kinematics::LineKinematics;
 use models::fdm::printer::{print_line, Effects, PrintedLine, PrinterProfile, LAYER_HEIGHT_MM, PRINTERS};
+use models::progress::Progress;
 use rayon::prelude::*;
 
 use super::camera::{photograph, CameraSettings, Photo};
@@ -102,6 +103,15 @@ pub fn generate(config: &GenerateConfig, out: &Path) -> Result<usize, DatasetErr
 
 /// [`generate`] into the empty folder `out_dir` (a stage's output folder).
 pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<usize, DatasetError> {
+    generate_into_observed(config, out_dir, &())
+}
+
+/// [`generate_into`], telling `progress` of each line printed and photographed.
+pub fn generate_into_observed(
+    config: &GenerateConfig,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<usize, DatasetError> {
     let bad = |expected: String| DatasetError::Malformed { file: out_dir.to_path_buf(), location: None, expected };
     let profile = PrinterProfile::named(&config.printer)
         .ok_or_else(|| bad(format!("expected a printer among {PRINTERS:?}, got `{}`", config.printer)))?;
@@ -110,6 +120,7 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<usize, D
     }
     let jobs = jobs(config).map_err(|e| bad(format!("a condition's kinematics: {e}")))?;
     let v_ref_mm_s = jobs.iter().map(|j| j.kin.peak_speed_mm_s()).fold(0.0, f64::max);
+    progress.add(jobs.len() as u64);
     let shots: Vec<(PrintedLine, Photo)> = jobs
         .par_iter()
         .enumerate()
@@ -125,6 +136,7 @@ pub fn generate_into(config: &GenerateConfig, out_dir: &Path) -> Result<usize, D
                 &mut stream(config.seed, 2 * index as u64 + 1),
             )
             .map_err(|e| bad(format!("photographing {}: {e}", job.line_id)))?;
+            progress.done(1);
             Ok((printed, photo))
         })
         .collect::<Result<_, DatasetError>>()?;

@@ -30,6 +30,7 @@ use super::objective::Target;
 pub use super::pipe_junction::{pipe_junction, PipeJunction, RegionMetrics, TwoMaterial};
 use super::printer::PrintRun;
 pub use super::printer::TruthPrinter;
+use crate::progress::Progress;
 
 /// A print job: part, machine, and both control laws' settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -255,7 +256,7 @@ pub fn run_print(
     rng: &mut impl Rng,
     record: bool,
 ) -> Result<(PrintOutcome, Option<PrintRecording>), InkjetError> {
-    run_print_predicting(scenario, law, rng, record, None)
+    run_print_predicting(scenario, law, rng, record, None, &())
 }
 
 /// The per-cell coefficients a closed-loop controller predicts layer `layer` with,
@@ -265,15 +266,20 @@ pub type PredictCoeffs<'a> = &'a dyn Fn(usize, &[DropletCoeffs]) -> Vec<DropletC
 /// [`run_print`] whose closed-loop controller predicts with `predict` (`None`: the
 /// nominal coefficients of each cell's material, as the paper's controller does). The
 /// printer always prints the nominal droplets of the material chosen; only the
-/// controller's model changes.
+/// controller's model changes. `progress` counts layers against the open loop's
+/// count, which a closed loop may exceed (each extra layer is added as it starts) or
+/// finish short of (the count is then completed).
 pub fn run_print_predicting(
     scenario: &Scenario,
     law: ControlLaw,
     rng: &mut impl Rng,
     record: bool,
     predict: Option<PredictCoeffs<'_>>,
+    progress: &dyn Progress,
 ) -> Result<(PrintOutcome, Option<PrintRecording>), InkjetError> {
     scenario.model.check()?;
+    let mut layers_known = scenario.open_loop_layers;
+    progress.add(layers_known as u64);
     let grid = scenario.target.grid();
     let mut run = scenario.truth.start(grid, rng);
     let mut recording = record.then(|| {
@@ -315,6 +321,10 @@ pub fn run_print_predicting(
                 (decision.pattern, materials, coeffs)
             }
         };
+        if layer == layers_known {
+            layers_known += 1;
+            progress.add(1);
+        }
         run.print_layer(&pattern, &coeffs)?;
         droplets += pattern.count();
         note_part_top(&mut part_top_um, &pattern, &materials, run.truth());
@@ -322,7 +332,9 @@ pub fn run_print_predicting(
             let measured = run.measure();
             rec.layers.push(LayerRecord { pattern, materials, measured, truth: run.truth().clone() });
         }
+        progress.done(1);
     }
+    progress.done((layers_known - run.layers_printed()) as u64);
     Ok((outcome(scenario, &run, droplets, part_top_um), recording))
 }
 

@@ -16,12 +16,14 @@ use discrepancy::{discover, Discovery};
 use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
+use models::progress::Progress;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain, Kind, Table, Value, ALPHA, BINS};
 use crate::fdm::lines::PrinterLines;
+use crate::progress::StageProgress;
 
 /// The `fdm.discrepancy` stage kind.
 pub struct DiscrepancyStage;
@@ -99,6 +101,7 @@ impl StageKind for DiscrepancyStage {
         let settings = engine_settings(ctx)?;
         let smoothing = ctx.params.f64("smoothing_mm");
         let mut tables = Tables::new(settings.alpha);
+        let progress = StageProgress::with_steps(ctx, printers.len() as u64);
         for (printer, lines) in &printers {
             let lag = FdmModel::new(lines, blob.has(printer), smoothing);
             if ctx.params.str("baseline") == "piecewise_model" {
@@ -109,6 +112,7 @@ impl StageKind for DiscrepancyStage {
                 let found = discover(&lag, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
                 tables.add(printer, &lag, lines, &found);
             }
+            progress.done(1);
         }
         tables.write(ctx)
     }

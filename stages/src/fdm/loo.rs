@@ -15,6 +15,7 @@
 
 use models::fdm::loo::run_folds;
 use models::fdm::{fit_at, fit_lag, rmse, LagParams, MeasuredLine, PiecewiseParams, PiecewiseValidParams};
+use models::progress::Progress;
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
@@ -22,6 +23,7 @@ use polars::prelude::{Column, IntoColumn, NamedFrom, Series};
 use rayon::prelude::*;
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
+use crate::progress::StageProgress;
 use crate::table::{f64_col, frame, str_col};
 
 /// One held-out line's result.
@@ -114,10 +116,12 @@ impl StageKind for PiecewiseLooStage {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let params = piecewise_params(ctx)?;
         let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
+        let progress = StageProgress::with_steps(ctx, printer.lines.len() as u64);
         let folds = run_folds(&printer.lines, |train, test, _| {
             let model = models::fdm::fit(train, &params)?;
             let predicted_mm = model.predict(&test.nominal, &test.positions_mm)?;
             let rmse_mm = rmse(&predicted_mm, &test.widths_mm);
+            progress.done(1);
             Ok(Fold { rmse_mm, r_a: model.r_a, r_f: model.r_f, tau_s: None, predicted_mm })
         })
         .map_err(|e| fit_failed("piecewise leave-one-out", e))?;
@@ -160,10 +164,12 @@ impl StageKind for LagLooStage {
         .check()
         .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
         let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
+        let progress = StageProgress::with_steps(ctx, printer.lines.len() as u64);
         let folds = run_folds(&printer.lines, |train, test, _| {
             let model = fit_lag(train, &params)?;
             let predicted_mm = model.predict(&test.nominal, &test.positions_mm)?;
             let rmse_mm = rmse(&predicted_mm, &test.widths_mm);
+            progress.done(1);
             Ok(Fold { rmse_mm, r_a: 1.0, r_f: 1.0, tau_s: Some(model.tau_s), predicted_mm })
         })
         .map_err(|e| fit_failed("lag leave-one-out", e))?;

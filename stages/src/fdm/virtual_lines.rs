@@ -8,13 +8,14 @@
 //!   the virtual lines' own scatter → `agreement.parquet`, `agreement_profiles.parquet`.
 
 use datasets::fdm_lines::camera::CameraSettings;
-use datasets::fdm_lines::generate::{conditions_named, generate_into, GenerateConfig};
+use datasets::fdm_lines::generate::{conditions_named, generate_into_observed, GenerateConfig};
 use models::fdm::printer::{held_out_agreement, Effects, PrinterProfile, PRINTERS};
 use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use super::lines::PrinterLines;
+use crate::progress::StageProgress;
 use crate::table::{f64_col, frame, str_col};
 
 /// The `fdm.generate_lines` stage kind.
@@ -100,7 +101,7 @@ impl StageKind for GenerateLinesStage {
             },
             ..GenerateConfig::new(ctx.params.str("printer"), ctx.seed)
         };
-        generate_into(&config, ctx.output_dir()).map_err(StageError::domain)?;
+        generate_into_observed(&config, ctx.output_dir(), &StageProgress::new(ctx)).map_err(StageError::domain)?;
         Ok(())
     }
 }

@@ -8,7 +8,8 @@
 //! surface and every layer's material map (for the cross-sections of Figs 13-14).
 
 use models::inkjet::experiments::{
-    cuboid_with_layers, cylinder, pipe_junction, run_print, ControlLaw, PrintOutcome, PrintRecording, Scenario,
+    cuboid_with_layers, cylinder, pipe_junction, run_print_predicting, ControlLaw, PrintOutcome, PrintRecording,
+    Scenario,
 };
 use models::inkjet::height_model::Material;
 use models::inkjet::pipe_junction::{desired_part_top, edge_deformation, RegionMetrics};
@@ -20,6 +21,7 @@ use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::progress::StageProgress;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.print_experiment` stage kind.
@@ -92,7 +94,10 @@ impl StageKind for PrintExperimentStage {
         let law = if controller == "open_loop" { ControlLaw::OpenLoop } else { ControlLaw::ClosedLoop };
         let two_material = scenario.two_material.is_some();
         let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
-        let (outcome, recording) = run_print(&scenario, law, &mut rng, two_material).map_err(StageError::domain)?;
+        let progress = StageProgress::new(ctx);
+        let (outcome, recording) = run_print_predicting(&scenario, law, &mut rng, two_material, None, &progress)
+            .map_err(StageError::domain)?;
+        drop(progress);
         let mut summary = summary_frame(&scenario_name, &controller, variation_pct, &outcome)?;
         ctx.write_table("summary", &mut summary)?;
         let mut map = height_map_frame(&outcome.final_heights)?;

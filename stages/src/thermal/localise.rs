@@ -58,6 +58,7 @@
 //! than the recorded time.
 
 use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
+use models::progress::Progress;
 use models::stats::finite_median;
 use models::thermal::Trajectory;
 use pipeline::StageError;
@@ -346,8 +347,14 @@ impl<'a> Localiser<'a> {
         Self { seq, trajectory, undistorter, h0, params, path_corners, passage_s, ready_s, max_age_s, place_cornerless }
     }
 
-    /// Both estimators on every frame, in file order, and the mount fits; `chosen` set by `method`.
-    pub fn run(&self, seed: u64, method: Localisation) -> Result<(Vec<FrameOutcome>, Vec<MountRow>), StageError> {
+    /// Both estimators on every frame, in file order, and the mount fits; `chosen` set by
+    /// `method`. `progress` is told of each frame observed.
+    pub fn run(
+        &self,
+        seed: u64,
+        method: Localisation,
+        progress: &dyn Progress,
+    ) -> Result<(Vec<FrameOutcome>, Vec<MountRow>), StageError> {
         let view = TrajectoryView::new(&self.trajectory.t_s, &self.trajectory.x_mm, &self.trajectory.y_mm)
             .map_err(StageError::domain)?;
         let ctx = FrameContext {
@@ -357,7 +364,7 @@ impl<'a> Localiser<'a> {
             trajectory: view,
             params: self.params,
         };
-        let mut frames = self.observe_all(&ctx, seed)?;
+        let mut frames = self.observe_all(&ctx, seed, progress)?;
         let mounts = self.localise_rigid_all(&ctx, &mut frames);
         for f in &mut frames {
             f.chosen = match method {
@@ -370,10 +377,16 @@ impl<'a> Localiser<'a> {
 
     /// Pass 1 over all frames: decode, observe, the paper's DLT, the ridge pairs; a frame
     /// whose image is the one before it again is skipped (module doc).
-    fn observe_all(&self, ctx: &FrameContext<'_>, seed: u64) -> Result<Vec<FrameOutcome>, StageError> {
+    fn observe_all(
+        &self,
+        ctx: &FrameContext<'_>,
+        seed: u64,
+        progress: &dyn Progress,
+    ) -> Result<Vec<FrameOutcome>, StageError> {
         let mut workspace = FrameWorkspace::new(&self.undistorter, &self.params).map_err(StageError::domain)?;
         let mut last_time: Option<(usize, f64)> = None;
         let mut outcomes: Vec<FrameOutcome> = Vec::with_capacity(self.seq.frames.len());
+        progress.add(self.seq.frames.len() as u64);
         for entry in &self.seq.frames {
             let outcome = match last_time {
                 Some((layer, t)) if layer == entry.layer && entry.recorded_time_s <= t => FrameOutcome::skipped(
@@ -400,6 +413,7 @@ impl<'a> Localiser<'a> {
                 }
             };
             outcomes.push(outcome);
+            progress.done(1);
         }
         Ok(outcomes)
     }

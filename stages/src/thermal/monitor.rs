@@ -60,6 +60,7 @@ use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 
 use super::common::{camera_model, deposition_directions, left_directions, open_sequence, trajectory_of};
 use super::localise::{DetectionRow, FrameOutcome, Localisation, Localiser, MountRow};
+use crate::progress::StageProgress;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 /// The `thermal.monitor` stage kind.
@@ -157,7 +158,7 @@ impl StageKind for MonitorStage {
         ctx.write_table("directions", &mut directions)?;
         let settings = Settings::from_params(&ctx.params);
         let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, settings)?;
-        let (frames, mounts) = analysis.localiser.run(ctx.seed, settings.localisation)?;
+        let (frames, mounts) = analysis.localiser.run(ctx.seed, settings.localisation, &StageProgress::new(ctx))?;
         let widths = analysis.widths(&frames);
         write_frame_tables(ctx, &analysis.localiser.undistorter, &frames, settings.localisation)?;
         write_mount_tables(ctx, &analysis.localiser.undistorter, &frames, &mounts)?;
@@ -192,7 +193,7 @@ pub fn monitor_tables(
     let (with_dda, without_dda) = deposition_directions(seq, &trajectory, &setup)?;
     let settings = Settings::from_params(params);
     let analysis = Analysis::new(seq, &trajectory, &with_dda, &setup, settings)?;
-    let (frames, _) = analysis.localiser.run(seed, settings.localisation)?;
+    let (frames, _) = analysis.localiser.run(seed, settings.localisation, &())?;
     let widths = analysis.widths(&frames);
     Ok(MonitorTables {
         frames: frames_frame(&frames, settings.localisation)?,

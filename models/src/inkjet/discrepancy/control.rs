@@ -218,7 +218,7 @@ fn one_trial(
             let predict = |layer: usize, nominal: &[DropletCoeffs]| controller.coeffs(grid, layer, nominal);
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             let (outcome, _) =
-                run_print_predicting(&calibration, ControlLaw::ClosedLoop, &mut rng, false, Some(&predict))?;
+                run_print_predicting(&calibration, ControlLaw::ClosedLoop, &mut rng, false, Some(&predict), &())?;
             Ok(ControlRow {
                 effect,
                 strength: signed,
