@@ -869,7 +869,7 @@ camera_latency effect of the virtual camera), which the recorded time cannot see
 mod tests {
     use super::*;
     use crate::figures::test_util::write_table;
-    use crate::figures::thermal_test_data::{accuracy, frames, write_compensate, write_reprint};
+    use crate::figures::thermal::test_data::{accuracy, frames, write_compensate, write_reprint};
 
     #[test]
     fn paper_reductions_match_table_3() {

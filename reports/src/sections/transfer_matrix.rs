@@ -14,7 +14,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
 use super::{comparison_frame, Row};
-use crate::figures::transfer_matrix::{load, Cell, Matrix};
+use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix};
 use crate::html::escape;
 
 /// The `report.transfer_matrix` stage kind.

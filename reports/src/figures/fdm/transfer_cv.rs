@@ -93,7 +93,7 @@ impl StageKind for TransferCvFigure {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let cv = load(&ctx.inputs[0].dir)?;
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Transfer learning to the target printer: held-out RMSE vs training lines (paper 000 Fig. 9)".to_string()
         });
         let stem = ctx.output_path("transfer_cv")?;

@@ -14,6 +14,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
+use crate::figures::common::{grid_step, viridis};
 use crate::read::{f64s, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
 
@@ -28,20 +29,6 @@ const COLOUR_BAR_PX: u32 = 110;
 const NEAR_OPTIMUM_REL: f64 = 0.01;
 /// An optimum is called sharp when at most this fraction of the grid is as good.
 const SHARP_MAX_FRACTION: f64 = 0.05;
-
-/// Matplotlib's viridis at nine equally spaced stops (perceptually uniform, readable in
-/// grey scale and by colour-blind readers); values between stops are interpolated.
-const VIRIDIS: [(u8, u8, u8); 9] = [
-    (68, 1, 84),
-    (71, 44, 122),
-    (59, 81, 139),
-    (44, 113, 142),
-    (33, 145, 140),
-    (39, 173, 129),
-    (92, 200, 99),
-    (170, 220, 50),
-    (253, 231, 37),
-];
 
 /// One printer's RMSE surface.
 #[derive(Debug)]
@@ -101,26 +88,6 @@ pub fn figure_size_px(n_printers: usize) -> (u32, u32) {
     (PANEL_PX.0 * n_printers.max(1) as u32, PANEL_PX.1)
 }
 
-/// Viridis at `t` in [0, 1] (clamped; NaN maps to the low end).
-pub fn viridis(t: f64) -> RGBColor {
-    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    let scaled = t * (VIRIDIS.len() - 1) as f64;
-    let i = (scaled.floor() as usize).min(VIRIDIS.len() - 2);
-    let frac = scaled - i as f64;
-    let mix = |a: u8, b: u8| (a as f64 + frac * (b as f64 - a as f64)).round() as u8;
-    let (lo, hi) = (VIRIDIS[i], VIRIDIS[i + 1]);
-    RGBColor(mix(lo.0, hi.0), mix(lo.1, hi.1), mix(lo.2, hi.2))
-}
-
-/// The grid spacing of `values`: the smallest gap between distinct values (1 when
-/// there is a single value, so a one-point grid still draws a cell).
-pub fn grid_step(values: impl Iterator<Item = f64>) -> f64 {
-    let mut v: Vec<f64> = values.collect();
-    v.sort_by(f64::total_cmp);
-    v.dedup();
-    v.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 1e-12).fold(f64::INFINITY, f64::min).min(1.0)
-}
-
 /// The fraction of grid points whose RMSE is within `rel` of the minimum: small when
 /// the optimum is sharp, large when the surface is a flat valley.
 pub fn near_optimum_fraction(rmse_mm: &[f64], rel: f64) -> f64 {
@@ -172,7 +139,7 @@ fn draw_panel<DB: DrawingBackend>(
     let (map, bar) = area.split_horizontally(area.dim_in_pixel().0.saturating_sub(COLOUR_BAR_PX));
     let range = rmse_range_mm(&surface.cells);
     draw_heat_map(&map, surface, range)?;
-    super::draw_viridis_bar(&bar, range, "training RMSE (mm)", label_decimals(range.1 - range.0), 120)
+    crate::figures::common::draw_viridis_bar(&bar, range, "training RMSE (mm)", label_decimals(range.1 - range.0), 120)
 }
 
 fn draw_heat_map<DB: DrawingBackend>(
@@ -245,34 +212,10 @@ mod tests {
     use polars::df;
 
     #[test]
-    fn viridis_ends_are_the_table_ends_and_out_of_range_clamps() {
-        assert_eq!(viridis(0.0), RGBColor(68, 1, 84));
-        assert_eq!(viridis(1.0), RGBColor(253, 231, 37));
-        assert_eq!(viridis(-3.0), viridis(0.0));
-        assert_eq!(viridis(7.0), viridis(1.0));
-        assert_eq!(viridis(f64::NAN), viridis(0.0));
-        // Halfway between stops 4 (0.5) and 5 (0.625): the rounded mean of the two.
-        assert_eq!(viridis(0.5625), RGBColor(36, 159, 135));
-    }
-
-    #[test]
-    fn viridis_gets_lighter_along_the_scale() {
-        let luma = |c: RGBColor| 0.299 * c.0 as f64 + 0.587 * c.1 as f64 + 0.114 * c.2 as f64;
-        let lumas: Vec<f64> = (0..=20).map(|k| luma(viridis(k as f64 / 20.0))).collect();
-        assert!(lumas.windows(2).all(|w| w[1] > w[0]), "{lumas:?}");
-    }
-
-    #[test]
     fn near_optimum_fraction_counts_points_within_tolerance_of_min() {
         let rmse = [1.0, 1.005, 1.02, 2.0];
         assert_eq!(near_optimum_fraction(&rmse, 0.01), 0.5);
         assert_eq!(near_optimum_fraction(&rmse, 0.0), 0.25);
-    }
-
-    #[test]
-    fn grid_step_is_the_smallest_gap() {
-        assert!((grid_step([1.1, 0.9, 1.0, 1.0].into_iter()) - 0.1).abs() < 1e-12);
-        assert_eq!(grid_step([1.0].into_iter()), 1.0);
     }
 
     /// Two printers on the paper's 21 × 21 grid: taz5 a narrow bowl (sharp optimum at

@@ -18,11 +18,11 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::r_surface::grid_step;
-use crate::figures::thermal_common::{
+use crate::figures::common::grid_step;
+use crate::figures::thermal::common::{
     clip_polyline, closed_outline, draw_key, draw_runs, load_polygon, merge_runs, plane_chart, KeySwatch, Vertex,
 };
-use crate::figures::thermal_directions::parse_vertices;
+use crate::figures::thermal::directions::parse_vertices;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
 
@@ -159,7 +159,7 @@ impl StageKind for ThermalOverdepositionFigure {
             half_mm: ctx.params.f64("zoom_mm"),
             pairs_per_row: ctx.params.i64("pairs_per_row") as usize,
         };
-        let title = super::title_or(ctx, || default_title(&plot.corners));
+        let title = crate::figures::common::title_or(ctx, || default_title(&plot.corners));
         let stem = ctx.output_path("thermal_overdeposition")?;
         let size = figure_size_px(plot.corners.len(), plot.pairs_per_row);
         draw_png_and_svg(&stem, size, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))
@@ -310,7 +310,7 @@ fn draw_panel<DB: DrawingBackend>(
 mod tests {
     use super::*;
     use crate::figures::test_util::{assert_drawn, write_table};
-    use crate::figures::thermal_test_data::{corner_path, corners, write_reprint};
+    use crate::figures::thermal::test_data::{corner_path, corners, write_reprint};
     use polars::df;
 
     #[test]

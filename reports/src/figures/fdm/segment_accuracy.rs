@@ -14,7 +14,7 @@ use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
-use super::distinct;
+use crate::figures::common::distinct;
 
 /// The `figure.fdm_segment_accuracy` stage kind.
 pub struct SegmentAccuracyFigure;

@@ -15,7 +15,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::r_surface::viridis;
+use crate::figures::common::viridis;
 use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
@@ -32,7 +32,7 @@ const TOP_ROW_FRACTION: f64 = 0.58;
 const NO_MATERIAL: RGBColor = RGBColor(225, 225, 225);
 
 const PARAMS: &[ParamSpec] = &[
-    super::TITLE,
+    crate::figures::common::TITLE,
     ParamSpec {
         name: "desired_height_um",
         ty: ParamType::Float { min: 0.0, max: 10_000.0 },
@@ -111,7 +111,7 @@ impl StageKind for InkjetHeightMapsFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let prints = [load(&ctx.inputs[0].dir)?, load(&ctx.inputs[1].dir)?];
         let desired = ctx.params.f64("desired_height_um");
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Printed part: aerial views and middle-row side view, open vs closed loop".to_string()
         });
         let stem = ctx.output_path("inkjet_height_maps")?;
@@ -205,7 +205,7 @@ pub fn draw<DB: DrawingBackend>(
     for (panel, print) in panels.iter().zip(prints) {
         draw_aerial(panel, print, max_um).map_err(|e| e.to_string())?;
     }
-    super::draw_viridis_bar(&bar, (0.0, max_um), "height (µm)", 0, 120).map_err(|e| e.to_string())?;
+    crate::figures::common::draw_viridis_bar(&bar, (0.0, max_um), "height (µm)", 0, 120).map_err(|e| e.to_string())?;
     draw_side_view(&bottom, prints, desired_um).map_err(|e| e.to_string())
 }
 

@@ -17,7 +17,8 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use crate::read::{f64s, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
 
-use super::{distinct, draw_width_profile_mesh};
+use super::draw_width_profile_mesh;
+use crate::figures::common::distinct;
 
 /// The `figure.fdm_virtual_agreement` stage kind.
 pub struct VirtualAgreementFigure;

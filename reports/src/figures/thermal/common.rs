@@ -13,7 +13,7 @@ use plotters::prelude::*;
 
 use pipeline::StageError;
 
-use crate::figures::r_surface::viridis;
+use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet};
 use crate::style::{house_mesh, text};
 

@@ -26,7 +26,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::{
+use crate::figures::thermal::common::{
     closed_outline, colour_level, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour, load_polygon,
     merge_runs, plane_chart, KeySwatch, PlaneChart, Vertex,
 };
@@ -64,7 +64,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(150.0),
         doc: "Upper edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 150 °C.",
     },
-    super::TITLE,
+    crate::figures::common::TITLE,
 ];
 
 /// One pixel or plane cell with its temperature.
@@ -140,7 +140,7 @@ impl StageKind for ThermalFrameFigure {
         if let Some(input) = ctx.inputs.get(1) {
             data.polygon = load_polygon(&input.dir)?;
         }
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Thermal frame alignment: undistorted frame, detected corners, aligned frames on the plane".to_string()
         });
         let stem = ctx.output_path("thermal_frame")?;
@@ -233,7 +233,7 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, data
     draw_frame_panel(&b, data, range, "(b) detected corners and nozzle", true).map_err(|e| e.to_string())?;
     draw_mosaic(&bottom, data, range).map_err(|e| e.to_string())?;
     draw_key(&key, &key_items(data)).map_err(|e| e.to_string())?;
-    super::draw_viridis_bar(&bar, range, "temperature (°C)", 0, super::thermal_common::COLOUR_LEVELS)
+    crate::figures::common::draw_viridis_bar(&bar, range, "temperature (°C)", 0, super::common::COLOUR_LEVELS)
         .map_err(|e| e.to_string())
 }
 
@@ -312,7 +312,7 @@ fn draw_mosaic<DB: DrawingBackend>(
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let caption = "(c) aligned frames stitched on the plane (latest frame per cell) with the CAD path";
     let area = area.titled(caption, text(18.0))?;
-    let step = crate::figures::r_surface::grid_step(data.mosaic.iter().map(|c| c.x));
+    let step = crate::figures::common::grid_step(data.mosaic.iter().map(|c| c.x));
     let xs = data.mosaic.iter().map(|c| c.x).chain(data.polygon.iter().map(|v| v.x_mm));
     let ys = data.mosaic.iter().map(|c| c.y).chain(data.polygon.iter().map(|v| v.y_mm));
     let ((x0, x1), (y0, y1)) = (finite_range(xs), finite_range(ys));
@@ -330,7 +330,7 @@ fn draw_mosaic<DB: DrawingBackend>(
 mod tests {
     use super::*;
     use crate::figures::test_util::{assert_drawn, write_table};
-    use crate::figures::thermal_test_data::{corner_path, frame_example, mosaic, path_table, write_monitor};
+    use crate::figures::thermal::test_data::{corner_path, frame_example, mosaic, path_table, write_monitor};
 
     #[test]
     fn band_outline_of_a_block_is_its_perimeter() {

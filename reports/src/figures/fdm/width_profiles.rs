@@ -16,7 +16,8 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text, PALETTE};
 
-use super::{distinct, draw_width_profile_mesh};
+use super::draw_width_profile_mesh;
+use crate::figures::common::distinct;
 
 /// The `figure.fdm_width_profiles` stage kind.
 pub struct WidthProfilesFigure;
@@ -70,7 +71,7 @@ impl StageKind for WidthProfilesFigure {
         if let Some(summary) = ctx.inputs.get(1) {
             add_steady_widths(&summary.dir.join("line_summary.parquet"), &printer, &mut profiles)?;
         }
-        let title = super::title_or(ctx, || format!("Measured line width along the line: {printer}"));
+        let title = crate::figures::common::title_or(ctx, || format!("Measured line width along the line: {printer}"));
         let stem = ctx.output_path("width_profiles")?;
         let profiles: Vec<Profile> = profiles.into_values().collect();
         draw_png_and_svg(&stem, (1500, 1050), |a| draw(a, &title, &profiles), |a| draw(a, &title, &profiles))

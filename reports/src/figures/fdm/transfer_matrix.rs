@@ -78,7 +78,7 @@ impl StageKind for TransferMatrixFigure {
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let matrix = load(&ctx.inputs[0].dir)?;
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Transfer among printers: median RMSE improvement over single-printer learning (cf. paper 000 Fig. 9)"
                 .to_string()
         });

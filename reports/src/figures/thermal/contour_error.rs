@@ -22,7 +22,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::{closed_outline, colour_level, level_colour, load_polygon, plane_chart, Vertex};
+use crate::figures::thermal::common::{closed_outline, colour_level, level_colour, load_polygon, plane_chart, Vertex};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
 
@@ -43,7 +43,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(-1),
         doc: "Layer to draw; −1: the layer with the largest max error over both prints; −2: every layer overlaid.",
     },
-    super::TITLE,
+    crate::figures::common::TITLE,
 ];
 
 /// One contour point.
@@ -106,7 +106,7 @@ impl StageKind for ThermalContourErrorFigure {
             polygon: load_polygon(dir)?,
             layer,
         };
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".to_string()
         });
         let stem = ctx.output_path("thermal_contour_error")?;
@@ -182,8 +182,14 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
         let caption = format!("{}: max {max:.4} mm, RMS {rms:.4} mm (all layers); {}", VARIANTS[k], plot.layer_label());
         draw_panel(row, &caption, &drawn[k], &plot.polygon, max_mm).map_err(e)?;
     }
-    super::draw_viridis_bar(&bar, (0.0, max_mm), "contour error e_t (mm)", 2, super::thermal_common::COLOUR_LEVELS)
-        .map_err(e)
+    crate::figures::common::draw_viridis_bar(
+        &bar,
+        (0.0, max_mm),
+        "contour error e_t (mm)",
+        2,
+        super::common::COLOUR_LEVELS,
+    )
+    .map_err(e)
 }
 
 fn draw_panel<DB: DrawingBackend>(
@@ -197,7 +203,7 @@ fn draw_panel<DB: DrawingBackend>(
     let xs = polygon.iter().map(|v| v.x_mm).chain(points.iter().map(|p| p.x_mm));
     let ys = polygon.iter().map(|v| v.y_mm).chain(points.iter().map(|p| p.y_mm));
     let ((x0, x1), (y0, y1)) =
-        (crate::figures::thermal_common::finite_range(xs), crate::figures::thermal_common::finite_range(ys));
+        (crate::figures::thermal::common::finite_range(xs), crate::figures::thermal::common::finite_range(ys));
     let pad = 0.04 * (x1 - x0).max(y1 - y0);
     let mut chart = plane_chart(&area, (x0 - pad)..(x1 + pad), (y0 - pad)..(y1 + pad), 0)?;
     chart.draw_series(LineSeries::new(closed_outline(polygon), RGBColor(200, 200, 200).stroke_width(1)))?;
@@ -211,7 +217,7 @@ fn draw_panel<DB: DrawingBackend>(
 mod tests {
     use super::*;
     use crate::figures::test_util::{assert_drawn, write_table};
-    use crate::figures::thermal_test_data::{corner_path, write_reprint};
+    use crate::figures::thermal::test_data::{corner_path, write_reprint};
     use polars::df;
 
     fn p(layer: i64, error_mm: f64) -> Point {

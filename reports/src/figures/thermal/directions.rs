@@ -28,7 +28,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::{
+use crate::figures::thermal::common::{
     clip_polyline, closed_outline, draw_key, finite_range, interior_angle_deg, load_polygon, plane_chart, KeySwatch,
     PlaneChart, Vertex,
 };
@@ -68,7 +68,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Int(8),
         doc: "Draw the deposition direction of every k-th sample (at 1 ms sampling and 20 mm/s, k = 8 is one segment per 0.16 mm on the straights, denser where the head slows).",
     },
-    super::TITLE,
+    crate::figures::common::TITLE,
 ];
 
 /// The columns of `directions.parquet` this figure draws.
@@ -179,7 +179,7 @@ impl StageKind for ThermalDirectionsFigure {
             half_mm: ctx.params.f64("zoom_mm"),
             every_k: ctx.params.i64("every_k_samples") as usize,
         };
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".to_string()
         });
         let stem = ctx.output_path("thermal_directions")?;
@@ -395,7 +395,7 @@ impl<DB: DrawingBackend> Lines<'_, '_, DB> {
 mod tests {
     use super::*;
     use crate::figures::test_util::{assert_drawn, write_table};
-    use crate::figures::thermal_test_data::{corner_path, directions, path_table};
+    use crate::figures::thermal::test_data::{corner_path, directions, path_table};
 
     fn straight(n: usize) -> Directions {
         Directions {

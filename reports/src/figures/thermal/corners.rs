@@ -26,8 +26,8 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::thermal_common::finite_range;
-use crate::figures::thermal_directions::parse_vertices;
+use crate::figures::thermal::common::finite_range;
+use crate::figures::thermal::directions::parse_vertices;
 use crate::read::{f64s, ints, no_rows, read_parquet};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
@@ -73,7 +73,7 @@ const PARAMS: &[ParamSpec] = &[
         default: ParamDefault::Float(4.0),
         doc: "Upper bound ΔV_max of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: 4 mm/s.",
     },
-    super::TITLE,
+    crate::figures::common::TITLE,
 ];
 
 /// One compensated span (a row of `spans.parquet`).
@@ -182,7 +182,7 @@ impl StageKind for ThermalCornersFigure {
             pad_s: ctx.params.f64("pad_s"),
             dv_bounds_mm_s: (ctx.params.f64("dv_min_mm_s"), ctx.params.f64("dv_max_mm_s")),
         };
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Compensated corners: temperature, extracted vs desired width, compensation sequence".to_string()
         });
         let stem = ctx.output_path("thermal_corners")?;
@@ -316,7 +316,7 @@ pub fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str, plot
     Ok(())
 }
 
-type Chart<'a, DB> = crate::figures::thermal_common::PlaneChart<'a, DB>;
+type Chart<'a, DB> = crate::figures::thermal::common::PlaneChart<'a, DB>;
 
 fn time_chart<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
@@ -471,7 +471,7 @@ fn finish<'a, DB: DrawingBackend + 'a>(
 mod tests {
     use super::*;
     use crate::figures::test_util::{assert_drawn, write_table};
-    use crate::figures::thermal_test_data::{corner_path, widths, write_compensate};
+    use crate::figures::thermal::test_data::{corner_path, widths, write_compensate};
 
     #[test]
     fn finite_pieces_break_at_nan() {

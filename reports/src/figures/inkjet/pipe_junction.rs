@@ -15,7 +15,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::r_surface::viridis;
+use crate::figures::common::viridis;
 use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
@@ -28,7 +28,7 @@ const NO_PART: RGBColor = RGBColor(225, 225, 225);
 const SUPPORT: RGBColor = RGBColor(240, 190, 120);
 
 const PARAMS: &[ParamSpec] = &[
-    super::TITLE,
+    crate::figures::common::TITLE,
     ParamSpec {
         name: "section_x_index",
         ty: ParamType::Int { min: 0, max: 100_000 },
@@ -71,7 +71,7 @@ impl StageKind for InkjetPipeJunctionFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let column = ctx.params.i64("section_x_index");
         let prints = [load(&ctx.inputs[0].dir, column)?, load(&ctx.inputs[1].dir, column)?];
-        let title = super::title_or(ctx, || {
+        let title = crate::figures::common::title_or(ctx, || {
             "Two-material pipe junction: part top and material cross-section, open vs closed loop".to_string()
         });
         let stem = ctx.output_path("inkjet_pipe_junction")?;
@@ -127,7 +127,8 @@ fn draw_titled<DB: DrawingBackend>(
     for (panel, print) in maps.split_evenly((1, 2)).iter().zip(prints) {
         draw_aerial(panel, print, max_um, column).map_err(|e| e.to_string())?;
     }
-    super::draw_viridis_bar(&bar, (0.0, max_um), "part top (µm)", 0, 120).map_err(|e| e.to_string())?;
+    crate::figures::common::draw_viridis_bar(&bar, (0.0, max_um), "part top (µm)", 0, 120)
+        .map_err(|e| e.to_string())?;
     for (panel, print) in bottom.split_evenly((1, 2)).iter().zip(prints) {
         draw_section(panel, print, column, max_um).map_err(|e| e.to_string())?;
     }

@@ -15,7 +15,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::figures::inkjet_height_maps::{draw, Cell, Print};
+use crate::figures::inkjet::height_maps::{draw, Cell, Print};
 use crate::read::{f64s, i64s, no_rows, read_parquet};
 use crate::style::{draw_png_and_svg, text};
 
@@ -27,7 +27,7 @@ const SIZE_PX: (u32, u32) = (1400, 900);
 pub const NO_MATERIAL_FRACTION: f64 = 0.05;
 
 const PARAMS: &[ParamSpec] = &[
-    super::TITLE,
+    crate::figures::common::TITLE,
     ParamSpec {
         name: "layer",
         ty: ParamType::Int { min: 0, max: 100_000 },
@@ -65,7 +65,9 @@ impl StageKind for InkjetModelVsScanFigure {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let desired = ctx.params.f64("desired_height_um");
         let prints = load(&ctx.inputs[0].dir.join("profiles.parquet"), ctx.params.i64("layer"), desired)?;
-        let title = super::title_or(ctx, || "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string());
+        let title = crate::figures::common::title_or(ctx, || {
+            "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string()
+        });
         let stem = ctx.output_path("inkjet_model_vs_scan")?;
         draw_png_and_svg(
             &stem,
