@@ -15,12 +15,12 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use pipeline::artifact::read_parquet;
+use pipeline::columns::{bools, ints, opt_f64s, strs};
 use pipeline::manifest::Manifest;
 use pipeline::StageError;
 use polars::prelude::{DataFrame, DataType};
-use reports::read::{bools, ints, read_parquet, strs};
 
-use crate::history::floats;
 use crate::{NumberRow, StageRow};
 
 /// One row per stage of `manifest`.
@@ -104,7 +104,7 @@ fn table_numbers(table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
 fn comparison_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let path = table.path;
     let (section, item) = (strs(df, "section", path)?, strs(df, "item", path)?);
-    let (paper, ours) = (optional_floats(df, "paper_value", path)?, floats(df, "our_value", path)?);
+    let (paper, ours) = (optional_floats(df, "paper_value", path)?, opt_f64s(df, "our_value", path)?);
     let unit = optional_strs(df, "unit", path)?;
     let source = optional_strs(df, "source", path)?;
     Ok((0..df.height())
@@ -122,7 +122,7 @@ fn power_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, Sta
     let mut numbers = Vec::new();
     for rate in ["correct_rate", "false_alarm_rate", "coverage_rate"] {
         let Ok(_) = df.column(rate) else { continue };
-        let values = floats(df, rate, table.path)?;
+        let values = opt_f64s(df, rate, table.path)?;
         for (i, key) in keys.iter().enumerate() {
             let source = match draws[i] {
                 Some(n) => format!("{} ({n} draws)", table.file.display()),
@@ -170,7 +170,7 @@ fn row_keys(df: &DataFrame, path: &Path, except: &[&str]) -> Result<Vec<String>,
                 part.push(value);
             }
         } else if name == "strength" {
-            for (part, value) in parts.iter_mut().zip(floats(df, name, path)?) {
+            for (part, value) in parts.iter_mut().zip(opt_f64s(df, name, path)?) {
                 part.push(format!("strength={}", value.map_or("null".into(), |v| v.to_string())));
             }
         }
@@ -180,7 +180,7 @@ fn row_keys(df: &DataFrame, path: &Path, except: &[&str]) -> Result<Vec<String>,
 
 fn optional_floats(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<f64>>, StageError> {
     match df.column(name) {
-        Ok(_) => floats(df, name, path),
+        Ok(_) => opt_f64s(df, name, path),
         Err(_) => Ok(vec![None; df.height()]),
     }
 }

@@ -22,11 +22,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use pipeline::artifact::{read_parquet, write_parquet, TableMeta};
+use pipeline::columns::{bools, ints, opt_f64s, opt_ints, opt_strs, strs};
 use pipeline::error::RunError;
 use pipeline::lock::{remove_stale_temps, OutLock};
 use pipeline::StageError;
 use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
-use reports::read::{bools, i64s, strs};
 
 use crate::{Night, NightInfo, NumberRow, RunRow, StageRow};
 
@@ -231,7 +231,7 @@ fn read_nights(path: &Path) -> Result<Vec<NightInfo>, StageError> {
         strs(&df, "tool_version", path)?,
     );
     let (started, finished, cores) =
-        (i64s(&df, "started_unix_s", path)?, i64s(&df, "finished_unix_s", path)?, i64s(&df, "cores", path)?);
+        (ints(&df, "started_unix_s", path)?, ints(&df, "finished_unix_s", path)?, ints(&df, "cores", path)?);
     let date = date_of_partition(path)?;
     Ok((0..df.height())
         .map(|i| NightInfo {
@@ -271,7 +271,7 @@ fn runs_frame(night: &Night) -> Result<DataFrame, polars::error::PolarsError> {
 fn read_runs(df: &DataFrame, path: &Path) -> Result<Vec<RunRow>, StageError> {
     let (run, spec, ok, error) =
         (strs(df, "run", path)?, strs(df, "spec_file", path)?, bools(df, "ok", path)?, strs(df, "error", path)?);
-    let wall = floats(df, "wall_time_s", path)?;
+    let wall = opt_f64s(df, "wall_time_s", path)?;
     Ok((0..df.height())
         .map(|i| RunRow {
             run: run[i].clone(),
@@ -308,9 +308,9 @@ fn stages_frame(night: &Night) -> Result<DataFrame, polars::error::PolarsError> 
 fn read_stages(df: &DataFrame, path: &Path) -> Result<Vec<StageRow>, StageError> {
     let (run, stage, kind, status) =
         (strs(df, "run", path)?, strs(df, "stage", path)?, strs(df, "kind", path)?, strs(df, "status", path)?);
-    let (version, rows) = (i64s(df, "kind_version", path)?, i64s(df, "rows", path)?);
+    let (version, rows) = (ints(df, "kind_version", path)?, ints(df, "rows", path)?);
     let (wall, cpu, peak) =
-        (floats(df, "wall_time_s", path)?, floats(df, "cpu_time_s", path)?, opt_i64s(df, "peak_rss_bytes", path)?);
+        (opt_f64s(df, "wall_time_s", path)?, opt_f64s(df, "cpu_time_s", path)?, opt_ints(df, "peak_rss_bytes", path)?);
     Ok((0..df.height())
         .map(|i| StageRow {
             run: run[i].clone(),
@@ -349,7 +349,7 @@ fn read_numbers(df: &DataFrame, path: &Path) -> Result<Vec<NumberRow>, StageErro
     let (run, stage, table, metric) =
         (strs(df, "run", path)?, strs(df, "stage", path)?, strs(df, "table", path)?, strs(df, "metric", path)?);
     let (paper, value, verdict) =
-        (floats(df, "paper_value", path)?, floats(df, "value", path)?, opt_strs(df, "text", path)?);
+        (opt_f64s(df, "paper_value", path)?, opt_f64s(df, "value", path)?, opt_strs(df, "text", path)?);
     let (unit, source) = (strs(df, "unit", path)?, strs(df, "source", path)?);
     Ok((0..df.height())
         .map(|i| NumberRow {
@@ -364,26 +364,6 @@ fn read_numbers(df: &DataFrame, path: &Path) -> Result<Vec<NumberRow>, StageErro
             source: source[i].clone(),
         })
         .collect())
-}
-
-fn bad(path: &Path) -> impl Fn(polars::error::PolarsError) -> StageError + '_ {
-    move |source| StageError::Table { path: path.to_path_buf(), source }
-}
-
-/// A float column with its nulls.
-pub(crate) fn floats(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<f64>>, StageError> {
-    let column = pipeline::artifact::column(df, name, path)?;
-    let wide = column.cast(&polars::prelude::DataType::Float64).map_err(bad(path))?;
-    Ok(wide.f64().map_err(bad(path))?.iter().collect())
-}
-
-fn opt_i64s(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<i64>>, StageError> {
-    Ok(pipeline::artifact::column(df, name, path)?.i64().map_err(bad(path))?.iter().collect())
-}
-
-fn opt_strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<String>>, StageError> {
-    let column = pipeline::artifact::column(df, name, path)?;
-    Ok(column.str().map_err(bad(path))?.iter().map(|v| v.map(str::to_string)).collect())
 }
 
 #[cfg(test)]

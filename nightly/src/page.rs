@@ -110,12 +110,13 @@ fn findings_table(found: &[&Finding]) -> String {
 
 fn rules_note(rules: &Rules) -> String {
     format!(
-        "<p class=\"note\">Rules: a number regresses when it leaves the median of its last {} nights ± max({} × 1.4826 × MAD, {} % of the median) and does not move towards the paper's value; a verdict when it differs from the most frequent of those nights; a number when it disappears or stops being finite; a run when it fails; a stage when it is more than {} % and {} s slower than its median.</p>\n",
+        "<p class=\"note\">Rules: a number regresses when it leaves the median of its last {} nights ± max({} × 1.4826 × MAD, {} % of the median) and does not move towards the paper's value; a verdict when it differs from the most frequent of those nights; a number when it disappears or stops being finite; a run when it fails; a stage when it is more than {} %, {} s and {} × 1.4826 × MAD of its own times slower than its median (with one earlier night its spread is not known yet, and a stage's time on a shared machine can vary by more than that percentage).</p>\n",
         rules.window_nights,
         rules.mad_k,
         100.0 * rules.relative_floor,
         (100.0 * (rules.slower_ratio - 1.0)).round(),
-        rules.slower_min_s
+        rules.slower_min_s,
+        rules.mad_k
     )
 }
 
@@ -239,7 +240,8 @@ fn number_figure(history: &History, key: &SeriesKey, values: &[Option<&NumberRow
     let paper = latest.and_then(|n| n.paper_value);
     let earlier: Vec<f64> =
         ours[..ours.len().saturating_sub(1)].iter().rev().take(rules.window_nights).flatten().copied().collect();
-    let unit = latest.map(|n| n.unit.as_str()).unwrap_or_default();
+    // A rate or a count has unit 1, which a caption does not print.
+    let unit = latest.map(|n| n.unit.as_str()).filter(|u| *u != "1").unwrap_or_default();
     let chart =
         Chart { title: String::new(), size: (320, 170), paper, band: band(&earlier, rules), ..Chart::default() };
     let now = ours.last().copied().flatten().map(format_sig).unwrap_or_else(|| "—".into());
@@ -324,8 +326,13 @@ impl Chart {
         if self.log_y {
             return Some((lo / 1.5, hi * 1.5));
         }
-        let pad = if hi > lo { 0.08 * (hi - lo) } else { 0.05 * hi.abs().max(1e-9) };
-        Some((lo - pad, hi + pad))
+        // At least ±2 % of the values' size (±1 when they are all 0), so a number that
+        // never moved is drawn as a level line, not magnified to its band's floor.
+        let scale = series.iter().flat_map(|(_, v)| v.iter().flatten()).chain(&self.paper).map(|y| y.abs());
+        let scale = scale.filter(|y| y.is_finite()).fold(0.0, f64::max);
+        let min_half = if scale > 0.0 { 0.02 * scale } else { 1.0 };
+        let (mid, half) = (0.5 * (lo + hi), (0.5 * (hi - lo)).max(min_half));
+        Some((mid - 1.08 * half, mid + 1.08 * half))
     }
 
     fn draw(&self, svg: &mut String, x_labels: &[String], series: &[(String, Vec<Option<f64>>)]) -> Result<(), String> {

@@ -16,8 +16,13 @@
 //! - **A number that disappears** (present the night before, absent now, its run
 //!   complete) or stops being finite is a regression; a **run that fails** is one.
 //! - **A stage is slower** when its wall time exceeds its window median by more than
-//!   25 % and by more than half a second: below that, scheduler noise on a stage of a
-//!   few milliseconds would cry wolf every night.
+//!   25 %, by more than half a second, and by more than three robust standard
+//!   deviations of its own times over the window: below half a second, scheduler
+//!   noise on a stage of a few milliseconds would cry wolf every night, and on a
+//!   shared machine (a cloud VM) the same binary's stage of a few seconds varies by a
+//!   quarter from night to night, which the stage's own spread measures once the
+//!   window holds a few nights. With one earlier night that spread is not known yet
+//!   and the 25 % alone applies.
 //!
 //! With no earlier night there is nothing to compare, so nothing is flagged.
 
@@ -233,9 +238,12 @@ fn slower_stages(latest: &Night, window: &[Night], rules: &Rules) -> Vec<Finding
         .stages
         .iter()
         .filter_map(|s| {
-            let median_s = median(&mut past.get(&(s.run.as_str(), s.stage.as_str()))?.clone())?;
-            let slower = s.wall_time_s > rules.slower_ratio * median_s && s.wall_time_s - median_s > rules.slower_min_s;
-            slower.then(|| Finding {
+            let times = past.get(&(s.run.as_str(), s.stage.as_str()))?;
+            let median_s = median(&mut times.clone())?;
+            let mut deviations: Vec<f64> = times.iter().map(|t| (t - median_s).abs()).collect();
+            let noise_s = rules.mad_k * 1.4826 * median(&mut deviations).unwrap_or(0.0);
+            let margin_s = ((rules.slower_ratio - 1.0) * median_s).max(rules.slower_min_s).max(noise_s);
+            (s.wall_time_s - median_s > margin_s).then(|| Finding {
                 subject: format!("{} / {}", s.run, s.stage),
                 change: Change::Slower { wall_time_s: s.wall_time_s, median_s },
                 regression: true,
@@ -328,6 +336,21 @@ mod tests {
             matches!(found[..], [Finding { change: Change::RunFailed { .. }, .. }]),
             "one finding, not every number: {found:#?}"
         );
+    }
+
+    #[test]
+    fn a_stage_is_slower_only_beyond_its_own_spread() {
+        let at = |times: &[f64], tonight: f64| {
+            let mut nights: Vec<Night> = times.iter().enumerate().map(|(d, &t)| night(d as i64, 0.12, t)).collect();
+            nights.push(night(times.len() as i64, 0.12, tonight));
+            findings(&history(nights), &Rules::default())
+        };
+        // A steady 5 s stage: 30 % slower is a regression.
+        assert!(matches!(at(&[5.0, 5.0, 5.0], 6.5)[..], [Finding { change: Change::Slower { .. }, .. }]));
+        // The same 30 % on a stage that varies by a second (robust SD 1.48 s) is noise;
+        // twice its median is not.
+        assert_eq!(at(&[4.0, 5.0, 6.0, 4.0, 5.0, 6.0, 5.0], 6.5), vec![]);
+        assert!(matches!(at(&[4.0, 5.0, 6.0, 4.0, 5.0, 6.0, 5.0], 10.0)[..], [Finding { .. }]));
     }
 
     #[test]

@@ -642,10 +642,10 @@ fn line(stage: &PlannedStage, status: Status, reason: String, wall_time_s: f64) 
 fn format_line(line: &StageLine) -> String {
     match line.status {
         Status::Ran => {
-            format!("  ran      {:<24} {:<26} {:>7.2} s  ({})", line.stage, line.kind, line.wall_time_s, line.reason)
+            format!("  ran      {:<24} {:<32} {:>7.2} s  ({})", line.stage, line.kind, line.wall_time_s, line.reason)
         }
         Status::Cached => format!("  cached   {:<24} {}", line.stage, line.kind),
-        Status::Resumed => format!("  resumed  {:<24} {:<26} ({})", line.stage, line.kind, line.reason),
-        Status::WouldRun => format!("  would run {:<23} {:<26} because {}", line.stage, line.kind, line.reason),
+        Status::Resumed => format!("  resumed  {:<24} {:<32} ({})", line.stage, line.kind, line.reason),
+        Status::WouldRun => format!("  would run {:<23} {:<32} because {}", line.stage, line.kind, line.reason),
     }
 }

@@ -12,6 +12,7 @@
 
 pub mod artifact;
 pub mod cache;
+pub mod columns;
 pub mod commit;
 pub mod error;
 pub mod execute;

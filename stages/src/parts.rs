@@ -15,7 +15,7 @@ use pipeline::{ParamSpec, ParamType, Params, StageContext, StageError, Unit};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, PlSmallStr, Series};
 
 use crate::discrepancy_tables::power_frame;
-use crate::table::{opt_bool_column, str_column};
+use crate::table::{opt_bools, strs};
 
 /// The file of a unit's part in its folder.
 pub const PART_TABLE: &str = "part";
@@ -58,9 +58,9 @@ pub fn merge_study(ctx: &mut StageContext, parts: &[PathBuf], effects: &[&'stati
     let all = read_parts(parts)?;
     let file = ctx.output_dir().join("parts");
     let (base, effect, outcome) =
-        (str_column(&all, &file, "base")?, str_column(&all, &file, "effect")?, str_column(&all, &file, "outcome")?);
-    let strength = crate::table::f64_column(&all, &file, "strength")?;
-    let covered = opt_bool_column(&all, &file, COVERED)?;
+        (strs(&all, "base", &file)?, strs(&all, "effect", &file)?, strs(&all, "outcome", &file)?);
+    let strength = crate::table::f64s(&all, "strength", &file)?;
+    let covered = opt_bools(&all, COVERED, &file)?;
     let bad = |what: &str, value: &str| StageError::BadInput {
         file: file.clone(),
         location: None,

@@ -18,7 +18,7 @@ use pipeline::{ParamSpec, StageContext, StageError, StageKind};
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
-use crate::read::{bools, f64s, i64s, read_parquet, strs};
+use crate::read::{bools, f64s, ints, read_parquet, strs};
 use models::stats::finite_median;
 
 /// The `report.fdm_virtual` stage kind.
@@ -223,7 +223,7 @@ fn discrepancy_part(
         let (mechanism, verdict) = (strs(&df, "mechanism", &path)?, strs(&df, "verdict", &path)?);
         let (named, gain, p) =
             (bools(&df, "named", &path)?, f64s(&df, "gain_pct", &path)?, f64s(&df, "p_adjusted", &path)?);
-        let round = i64s(&df, "round", &path)?;
+        let round = ints(&df, "round", &path)?;
         let holds =
             sets.get(*photos).map_or("(not among the accuracy stage's photo sets)".into(), |e| e.replace('_', " "));
         let hits: Vec<usize> = (0..df.height()).filter(|&i| named[i]).collect();

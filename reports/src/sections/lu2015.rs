@@ -129,7 +129,7 @@ impl Summary {
         let (scenario, controller) = (strs(&df, "scenario", path)?, strs(&df, "controller", path)?);
         let pct = f64s(&df, "variation_pct", path)?;
         let keys = scenario.into_iter().zip(controller).zip(pct).map(|((s, c), p)| (s, c, p)).collect();
-        let layers = crate::read::i64s(&df, "layers", path)?;
+        let layers = crate::read::ints(&df, "layers", path)?;
         Ok(Self { keys, layers, path: path.to_path_buf(), df })
     }
 
@@ -201,10 +201,7 @@ fn figure_key(figure: &str) -> &'static str {
 
 fn recovery(path: &Path) -> Result<(usize, usize), StageError> {
     let df = read_parquet(path)?;
-    let flips = df
-        .column("flips_wrong")
-        .and_then(|c| c.i64().map(|ca| ca.iter().map(|v| v.unwrap_or(-1)).collect::<Vec<i64>>()))
-        .map_err(|source| StageError::Table { path: path.to_path_buf(), source })?;
+    let flips = crate::read::ints(&df, "flips_wrong", path)?;
     Ok((flips.iter().filter(|f| **f == 0).count(), flips.len()))
 }
 
@@ -277,7 +274,7 @@ fn pipe_junction(summary: &Summary, path: &Path, rows: &mut Vec<Row>) -> Result<
     let (controller, region) = (strs(&df, "controller", path)?, strs(&df, "region", path)?);
     let (rmse, max, mean) =
         (f64s(&df, "rmse_um", path)?, f64s(&df, "max_abs_um", path)?, f64s(&df, "mean_err_um", path)?);
-    let cells = crate::read::i64s(&df, "cells", path)?;
+    let cells = crate::read::ints(&df, "cells", path)?;
     let mut html = String::from("<h4>Pipe junction (Figs 13-15): two materials, 100 × 100 grid, h_d = 200 µm, [0 20%]</h4>\n<p>Error of the printed part's top surface (the height after the last layer that deposited part material at a cell) against the desired top of the pipe walls; edge = part cells within 2 cells of the part's plan-view boundary. The paper shows this only as pictures (\u{201c}visible deformation near the edge\u{201d} open loop, \u{201c}no visible deformation\u{201d} closed loop), with no number.</p>\n<table><tr><th class=\"t\">controller</th><th class=\"t\">region</th><th>cells</th><th>RMS error (µm)</th><th>max |error| (µm)</th><th>mean error (µm)</th></tr>\n");
     for r in 0..df.height() {
         let _ = writeln!(
@@ -323,7 +320,7 @@ fn pipe_junction(summary: &Summary, path: &Path, rows: &mut Vec<Row>) -> Result<
 fn scan_residuals(path: &Path, rows: &mut Vec<Row>) -> Result<String, StageError> {
     let df = read_parquet(path)?;
     let effects = strs(&df, "effects", path)?;
-    let layer = crate::read::i64s(&df, "layer", path)?;
+    let layer = crate::read::ints(&df, "layer", path)?;
     let (rmse, bias, max) = (f64s(&df, "rmse_um", path)?, f64s(&df, "bias_um", path)?, f64s(&df, "max_abs_um", path)?);
     let mut names: Vec<String> = effects.clone();
     names.dedup();

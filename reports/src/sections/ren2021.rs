@@ -17,7 +17,7 @@ use models::stats::finite_median;
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
-use crate::read::{f64s, read_parquet, strs};
+use crate::read::{f64s, ints, read_parquet, strs};
 
 /// The `report.ren2021` stage kind.
 pub struct Ren2021Section;
@@ -92,10 +92,7 @@ fn transfer_medians(path: &Path) -> Result<BTreeMap<(String, i64), f64>, StageEr
     let df = read_parquet(path)?;
     let method = strs(&df, "method", path)?;
     let rmse = f64s(&df, "rmse_mm", path)?;
-    let n = df
-        .column("n_train")
-        .and_then(|c| c.i64().map(|ca| ca.iter().map(|v| v.unwrap_or(0)).collect::<Vec<i64>>()))
-        .map_err(|source| StageError::Table { path: path.to_path_buf(), source })?;
+    let n = ints(&df, "n_train", path)?;
     let mut groups: BTreeMap<(String, i64), Vec<f64>> = BTreeMap::new();
     for i in 0..df.height() {
         groups.entry((method[i].clone(), n[i])).or_default().push(rmse[i]);

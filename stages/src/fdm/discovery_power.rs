@@ -31,7 +31,7 @@ use polars::prelude::{IntoColumn, NamedFrom, Series};
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
 use crate::parts::{read_parts, study_unit_draws, study_units, without, COVERED, DRAWS_PER_UNIT, PART_TABLE};
-use crate::table::{f64_col, f64_column, frame, i64_col, opt_bool_column, str_col, str_column};
+use crate::table::{f64_col, f64s, frame, i64_col, opt_bools, str_col, strs};
 
 /// The `fdm.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
@@ -173,9 +173,9 @@ fn power_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Po
         expected: format!("a known {what}, got `{value}`"),
     };
     let file = ctx.output_dir().join("parts");
-    let text = |name: &str| str_column(all, &file, name);
+    let text = |name: &str| strs(all, name, &file);
     let (base, own, effect, outcome) = (text("base")?, text(PART_ONLY[0])?, text("effect")?, text("outcome")?);
-    let (strength, covered) = (f64_column(all, &file, "strength")?, opt_bool_column(all, &file, PART_ONLY[1])?);
+    let (strength, covered) = (f64s(all, "strength", &file)?, opt_bools(all, PART_ONLY[1], &file)?);
     let noise = if ctx.params.str("noise") == "white" { Noise::White } else { Noise::Measured };
     let mut labels: Vec<&str> = Vec::new();
     for b in &base {

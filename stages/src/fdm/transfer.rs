@@ -34,7 +34,7 @@ use polars::prelude::DataFrame;
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
 use crate::parts::PART_TABLE;
-use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
+use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 
 /// A unit's failures: per subset, the first grid pair of its block at which the fit failed.
 const PART_ERRORS: &str = "part_errors";
@@ -187,11 +187,11 @@ fn errors_frame(part: &GridPart) -> Result<DataFrame, StageError> {
 fn read_part(dir: &Path) -> Result<GridPart, StageError> {
     let file = dir.join(format!("{PART_TABLE}.parquet"));
     let winners = read_parquet(&file)?;
-    let n_configs = i64_column(&winners, &file, "configurations")?.first().copied().unwrap_or(1).max(1) as usize;
-    let (sse, pair) = (f64_column(&winners, &file, "sse")?, i64_column(&winners, &file, "pair")?);
-    let (a1, a2) = (f64_column(&winners, &file, "alpha_1")?, f64_column(&winners, &file, "alpha_2")?);
+    let n_configs = ints(&winners, "configurations", &file)?.first().copied().unwrap_or(1).max(1) as usize;
+    let (sse, pair) = (f64s(&winners, "sse", &file)?, ints(&winners, "pair", &file)?);
+    let (a1, a2) = (f64s(&winners, "alpha_1", &file)?, f64s(&winners, "alpha_2", &file)?);
     let theta: Vec<Vec<f64>> =
-        (0..THETA).map(|k| f64_column(&winners, &file, &format!("theta_{k}"))).collect::<Result<_, _>>()?;
+        (0..THETA).map(|k| f64s(&winners, &format!("theta_{k}"), &file)).collect::<Result<_, _>>()?;
     let winners = (0..winners.height())
         .map(|i| GridWinner {
             sse: sse[i],
@@ -204,8 +204,8 @@ fn read_part(dir: &Path) -> Result<GridPart, StageError> {
     let errors = read_parquet(&file)?;
     let n_subsets = winners.len() / n_configs;
     let mut first_error = vec![None; n_subsets];
-    let (subset, pair) = (i64_column(&errors, &file, "subset")?, i64_column(&errors, &file, "pair")?);
-    for (i, text) in str_column(&errors, &file, "error")?.into_iter().enumerate() {
+    let (subset, pair) = (ints(&errors, "subset", &file)?, ints(&errors, "pair", &file)?);
+    for (i, text) in strs(&errors, "error", &file)?.into_iter().enumerate() {
         let slot = usize::try_from(subset[i]).ok().and_then(|s| first_error.get_mut(s)).ok_or_else(|| {
             StageError::BadInput {
                 file: file.clone(),

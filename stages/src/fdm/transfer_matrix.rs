@@ -32,7 +32,7 @@ use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, St
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
 use crate::parts::{read_parts, PART_TABLE};
-use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
+use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 
 /// The `fdm.transfer_matrix` stage kind.
 pub struct TransferMatrixStage;
@@ -187,12 +187,12 @@ fn part_table(rows: &[MatrixRow]) -> Result<polars::prelude::DataFrame, StageErr
 fn part_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Vec<MatrixRow>, StageError> {
     let file = ctx.output_dir().join("parts");
     let index = |name: &str| -> Result<Vec<usize>, StageError> {
-        Ok(i64_column(all, &file, name)?.into_iter().map(|v| v as usize).collect())
+        Ok(ints(all, name, &file)?.into_iter().map(|v| v as usize).collect())
     };
     let (task, n_train, test_index) = (index("task")?, index("n_train")?, index("test_index")?);
     let (subset, method, prior) =
-        (str_column(all, &file, "subset")?, str_column(all, &file, "method")?, str_column(all, &file, "prior")?);
-    let (rmse_mm, lambda) = (f64_column(all, &file, "rmse_mm")?, f64_column(all, &file, "lambda")?);
+        (strs(all, "subset", &file)?, strs(all, "method", &file)?, strs(all, "prior", &file)?);
+    let (rmse_mm, lambda) = (f64s(all, "rmse_mm", &file)?, f64s(all, "lambda", &file)?);
     (0..all.height())
         .map(|i| {
             let method = MatrixMethod::parse(&method[i]).ok_or_else(|| StageError::BadInput {

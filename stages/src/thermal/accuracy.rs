@@ -45,8 +45,9 @@ use vision::camera::Undistorter;
 use vision::corners::{precision_recall, CornerDetection};
 use vision::homography::Homography;
 
-use super::common::{camera_model, f64_column, i64_column, open_sequence, read_table};
+use super::common::{camera_model, f64s, ints, open_sequence, read_table};
 use crate::table::{f64_col, frame, i64_col, str_col};
+use crate::table::{opt_bools, opt_strs};
 
 /// The `thermal.accuracy_evaluate` stage kind.
 pub struct AccuracyEvaluateStage;
@@ -201,17 +202,16 @@ impl FrameRows {
     fn read(dir: &Path) -> Result<Self, StageError> {
         let file = dir.join("frames.parquet");
         let df = read_table(dir, "frames.parquet")?;
-        let h: Vec<Vec<f64>> = (0..9)
-            .map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1)))
-            .collect::<Result<_, _>>()?;
-        let estimated_s = f64_column(&df, &file, "estimated_time_s")?;
+        let h: Vec<Vec<f64>> =
+            (0..9).map(|i| f64s(&df, &format!("h{}{}", i / 3 + 1, i % 3 + 1), &file)).collect::<Result<_, _>>()?;
+        let estimated_s = f64s(&df, "estimated_time_s", &file)?;
         let homography = (0..estimated_s.len())
             .map(|r| {
                 let m = [[h[0][r], h[1][r], h[2][r]], [h[3][r], h[4][r], h[5][r]], [h[6][r], h[7][r], h[8][r]]];
                 m.iter().flatten().all(|v| v.is_finite()).then_some(Homography { m })
             })
             .collect();
-        let optional = |name: &str| df.column(name).is_ok().then(|| f64_column(&df, &file, name)).transpose();
+        let optional = |name: &str| df.column(name).is_ok().then(|| f64s(&df, name, &file)).transpose();
         let mut estimators = Vec::new();
         for prefix in ["dlt", "rigid_mount"] {
             if let Some(t) = optional(&format!("{prefix}_time_s"))? {
@@ -223,32 +223,22 @@ impl FrameRows {
             _ => None,
         };
         let placed_by: Vec<Option<String>> = match df.column("placed_by") {
-            Ok(c) => c
-                .str()
-                .map_err(|source| StageError::Table { path: file.clone(), source })?
-                .iter()
-                .map(|v| v.map(str::to_string))
-                .collect(),
+            Ok(_) => opt_strs(&df, "placed_by", &file)?,
             Err(_) => vec![None; estimated_s.len()],
         };
         let placed = |how: &str| -> Vec<bool> { placed_by.iter().map(|p| p.as_deref() == Some(how)).collect() };
         let repeated = match df.column("repeat_of_frame") {
-            Ok(_) => i64_column(&df, &file, "repeat_of_frame")?.iter().map(|r| *r >= 0).collect(),
+            Ok(_) => ints(&df, "repeat_of_frame", &file)?.iter().map(|r| *r >= 0).collect(),
             Err(_) => vec![false; estimated_s.len()],
         };
         let at_window_edge = match df.column("at_window_edge") {
-            Ok(c) => c
-                .bool()
-                .map_err(|source| StageError::Table { path: file.clone(), source })?
-                .iter()
-                .map(|v| v == Some(true))
-                .collect(),
+            Ok(_) => opt_bools(&df, "at_window_edge", &file)?.into_iter().map(|v| v == Some(true)).collect(),
             Err(_) => vec![false; estimated_s.len()],
         };
         Ok(Self {
-            layer: i64_column(&df, &file, "layer")?,
-            frame: i64_column(&df, &file, "frame")?,
-            recorded_s: f64_column(&df, &file, "recorded_time_s")?,
+            layer: ints(&df, "layer", &file)?,
+            frame: ints(&df, "frame", &file)?,
+            recorded_s: f64s(&df, "recorded_time_s", &file)?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
             by_recorded_time: placed("recorded_time"),
             parked: placed("parked"),
@@ -381,10 +371,9 @@ fn mount_metrics(
     let file = monitor.join("mount.parquet");
     let df = read_table(monitor, "mount.parquet")?;
     let h: Vec<Vec<f64>> =
-        (0..9).map(|i| f64_column(&df, &file, &format!("h{}{}", i / 3 + 1, i % 3 + 1))).collect::<Result<_, _>>()?;
-    let applied = pipeline::artifact::column(&df, "applied", &file)?;
-    let applied = applied.bool().map_err(|source| StageError::Table { path: file.clone(), source })?;
-    let Some(last) = applied.iter().position(|a| a == Some(true)) else { return Ok(None) };
+        (0..9).map(|i| f64s(&df, &format!("h{}{}", i / 3 + 1, i % 3 + 1), &file)).collect::<Result<_, _>>()?;
+    let applied = opt_bools(&df, "applied", &file)?;
+    let Some(last) = applied.iter().position(|a| *a == Some(true)) else { return Ok(None) };
     let fitted = Homography {
         m: [
             [h[0][last], h[1][last], h[2][last]],
@@ -449,15 +438,9 @@ fn vertex_metrics(
     let file = monitor.join("vertices.parquet");
     let df = read_table(monitor, "vertices.parquet")?;
     let (layer, frame_no, vertex) =
-        (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?, i64_column(&df, &file, "vertex")?);
-    let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
-    let used = pipeline::artifact::column(&df, "used", &file)?;
-    let used: Vec<bool> = used
-        .bool()
-        .map_err(|source| StageError::Table { path: file.clone(), source })?
-        .iter()
-        .map(|b| b == Some(true))
-        .collect();
+        (ints(&df, "layer", &file)?, ints(&df, "frame", &file)?, ints(&df, "vertex", &file)?);
+    let (u, v) = (f64s(&df, "raw_u_px", &file)?, f64s(&df, "raw_v_px", &file)?);
+    let used: Vec<bool> = opt_bools(&df, "used", &file)?.into_iter().map(|b| b == Some(true)).collect();
     let true_corner = |i: usize| {
         truth
             .corners
@@ -556,11 +539,11 @@ fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) ->
     let df = read_table(monitor, "widths.parquet")?;
     let dirs_file = monitor.join("directions.parquet");
     let dirs = read_table(monitor, "directions.parquet")?;
-    let (dep_x, dep_y) = (f64_column(&dirs, &dirs_file, "dep_x")?, f64_column(&dirs, &dirs_file, "dep_y")?);
-    let layer = i64_column(&df, &file, "layer")?;
-    let sample = i64_column(&df, &file, "sample")?;
-    let (x, y) = (f64_column(&df, &file, "x_mm")?, f64_column(&df, &file, "y_mm")?);
-    let (wl, wr) = (f64_column(&df, &file, "w_left_mm")?, f64_column(&df, &file, "w_right_mm")?);
+    let (dep_x, dep_y) = (f64s(&dirs, "dep_x", &dirs_file)?, f64s(&dirs, "dep_y", &dirs_file)?);
+    let layer = ints(&df, "layer", &file)?;
+    let sample = ints(&df, "sample", &file)?;
+    let (x, y) = (f64s(&df, "x_mm", &file)?, f64s(&df, "y_mm", &file)?);
+    let (wl, wr) = (f64s(&df, "w_left_mm", &file)?, f64s(&df, "w_right_mm", &file)?);
     let mut deposits: Vec<Option<DepositGrid>> = Vec::new();
     let (mut abs_err, mut signed) = (Vec::new(), Vec::new());
     for i in (0..layer.len()).filter(|&i| wl[i].is_finite() && wr[i].is_finite()) {
@@ -601,8 +584,8 @@ fn detection_metrics(
 ) -> Result<(), StageError> {
     let file = monitor.join("detections.parquet");
     let df = read_table(monitor, "detections.parquet")?;
-    let (layer, frame_no) = (i64_column(&df, &file, "layer")?, i64_column(&df, &file, "frame")?);
-    let (u, v) = (f64_column(&df, &file, "raw_u_px")?, f64_column(&df, &file, "raw_v_px")?);
+    let (layer, frame_no) = (ints(&df, "layer", &file)?, ints(&df, "frame", &file)?);
+    let (u, v) = (f64s(&df, "raw_u_px", &file)?, f64s(&df, "raw_v_px", &file)?);
     let repeats = frames.repeats();
     let mut keys: Vec<(i64, i64)> =
         truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).filter(|key| !repeats.contains(key)).collect();

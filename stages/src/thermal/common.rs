@@ -77,7 +77,7 @@ pub fn read_table(dir: &Path, file: &str) -> Result<DataFrame, StageError> {
     pipeline::artifact::read_parquet(&dir.join(file))
 }
 
-pub use crate::table::{f64_column, i64_column};
+pub use crate::table::{bools, f64s, ints};
 
 /// A domain error about one file of the sequence.
 pub fn bad_input(seq: &ThermalSequence, file: &str, err: impl std::fmt::Display) -> StageError {

@@ -76,7 +76,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use polars::prelude::DataFrame;
 
-use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
+use super::common::{f64s, ints, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col};
 use models::thermal::setup::interior_angles_deg;
 
@@ -352,10 +352,10 @@ struct MeasuredWidths {
 
 impl MeasuredWidths {
     fn read(df: &DataFrame, file: &Path, layers: std::ops::Range<i64>, samples: usize) -> Result<Self, StageError> {
-        let layer = i64_column(df, file, "layer")?;
-        let sample = i64_column(df, file, "sample")?;
-        let left = f64_column(df, file, "w_left_mm")?;
-        let right = f64_column(df, file, "w_right_mm")?;
+        let layer = ints(df, "layer", file)?;
+        let sample = ints(df, "sample", file)?;
+        let left = f64s(df, "w_left_mm", file)?;
+        let right = f64s(df, "w_right_mm", file)?;
         let mut readings: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); samples];
         let mut found = 0;
         for i in (0..layer.len()).filter(|&i| layers.contains(&layer[i])) {
@@ -394,8 +394,8 @@ struct DepositionFrame {
 
 impl DepositionFrame {
     fn read(df: &DataFrame, file: &Path, samples: usize) -> Result<Self, StageError> {
-        let sample = i64_column(df, file, "sample")?;
-        let col = |name: &str| f64_column(df, file, name);
+        let sample = ints(df, "sample", file)?;
+        let col = |name: &str| f64s(df, name, file);
         let (dep_x, dep_y, psi, kappa, speed) =
             (col("dep_x")?, col("dep_y")?, col("psi_rad")?, col("kappa_eff_per_mm")?, col("speed_mm_s")?);
         let zero = SweepSample { speed_mm_s: 0.0, psi_rad: 0.0, kappa_eff_per_mm: 0.0 };
@@ -429,8 +429,8 @@ impl DepositionFrame {
 
 /// Median temperature of each CAD corner's matched detections (NaN: never detected).
 fn corner_temperatures(df: &DataFrame, file: &Path, vertices: usize) -> Result<Vec<f64>, StageError> {
-    let vertex = i64_column(df, file, "matched_vertex")?;
-    let temp = f64_column(df, file, "temp_c")?;
+    let vertex = ints(df, "matched_vertex", file)?;
+    let temp = f64s(df, "temp_c", file)?;
     Ok((0..vertices)
         .map(|v| {
             let mut t: Vec<f64> = (0..vertex.len()).filter(|&i| vertex[i] == v as i64).map(|i| temp[i]).collect();

@@ -52,7 +52,7 @@ use super::monitor;
 use crate::discrepancy_tables::{max_rounds, ALPHA};
 use crate::effects::strength_list;
 use crate::parts::{listed, read_parts, PART_TABLE};
-use crate::table::{f64_col, f64_column, frame, i64_col, i64_column, str_col, str_column};
+use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 
 /// The `thermal.control_gain` stage kind.
 pub struct ControlGainStage;
@@ -342,13 +342,12 @@ fn trials_from_frame(all: &DataFrame, file: &Path) -> Result<Vec<Trial>, StageEr
         location: Some(format!("row {row}")),
         expected,
     };
-    let (strength, print) = (f64_column(all, file, "strength")?, i64_column(all, file, "print")?);
+    let (strength, print) = (f64s(all, "strength", file)?, ints(all, "print", file)?);
     let (seed, named, controller) =
-        (str_column(all, file, "seed")?, str_column(all, file, "named")?, str_column(all, file, "controller")?);
-    let [tau, tau_lo, tau_hi] =
-        ["tau_excess", "tau_excess_ci_lo", "tau_excess_ci_hi"].map(|c| f64_column(all, file, c));
+        (strs(all, "seed", file)?, strs(all, "named", file)?, strs(all, "controller", file)?);
+    let [tau, tau_lo, tau_hi] = ["tau_excess", "tau_excess_ci_lo", "tau_excess_ci_hi"].map(|c| f64s(all, c, file));
     let (tau, tau_lo, tau_hi) = (tau?, tau_lo?, tau_hi?);
-    let [oe, rms, max] = METRICS.map(|(name, _)| f64_column(all, file, name));
+    let [oe, rms, max] = METRICS.map(|(name, _)| f64s(all, name, file));
     let (oe, rms, max) = (oe?, rms?, max?);
     if !all.height().is_multiple_of(CONTROLLERS.len()) {
         return Err(bad(all.height(), format!("{} rows per print", CONTROLLERS.len())));

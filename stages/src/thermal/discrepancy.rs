@@ -27,7 +27,7 @@ use pipeline::units::run_split;
 use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
 use polars::prelude::DataFrame;
 
-use super::common::{f64_column, i64_column, open_sequence, read_table, trajectory_of};
+use super::common::{bools, f64s, ints, open_sequence, read_table, trajectory_of};
 use crate::discrepancy_tables::{engine_settings, max_rounds, DiscrepancyTables, Domain, ALPHA, BINS, BOOTSTRAP_DRAWS};
 use crate::parts::{data_set_units, merge_tables};
 
@@ -137,7 +137,7 @@ pub fn record_from_tables(
     let trajectory = trajectory_of(seq)?;
     let setup = seq.process.print_setup();
     let (frame_file, width_file) = (monitor_dir.join("frames.parquet"), monitor_dir.join("widths.parquet"));
-    let estimated = f64_column(frames, &frame_file, "estimated_time_s")?;
+    let estimated = f64s(frames, "estimated_time_s", &frame_file)?;
     let straight = straight_run_samples(&trajectory, &seq.path_mm, setup.feed_mm_s, clearance_mm);
     let bead_widths = straight_run_widths(widths, &width_file, &straight, &estimated)?;
     let frames = frame_offsets(frames, &frame_file)?;
@@ -169,14 +169,11 @@ pub fn record_from_tables(
 
 /// Localised, uncensored, non-repeated frames with a capture-time estimate.
 fn frame_offsets(df: &DataFrame, file: &Path) -> Result<Vec<FrameObservation>, StageError> {
-    let (layer, repeat, edge) = (
-        i64_column(df, file, "layer")?,
-        i64_column(df, file, "repeat_of_frame")?,
-        i64_column(df, file, "at_window_edge")?,
-    );
-    let (recorded, estimated) = (f64_column(df, file, "recorded_time_s")?, f64_column(df, file, "estimated_time_s")?);
+    let (layer, repeat, edge) =
+        (ints(df, "layer", file)?, ints(df, "repeat_of_frame", file)?, bools(df, "at_window_edge", file)?);
+    let (recorded, estimated) = (f64s(df, "recorded_time_s", file)?, f64s(df, "estimated_time_s", file)?);
     Ok((0..df.height())
-        .filter(|&i| estimated[i].is_finite() && repeat[i] < 0 && edge[i] == 0 && layer[i] >= 0)
+        .filter(|&i| estimated[i].is_finite() && repeat[i] < 0 && !edge[i] && layer[i] >= 0)
         .map(|i| FrameObservation {
             layer: layer[i] as usize,
             recorded_time_s: recorded[i],
@@ -193,9 +190,8 @@ fn straight_run_widths(
     straight: &[bool],
     estimated_time_s: &[f64],
 ) -> Result<Vec<WidthObservation>, StageError> {
-    let (layer, sample, frame) =
-        (i64_column(df, file, "layer")?, i64_column(df, file, "sample")?, i64_column(df, file, "frame_index")?);
-    let (left, right) = (f64_column(df, file, "w_left_mm")?, f64_column(df, file, "w_right_mm")?);
+    let (layer, sample, frame) = (ints(df, "layer", file)?, ints(df, "sample", file)?, ints(df, "frame_index", file)?);
+    let (left, right) = (f64s(df, "w_left_mm", file)?, f64s(df, "w_right_mm", file)?);
     let timed = |f: i64| usize::try_from(f).ok().and_then(|f| estimated_time_s.get(f)).is_some_and(|t| t.is_finite());
     let mut out = Vec::new();
     for i in 0..df.height() {
@@ -210,8 +206,8 @@ fn straight_run_widths(
 
 /// Every sample's finite centre temperature.
 fn centre_temperatures(df: &DataFrame, file: &Path) -> Result<Vec<TemperatureObservation>, StageError> {
-    let (layer, sample) = (i64_column(df, file, "layer")?, i64_column(df, file, "sample")?);
-    let (t, temp) = (f64_column(df, file, "t_s")?, f64_column(df, file, "temp_c")?);
+    let (layer, sample) = (ints(df, "layer", file)?, ints(df, "sample", file)?);
+    let (t, temp) = (f64s(df, "t_s", file)?, f64s(df, "temp_c", file)?);
     Ok((0..df.height())
         .filter(|&i| temp[i].is_finite() && layer[i] >= 0 && sample[i] >= 0)
         .map(|i| TemperatureObservation {

@@ -42,7 +42,7 @@ use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::common::{f64_column, open_sequence, read_table, trajectory_of};
+use super::common::{f64s, open_sequence, read_table, trajectory_of};
 use crate::progress::StageProgress;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 use models::thermal::setup::{convex_vertices, interior_angles_deg};
@@ -168,7 +168,7 @@ const REPRINT_SEED_SALT: u64 = 0x5245_5052_494e_5421;
 fn read_commands(dir: &std::path::Path, samples: usize) -> Result<(Vec<f64>, Vec<f64>), StageError> {
     let file = dir.join("command.parquet");
     let df = read_table(dir, "command.parquet")?;
-    let (v_e, v_ef) = (f64_column(&df, &file, "v_e_mm_s")?, f64_column(&df, &file, "v_ef_mm_s")?);
+    let (v_e, v_ef) = (f64s(&df, "v_e_mm_s", &file)?, f64s(&df, "v_ef_mm_s", &file)?);
     if v_e.len() != samples {
         return Err(StageError::BadInput {
             file,

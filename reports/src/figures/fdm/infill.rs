@@ -19,7 +19,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
 
 /// The `figure.fdm_infill` stage kind.
@@ -223,7 +223,7 @@ fn read_maps(path: &Path, printer: &str, condition: &str) -> Result<Vec<HatchMap
     let df = read_parquet(path)?;
     let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
     let (hatch, x, y) = (f64s(&df, "hatch_mm", path)?, f64s(&df, "x_mm", path)?, f64s(&df, "y_mm", path)?);
-    let coverage = i64s(&df, "coverage", path)?;
+    let coverage = ints(&df, "coverage", path)?;
     let mut cells: BTreeMap<i64, Vec<(f64, f64, i64)>> = BTreeMap::new();
     for i in (0..df.height()).filter(|&i| printers[i] == printer && conditions[i] == condition) {
         cells.entry(hatch_key(hatch[i])).or_default().push((x[i], y[i], coverage[i]));

@@ -15,7 +15,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_transfer_cv` stage kind.
@@ -105,7 +105,7 @@ impl StageKind for TransferCvFigure {
 pub fn load(dir: &Path) -> Result<TransferCv, StageError> {
     let path = dir.join("transfer_cv.parquet");
     let df = read_parquet(&path)?;
-    let (n_train, methods) = (i64s(&df, "n_train", &path)?, strs(&df, "method", &path)?);
+    let (n_train, methods) = (ints(&df, "n_train", &path)?, strs(&df, "method", &path)?);
     let rmse = f64s(&df, "rmse_mm", &path)?;
     let mut rmse_mm: BTreeMap<(i64, String), Vec<f64>> = BTreeMap::new();
     for i in (0..df.height()).filter(|&i| rmse[i].is_finite()) {

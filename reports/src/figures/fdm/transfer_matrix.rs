@@ -18,7 +18,7 @@ use pipeline::params::ParamDefault;
 use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
-use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.fdm_transfer_matrix` stage kind.
@@ -95,7 +95,7 @@ pub fn load(dir: &Path) -> Result<Matrix, StageError> {
     let df = read_parquet(&path)?;
     let (sources, target, method) =
         (strs(&df, "sources", &path)?, strs(&df, "target", &path)?, strs(&df, "method", &path)?);
-    let n_train = i64s(&df, "n_train", &path)?;
+    let n_train = ints(&df, "n_train", &path)?;
     let (imp, lo, hi) =
         (f64s(&df, "improvement_pct", &path)?, f64s(&df, "ci_lo_pct", &path)?, f64s(&df, "ci_hi_pct", &path)?);
     let mut matrix = Matrix::new();

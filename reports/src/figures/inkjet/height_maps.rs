@@ -16,7 +16,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::common::viridis;
-use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.inkjet_height_maps` stage kind.
@@ -128,7 +128,7 @@ impl StageKind for InkjetHeightMapsFigure {
 pub fn load(dir: &Path) -> Result<Print, StageError> {
     let path = dir.join("height_map.parquet");
     let df = read_parquet(&path)?;
-    let (xi, yi) = (i64s(&df, "x_index", &path)?, i64s(&df, "y_index", &path)?);
+    let (xi, yi) = (ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
     let (x, y, h) = (f64s(&df, "x_um", &path)?, f64s(&df, "y_um", &path)?, f64s(&df, "height_um", &path)?);
     let cells: Vec<Cell> = (0..df.height())
         .map(|i| Cell { x_index: xi[i], y_index: yi[i], x_um: x[i], y_um: y[i], height_um: h[i] })
@@ -143,7 +143,7 @@ pub fn load(dir: &Path) -> Result<Print, StageError> {
     }
     Ok(Print {
         controller: strs(&df, "controller", &path)?.swap_remove(0),
-        layers: i64s(&df, "layers", &path)?[0],
+        layers: ints(&df, "layers", &path)?[0],
         mean_err_um: f64s(&df, "mean_err_um", &path)?[0],
         std_um: f64s(&df, "std_um", &path)?[0],
         cells,

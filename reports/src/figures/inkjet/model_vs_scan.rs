@@ -16,7 +16,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::inkjet::height_maps::{draw, Cell, Print};
-use crate::read::{f64s, i64s, no_rows, read_parquet};
+use crate::read::{f64s, ints, no_rows, read_parquet};
 use crate::style::{draw_png_and_svg, text};
 
 /// The `figure.inkjet_model_vs_scan` stage kind.
@@ -93,10 +93,10 @@ fn draw_titled<DB: DrawingBackend>(
 /// half the desired height (the part).
 fn load(path: &std::path::Path, layer: i64, desired_um: f64) -> Result<[Print; 2], StageError> {
     let df = read_parquet(path)?;
-    let layers = i64s(&df, "layer", path)?;
+    let layers = ints(&df, "layer", path)?;
     let last = layers.iter().copied().max().ok_or_else(|| no_rows(path, "layer", "one row per layer and cell"))?;
     let layer = if layer == 0 { last } else { layer };
-    let (xi, yi) = (i64s(&df, "x_index", path)?, i64s(&df, "y_index", path)?);
+    let (xi, yi) = (ints(&df, "x_index", path)?, ints(&df, "y_index", path)?);
     let (x, y) = (f64s(&df, "x_um", path)?, f64s(&df, "y_um", path)?);
     let rows: Vec<usize> = (0..df.height()).filter(|&r| layers[r] == layer).collect();
     if rows.is_empty() {

@@ -16,7 +16,7 @@ use pipeline::stage::Arity;
 use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 use crate::figures::common::viridis;
-use crate::read::{f64s, i64s, no_rows, read_parquet, strs};
+use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 
 /// The `figure.inkjet_pipe_junction` stage kind.
@@ -87,7 +87,7 @@ impl StageKind for InkjetPipeJunctionFigure {
 fn load(dir: &Path, column: i64) -> Result<PipePrint, StageError> {
     let path = dir.join("part_top.parquet");
     let df = read_parquet(&path)?;
-    let (xi, yi) = (i64s(&df, "x_index", &path)?, i64s(&df, "y_index", &path)?);
+    let (xi, yi) = (ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
     let (top, want) = (f64s(&df, "part_top_um", &path)?, f64s(&df, "desired_top_um", &path)?);
     let tops: Vec<_> = (0..df.height()).map(|r| (xi[r], yi[r], top[r], want[r])).collect();
     if tops.is_empty() {
@@ -95,7 +95,7 @@ fn load(dir: &Path, column: i64) -> Result<PipePrint, StageError> {
     }
     let path = dir.join("layers.parquet");
     let df = read_parquet(&path)?;
-    let (layer, xi, yi) = (i64s(&df, "layer", &path)?, i64s(&df, "x_index", &path)?, i64s(&df, "y_index", &path)?);
+    let (layer, xi, yi) = (ints(&df, "layer", &path)?, ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
     let (bottom, top, material) =
         (f64s(&df, "bottom_um", &path)?, f64s(&df, "top_um", &path)?, strs(&df, "material", &path)?);
     let section: Vec<_> = (0..df.height())
