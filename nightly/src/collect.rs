@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use pipeline::artifact::read_parquet;
-use pipeline::columns::{bools, ints, opt_f64s, strs};
+use pipeline::columns::{bools, if_present, ints, opt_f64s, strs};
 use pipeline::manifest::Manifest;
 use pipeline::StageError;
 use polars::prelude::{DataFrame, DataType};
@@ -104,9 +104,12 @@ fn table_numbers(table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
 fn comparison_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let path = table.path;
     let (section, item) = (strs(df, "section", path)?, strs(df, "item", path)?);
-    let (paper, ours) = (optional_floats(df, "paper_value", path)?, opt_f64s(df, "our_value", path)?);
-    let unit = optional_strs(df, "unit", path)?;
-    let source = optional_strs(df, "source", path)?;
+    let paper = if_present(df, "paper_value", path, opt_f64s)?.unwrap_or_else(|| vec![None; df.height()]);
+    let ours = opt_f64s(df, "our_value", path)?;
+    let text = |name: &str| -> Result<Vec<String>, StageError> {
+        Ok(if_present(df, name, path, strs)?.unwrap_or_else(|| vec![String::new(); df.height()]))
+    };
+    let (unit, source) = (text("unit")?, text("source")?);
     Ok((0..df.height())
         .map(|i| table.number(format!("{}/{}", section[i], item[i]), paper[i], ours[i], &unit[i], source[i].clone()))
         .collect())
@@ -176,20 +179,6 @@ fn row_keys(df: &DataFrame, path: &Path, except: &[&str]) -> Result<Vec<String>,
         }
     }
     Ok(parts.into_iter().map(|p| p.join("/")).collect())
-}
-
-fn optional_floats(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<f64>>, StageError> {
-    match df.column(name) {
-        Ok(_) => opt_f64s(df, name, path),
-        Err(_) => Ok(vec![None; df.height()]),
-    }
-}
-
-fn optional_strs(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<String>, StageError> {
-    match df.column(name) {
-        Ok(_) => strs(df, name, path),
-        Err(_) => Ok(vec![String::new(); df.height()]),
-    }
 }
 
 #[cfg(test)]

@@ -62,6 +62,20 @@ pub fn opt_bools(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<Option<b
     Ok(col.bool().map_err(table_error(path))?.iter().collect())
 }
 
+/// `read` of column `name` when `df` has it, `None` when it has not (a column a later
+/// version of the writing stage added, read from an older table).
+pub fn if_present<T>(
+    df: &DataFrame,
+    name: &str,
+    path: &Path,
+    read: fn(&DataFrame, &str, &Path) -> Result<Vec<T>, StageError>,
+) -> Result<Option<Vec<T>>, StageError> {
+    if df.column(name).is_err() {
+        return Ok(None);
+    }
+    read(df, name, path).map(Some)
+}
+
 /// The values, or an error naming the first null's row.
 fn required<T>(values: Vec<Option<T>>, name: &str, path: &Path) -> Result<Vec<T>, StageError> {
     values.into_iter().enumerate().map(|(row, v)| v.ok_or_else(|| null_at(path, name, row))).collect()
@@ -150,5 +164,8 @@ mod tests {
         assert!(message(ints(&df, "x", path).unwrap_err()).contains("integers, found f64"));
         assert!(message(bools(&df, "n32", path).unwrap_err()).contains("booleans, found i32"));
         assert!(message(strs(&df, "missing", path).unwrap_err()).contains("expected a column `missing`"));
+        assert_eq!(if_present(&df, "missing", path, f64s).unwrap(), None);
+        assert_eq!(if_present(&df, "n32", path, ints).unwrap(), Some(vec![3, -1]));
+        assert!(if_present(&df, "name", path, f64s).is_err(), "a present column of the wrong type is still refused");
     }
 }

@@ -32,7 +32,7 @@ pub fn frame(columns: Vec<Column>) -> Result<DataFrame, StageError> {
     DataFrame::new(height, columns).map_err(|source| StageError::Table { path: "(in memory)".into(), source })
 }
 
-pub use pipeline::columns::{bools, f64s, ints, opt_bools, opt_strs, strs};
+pub use pipeline::columns::{bools, f64s, if_present, ints, opt_bools, opt_strs, strs};
 
 /// Reads an `fdm-widths` dataset folder.
 pub fn read_fdm_widths(dir: &Path) -> Result<datasets::fdm_widths::FdmWidthsDataset, StageError> {

@@ -46,8 +46,7 @@ use vision::corners::{precision_recall, CornerDetection};
 use vision::homography::Homography;
 
 use super::common::{camera_model, f64s, ints, open_sequence, read_table};
-use crate::table::{f64_col, frame, i64_col, str_col};
-use crate::table::{opt_bools, opt_strs};
+use crate::table::{f64_col, frame, i64_col, if_present, opt_bools, opt_strs, str_col};
 
 /// The `thermal.accuracy_evaluate` stage kind.
 pub struct AccuracyEvaluateStage;
@@ -211,7 +210,7 @@ impl FrameRows {
                 m.iter().flatten().all(|v| v.is_finite()).then_some(Homography { m })
             })
             .collect();
-        let optional = |name: &str| df.column(name).is_ok().then(|| f64s(&df, name, &file)).transpose();
+        let optional = |name: &str| if_present(&df, name, &file, f64s);
         let mut estimators = Vec::new();
         for prefix in ["dlt", "rigid_mount"] {
             if let Some(t) = optional(&format!("{prefix}_time_s"))? {
@@ -222,19 +221,13 @@ impl FrameRows {
             (Some(x), Some(y)) => Some(x.iter().zip(&y).map(|(x, y)| [*x, *y]).collect()),
             _ => None,
         };
-        let placed_by: Vec<Option<String>> = match df.column("placed_by") {
-            Ok(_) => opt_strs(&df, "placed_by", &file)?,
-            Err(_) => vec![None; estimated_s.len()],
-        };
+        let n = estimated_s.len();
+        let placed_by = if_present(&df, "placed_by", &file, opt_strs)?.unwrap_or_else(|| vec![None; n]);
         let placed = |how: &str| -> Vec<bool> { placed_by.iter().map(|p| p.as_deref() == Some(how)).collect() };
-        let repeated = match df.column("repeat_of_frame") {
-            Ok(_) => ints(&df, "repeat_of_frame", &file)?.iter().map(|r| *r >= 0).collect(),
-            Err(_) => vec![false; estimated_s.len()],
-        };
-        let at_window_edge = match df.column("at_window_edge") {
-            Ok(_) => opt_bools(&df, "at_window_edge", &file)?.into_iter().map(|v| v == Some(true)).collect(),
-            Err(_) => vec![false; estimated_s.len()],
-        };
+        let repeated = if_present(&df, "repeat_of_frame", &file, ints)?
+            .map_or_else(|| vec![false; n], |r| r.iter().map(|r| *r >= 0).collect());
+        let at_window_edge = if_present(&df, "at_window_edge", &file, opt_bools)?
+            .map_or_else(|| vec![false; n], |e| e.iter().map(|v| *v == Some(true)).collect());
         Ok(Self {
             layer: ints(&df, "layer", &file)?,
             frame: ints(&df, "frame", &file)?,
