@@ -23,12 +23,11 @@
 //! s̄·δ/cos(θ/2) ≈ 2.6δ mm for a 45° corner, while the mount moves the predicted
 //! vertices of two neighbouring zigzag corners (5 mm apart across the part) relative to
 //! each other by about 5δ mm, the same way: the two corners of a frame then confirm the
-//! turned mount. Measured (five seeds): re-pairing from the fitted mount's arms and
-//! fitting again drifted instead of settling (seed 3: mount error 0.008 → 0.032 mm in four
-//! rounds, RMS residual rising). [`predict_corners_with_arms_into`] therefore takes the
+//! turned mount: re-pairing from the fitted mount's arms and fitting again drifts
+//! instead of settling. [`predict_corners_with_arms_into`] therefore takes the
 //! positions from the fitted mount and the arm directions from a fixed one (the nominal
 //! mount; its error, at most ±0.5° tilt and ±0.3° roll, turns an arm by ~0.005 rad at
-//! most); the fit-and-re-pair rounds then settle in 3-4 rounds.
+//! most); the fit-and-re-pair rounds then settle.
 
 use crate::frame::ThermalFrame;
 use crate::homography::Homography;

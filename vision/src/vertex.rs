@@ -4,11 +4,10 @@
 //! The paper pairs the corner its detector (Faster R-CNN) finds with the CAD corner and
 //! does not say where inside the detected box the corner point lies. Our hot-spot
 //! detector ([`crate::corners`]) returns the heat peak, and the peak is not at the CAD
-//! vertex: material piles up inside a corner, so the hottest point sits up to ~0.5 mm
-//! (3-4 px) inside it along the bisector, by an amount that varies with the corner angle
-//! and its age. Pairing the peak with the CAD vertex biases H(i) by a few tenths of a
-//! millimetre, i.e. ~10 ms at 20 mm/s in eq. 30 (measured on the virtual printer: peak −
-//! vertex up to 2.5 px, systematic in sign per corner).
+//! vertex: material piles up inside a corner, so the hottest point sits inside it along
+//! the bisector, by an amount that varies with the corner angle and its age. Pairing the
+//! peak with the CAD vertex biases H(i), systematically per corner, and through eq. 30
+//! the capture time.
 //!
 //! What we do instead: locate the vertex geometrically. Each arm of the corner is a
 //! straight bead whose temperature ridge runs along the path; away from the corner the
@@ -23,29 +22,21 @@
 //! second starts from the first intersection, which puts the cross-sections at the
 //! intended distances.
 //!
-//! Why the directions are held, not fitted, and why the arms are read this far out
-//! (measured on the eqs 5-11 printer, seed 3, five layers, every corner 0.15-0.8 s old,
-//! against the true corner pixels, started from them; offsets in plane mm):
+//! Why the directions are held, not fitted, and why the arms are read this far out:
 //! - Near a sharp corner the arm's ridge is pulled towards the other arm: the deposition
-//!   directions rotate (DDA, eqs 13-26) up to 1.24 mm from a 45° vertex (0.92 mm at 60°,
-//!   where the arms are ~0.95 mm apart), material piles up on the inner side along the
-//!   bisector (fill up to ~3), and its heat spreads over the arms. On the noise-free
-//!   plane the ridge is 0.15-0.2 mm inwards at s = 0.4-1.0 mm and 0.06-0.1 mm at 1.2 mm
-//!   for the 45°-60° corners; in the frames (PSF 0.7 px) the inward pull, as a function of
-//!   the arm gap g = 2 s sin(θ/2) and the same for every angle, is 0.10 mm at g = 0.8 mm,
-//!   0.014-0.022 mm at 1.2 mm, 0.003-0.007 mm at 1.4 mm and ≤ 0.001 mm from 1.6 mm on.
-//! - The former estimator fitted each arm's direction (total least squares) from 1.2 mm
-//!   of gap on. The pull at the near end tilts the fitted line, and the intersection
-//!   extrapolates the tilt back over `first_offset_mm` + `span_mm`/2 and divides it by
-//!   sin(θ/2): vertices 0.04 mm inwards along the bisector in the median, 0.18 mm at the
-//!   90th percentile and 0.19 mm for the 45° corners (0.84-1.07 px), systematic per
-//!   corner, which the mount fit then absorbed (see `thermal.monitor`).
-//! - Held directions turn a sideways pull into its mean over the read span instead of
-//!   an extrapolated tilt: from 1.2 mm of gap 0.006 mm median, 0.034 mm p90; from 1.6 mm
-//!   (the default) 0.006 mm median, 0.013 mm p90, 45° corners 0.001 mm. Fitted
-//!   directions from 1.6 mm: 0.015 mm and 0.095 mm.
+//!   directions rotate (DDA, eqs 13-26) over the first millimetre or so from the vertex,
+//!   material piles up on the inner side along the bisector, and its heat spreads over
+//!   the arms. In the frames (blurred by the camera's PSF) the inward pull depends on the
+//!   arm gap g = 2 s sin(θ/2), about the same for every angle, and dies out as the gap
+//!   grows; `min_arm_gap_mm` starts the reading where it has.
+//! - A fitted direction (total least squares along each arm) is tilted by the pull at the
+//!   arm's near end, and the intersection extrapolates the tilt back over
+//!   `min_offset_mm` + `span_mm`/2 and divides it by sin(θ/2): a vertex biased inwards
+//!   along the bisector, systematically per corner, which a mount fit then absorbs (see
+//!   `thermal.monitor`). A held direction turns a sideways pull into its mean over the
+//!   read span instead of an extrapolated tilt.
 //!
-//! The held direction must be right: with s̄ the mean distance read (2.8 mm at 45°),
+//! The held direction must be right: with s̄ the mean distance read,
 //! both arms turned by δ the same way (a roll of the mount) move the vertex sideways by
 //! s̄·δ/cos(θ/2), and arms opened or closed by δ each move it along the bisector by
 //! s̄·δ/sin(θ/2) (tested). The callers take it from

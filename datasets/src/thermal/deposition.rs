@@ -27,11 +27,11 @@
 //! nearest cells with room, the earliest deposit first (the squeeze flow under the face).
 //! Beyond the edge of the layer below the room reaches down to the bed (at most three
 //! layer heights), so melt squeezed over the edge hangs down the wall.
-//! Without it the apex of the 45° corner stood five layer heights tall under a nozzle one
-//! layer height above the bed, and the first layer's true widths saw only a quarter of
-//! the excess the flow lag delivers at the corners; with it they see 70 % (the oracle
-//! study, `datasets/examples/chen2024_oracle.rs`), the rest lying beside the deposition
-//! directions the widths are read along.
+//! Without it the apex of a sharp corner would stand several layer heights tall under a
+//! nozzle one layer height above the bed, and the true widths would see little of the
+//! excess the flow lag delivers at the corners; with it they see most of it, the rest
+//! lying beside the deposition directions the widths are read along (the chen2024
+//! report's variant `true_widths`).
 //!
 //! Layers stack: the nozzle of layer L sits at (L+1)·h above the bed, and the bead is
 //! squeezed into the gap between the nozzle's flat face and the part printed so far

@@ -30,16 +30,16 @@
 //!   after Δt̂1 is left to the extension.
 //! - Eq. 37: the compensated command is v_ef = v_e − Δv_er.
 //!
-//! Choices of ours beside the paper's text (found with the oracle study
-//! `datasets/examples/chen2024_oracle.rs`, true widths in place of the camera's):
+//! Choices of ours beside the paper's text (each run as a variant, on the camera's
+//! widths and on the printer's true ones, by `specs/chen2024.toml`):
 //! - Eq. 33 by swept area, as an option ([`velocity_change_from_sweep_mm_s`] with the
 //!   κ_eff sector terms; with κ_eff = 0 it is eq. 33 read as h|v|cos ψ·Δw). Paper: "ΔE(t)
 //!   = K_e(w_l + w_r − 2w_d)". Read literally it treats every sample as a slice of a
 //!   straight bead; at a sharp apex the allocated directions fan round a nearly fixed
 //!   point and neighbouring directions cross the same bulge. The swept area counts every
-//!   point once, but on the eqs 5-11 printer it under-counts the apex excess (the oracle
-//!   study: −56 % O_E against −71 % for the literal reading), so `thermal.compensate`
-//!   defaults to the literal reading.
+//!   point once, but on the eqs 5-11 printer it under-counts the apex excess (the
+//!   chen2024 report's variants `sweep` and defaults), so `thermal.compensate` defaults
+//!   to the literal reading.
 //! - Tail ([`solve_fbs_with_tail`], `FbsParams::tail_s`). Paper: the fit (eq. 39) runs
 //!   over [Δt̂0, Δt̂1] only. The lag's response to an input that ends at Δt̂1 goes on
 //!   for ~3τ and starves the bead after a corner; fitting it to zero there removes that.

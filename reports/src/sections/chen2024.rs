@@ -11,19 +11,24 @@
 //! Inputs, in order: a `thermal.compensate` stage (`spans.parquet`), a
 //! `thermal.reprint` stage (`corners.parquet`, `contour.parquet`, `contour_regions.parquet`), a
 //! `thermal.accuracy` stage (`accuracy.parquet`) and a `thermal.monitor` stage
-//! (`frames.parquet`), and optionally a fifth: the `thermal.reprint` stage of our
-//! lag-model extension (`thermal.compensate` with `source = "lag_model"`), reported
-//! beside the paper's method with the same checks. Each source names the stage, its kind and its parameters as
-//! recorded in the stage folder's `.stage.json` (the stage name alone when there is
+//! (`frames.parquet`); then, by name: `reprint_lag`, the re-print of our lag-model
+//! extension (`thermal.compensate` with `source = "lag_model"`), reported beside the
+//! paper's method with the same checks; every `reprint_X`, a variant the discussion
+//! cites, with the stages that set it apart (`chen2024_variants`; table
+//! `variants.parquet`); and `true_widths` (`thermal.true_widths`: the monitor's width
+//! error against the truth). Each source names the stage, its kind and its parameters
+//! as recorded in the stage folder's `.stage.json` (the stage name alone when there is
 //! no record).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use pipeline::params::ParamValue;
 use pipeline::stage::Arity;
 use pipeline::{InputArtifact, ParamSpec, StageContext, StageError, StageKind};
 
+use super::chen2024_variants::{read_variants, variants_frame, Variant};
 use super::{comparison_frame, Row};
 use crate::html::escape;
 use crate::read::{bools, f64s, ints, no_rows, read_parquet, strs};
@@ -47,7 +52,7 @@ impl StageKind for Chen2024Section {
         "report.chen2024"
     }
     fn version(&self) -> u32 {
-        16
+        17
     }
     fn summary(&self) -> &'static str {
         "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
@@ -67,6 +72,7 @@ impl StageKind for Chen2024Section {
         let (rows, html) = section(&ours);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table("variants", &mut variants_frame(&ours.reprint, &ours.variants)?)?;
         Ok(())
     }
 }
@@ -116,8 +122,66 @@ pub struct Ours {
     pub skipped: BTreeMap<String, usize>,
     /// Sources: spans, accuracy, frames.
     pub sources: [String; 3],
-    /// Our lag-model extension's re-print, when the fifth input is given.
+    /// Our lag-model extension's re-print (the input named `reprint_lag`), when given.
     pub extension: Option<Reprint>,
+    /// The variants (inputs named `reprint_X`, the extension's among them).
+    pub variants: Vec<Variant>,
+    /// The monitor's width error against the true widths (the input named
+    /// `true_widths`), when given.
+    pub width_errors: Option<WidthErrors>,
+    /// The shipped monitor's `measure_age_s`, from its record.
+    pub measure_age_s: Option<f64>,
+}
+
+/// `width_errors.parquet` of a `thermal.true_widths` stage: per region ("corner",
+/// "straight"), the per-layer medians and 90th percentiles of the monitor's absolute
+/// width error (mm), and the corner radius it used.
+#[derive(Debug, Clone, Default)]
+pub struct WidthErrors {
+    /// Region → per-layer (median, 90th percentile).
+    pub by_region: BTreeMap<String, Vec<(f64, f64)>>,
+    /// `corner_radius_mm` of the stage (mm), from its record.
+    pub corner_radius_mm: Option<f64>,
+    /// Where the numbers come from.
+    pub source: String,
+}
+
+impl WidthErrors {
+    fn read(input: &InputArtifact) -> Result<Self, StageError> {
+        let path = input.dir.join("width_errors.parquet");
+        let df = read_parquet(&path)?;
+        let region = strs(&df, "region", &path)?;
+        let (median, p90) = (f64s(&df, "median_abs_err_mm", &path)?, f64s(&df, "p90_abs_err_mm", &path)?);
+        let mut by_region: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+        for i in 0..df.height() {
+            by_region.entry(region[i].clone()).or_default().push((median[i], p90[i]));
+        }
+        Ok(Self {
+            by_region,
+            corner_radius_mm: recorded_f64(input, "corner_radius_mm"),
+            source: source(input, "width_errors.parquet"),
+        })
+    }
+
+    /// The range over layers of a region's medians and 90th percentiles (mm).
+    pub fn ranges_mm(&self, region: &str) -> Option<[(f64, f64); 2]> {
+        let layers = self.by_region.get(region).filter(|l| !l.is_empty())?;
+        let range = |pick: fn(&(f64, f64)) -> f64| {
+            let values = layers.iter().map(pick);
+            (values.clone().fold(f64::INFINITY, f64::min), values.fold(f64::NEG_INFINITY, f64::max))
+        };
+        Some([range(|l| l.0), range(|l| l.1)])
+    }
+}
+
+/// A float parameter of the stage that wrote `input`, from its record.
+fn recorded_f64(input: &InputArtifact, param: &str) -> Option<f64> {
+    let record = pipeline::cache::read_record(&input.dir)?;
+    let value = record.params.iter().find(|(name, _)| *name == param).and_then(|(_, v)| match v {
+        ParamValue::Float(x) => Some(*x),
+        _ => None,
+    });
+    value
 }
 
 /// The scores of one re-print: per-corner O_E and the contour error, with sources.
@@ -170,7 +234,7 @@ impl RegionError {
 }
 
 impl Reprint {
-    fn read(reprint: &InputArtifact) -> Result<Self, StageError> {
+    pub(crate) fn read(reprint: &InputArtifact) -> Result<Self, StageError> {
         Ok(Self {
             corners: read_corners(&reprint.dir.join("corners.parquet"))?,
             contour_mm: read_contour(&reprint.dir.join("contour.parquet"))?,
@@ -214,8 +278,10 @@ impl Reprint {
 
 impl Ours {
     /// Reads the four inputs (compensate, reprint, accuracy, monitor) and the optional
-    /// fifth (the extension's reprint).
+    /// named ones: `reprint_lag` (the extension), every `reprint_X` (a variant) with
+    /// its stages, and `true_widths`.
     pub fn read(inputs: &[InputArtifact]) -> Result<Self, StageError> {
+        let named = |name: &str| inputs.iter().skip(4).find(|i| i.name == name);
         let (compensate, reprint, accuracy, monitor) = (&inputs[0], &inputs[1], &inputs[2], &inputs[3]);
         let frames = read_frames(&monitor.dir.join("frames.parquet"))?;
         Ok(Self {
@@ -231,7 +297,10 @@ impl Ours {
                 source(accuracy, "accuracy.parquet"),
                 source(monitor, "frames.parquet"),
             ],
-            extension: inputs.get(4).map(Reprint::read).transpose()?,
+            extension: named("reprint_lag").map(Reprint::read).transpose()?,
+            variants: read_variants(inputs)?,
+            width_errors: named("true_widths").map(WidthErrors::read).transpose()?,
+            measure_age_s: recorded_f64(monitor, "measure_age_s"),
         })
     }
 
@@ -359,8 +428,60 @@ pub fn section(ours: &Ours) -> (Vec<Row>, String) {
     let mut html = String::from("<h3>Paper 003 vs ours</h3>\n");
     html += &comparison_table(ours, &mut rows);
     html += &corner_table(ours, &mut rows);
+    html += &variants_table(ours);
     html += &discussion(ours);
     (rows, html)
+}
+
+/// "O_E −70 %, max +1 %, RMS −28 %": the changes of the mean O_E and of the contour
+/// error's max and RMS from the conventional print to the compensated one.
+fn changes_text(changes_pct: [f64; 3]) -> String {
+    let [oe, max, rms] = changes_pct.map(|c| signed(c, 0));
+    format!("O_E {oe} %, max {max} %, RMS {rms} %")
+}
+
+/// The paper method's changes with the stage's defaults (stage reprint).
+fn defaults_text(ours: &Ours) -> String {
+    let defaults = Variant { name: "defaults".into(), reprint: ours.reprint.clone(), changes: Vec::new() };
+    changes_text(defaults.changes_pct())
+}
+
+/// Variant `name`'s changes and its name, or that the spec did not run it.
+fn variant_text(ours: &Ours, name: &str) -> String {
+    match ours.variants.iter().find(|v| v.name == name) {
+        Some(v) => format!("{} (variant {name})", changes_text(v.changes_pct())),
+        None => format!("— (variant {name} was not run)"),
+    }
+}
+
+/// Every variant beside the stage's defaults: what differs, the changes it brings.
+fn variants_table(ours: &Ours) -> String {
+    if ours.variants.is_empty() {
+        return String::new();
+    }
+    let mut html = String::from(
+        "<h4>Variants: each compensated, re-printed and scored like the stages above</h4>\n\
+<p class=\"run\">Change from the conventional print to the compensated one of the mean O_E (eq. 40) and of the contour error's max and \
+RMS (eq. 41, over every re-printed layer); what differs is read from the variant's stages' records, against the shipped stage of the same name \
+(variants.parquet of this stage).</p>\n\
+<table><tr><th class=\"t\">variant</th><th class=\"t\">what differs</th><th>mean O_E (%)</th><th>max (mm)</th><th>RMS (mm)</th>\
+<th>O_E change (%)</th><th>max change (%)</th><th>RMS change (%)</th></tr>\n",
+    );
+    let defaults = Variant { name: "defaults".into(), reprint: ours.reprint.clone(), changes: Vec::new() };
+    for v in std::iter::once(&defaults).chain(&ours.variants) {
+        let (oe0, oe1) = v.reprint.mean_oe_pct();
+        let [(max0, rms0), (max1, rms1)] = v.reprint.contour_mm;
+        let [oe, max, rms] = v.changes_pct().map(|c| signed(c, 1));
+        let what = if v.name == "defaults" { "the stages above".to_string() } else { v.changes_text() };
+        let _ = writeln!(
+            html,
+            "<tr><td class=\"t\">{}</td><td class=\"t\">{}</td><td>{oe0:.1} → {oe1:.1}</td><td>{max0:.3} → {max1:.3}</td>\
+<td>{rms0:.4} → {rms1:.4}</td><td>{oe}</td><td>{max}</td><td>{rms}</td></tr>",
+            escape(&v.name),
+            escape(&what)
+        );
+    }
+    html + "</table>\n"
 }
 
 /// `v` to `decimals` places for the page: a true minus sign (−), no "−0.0", "—" when
@@ -742,9 +863,10 @@ fn worst_points_sentence(reprint: &Reprint) -> String {
 }
 
 /// The contour-error paragraphs: Table 3 beside ours, where ours lies, and why.
-fn contour_paragraphs(reprint: &Reprint, extension: Option<&Reprint>) -> String {
+fn contour_paragraphs(ours: &Ours) -> String {
+    let reprint = &ours.reprint;
     let [(max0, rms0), (max1, rms1)] = reprint.contour_mm;
-    let lag = extension.map_or(String::new(), |ext| {
+    let lag = ours.extension.as_ref().map_or(String::new(), |ext| {
         let [(m0, _), (m1, _)] = ext.contour_mm;
         format!(
             " The lag model, which removes the whole predicted excess, changes the maximum by {} % (stage reprint_lag).",
@@ -761,11 +883,10 @@ point's distance to the nearest printed edge, so a bulge that pushes the edge ou
 says which each region's largest error is. By region, from {source}: at the valleys, where a corner's bulge fills the notch of the external surface, \
 {valley}; at the apexes {apex}; at the seam {seam}; along the straight runs {straight}. {worst}</p>\n\
 <p><b>Why the apexes do not improve.</b> At an apex the external surface is the outside of the turn. A round bead on a blended path does not reach \
-the mitred tip of the CAD bead there (at 45° the tip lies 0.59 mm beyond the vertex, the bead's edge about 0.26 mm), and the corner's excess bulges \
+the mitred tip of the CAD bead there (at 45° its tip lies W/(2 sin 22.5°) = 0.59 mm beyond the vertex; the round bead's edge stops well short of it), and the corner's excess bulges \
 on the inside of the turn, which the external surface does not include (Fig. 10). The compensation sets one flow for both sides (eq. 32 sums \
-w_l + w_r): removing the inner bulge thins the outside too, so the sharper apexes end up short, and the 45° apexes, already short by about \
-0.3 mm before, stay the largest error whatever the flow does. With the printer's true widths in place of the thermal ones the maximum does not \
-fall either (the oracle study, datasets/examples/chen2024_oracle.rs).{lag} A fall of the maximum like the paper's is out of reach of a \
+w_l + w_r): removing the inner bulge thins the outside too, so the sharper apexes end up short. {apex_before} With the printer's true widths in \
+place of the thermal ones the changes are {true_widths}.{lag} A fall of the maximum like the paper's is out of reach of a \
 flow-only compensation on this part; the paper's conventional maximum, 1.68 mm, comes from corner blobs of its real printer far larger than this \
 printer's, next to which a tip's shortfall is small.</p>\n",
         source = escape(&reprint.sources[2]),
@@ -774,7 +895,71 @@ printer's, next to which a tip's shortfall is small.</p>\n",
         seam = kind_change(reprint, "seam"),
         straight = kind_change(reprint, "straight"),
         worst = worst_points_sentence(reprint),
+        apex_before = apex_before_sentence(reprint),
+        true_widths = variant_text(ours, "true_widths"),
     )
+}
+
+/// The apex with the largest error before compensation, in one sentence.
+fn apex_before_sentence(reprint: &Reprint) -> String {
+    let apexes = reprint.regions.iter().filter(|r| r.kind == "apex");
+    let Some(worst) = apexes.max_by(|a, b| a.max_mm.0.total_cmp(&b.max_mm.0)) else {
+        return String::new();
+    };
+    format!(
+        "Before compensation the largest apex error is at {}: {}.",
+        escape(&worst.label(&reprint.corners)),
+        error_kind(worst.max_mm.0, worst.max_short.0)
+    )
+}
+
+/// The monitor's width error near and away from the corners, in one sentence (nothing
+/// when stage true_widths was not run).
+fn width_errors_sentence(ours: &Ours) -> String {
+    let Some(errors) = &ours.width_errors else {
+        return String::new();
+    };
+    let (Some([corner, corner_p90]), Some([straight, _])) = (errors.ranges_mm("corner"), errors.ranges_mm("straight"))
+    else {
+        return String::new();
+    };
+    let range = |r: (f64, f64)| format!("{:.3}-{:.3} mm", r.0, r.1);
+    let heat = if corner.1 > straight.1 {
+        " A corner's bulge holds more heat, and its warm contour spreads as it ages."
+    } else {
+        " Here the corners are read no worse than the straight runs."
+    };
+    format!(
+        "Within {} mm of a vertex the thermal widths differ from the true ones by {} (median absolute per layer; 90th percentile {}), \
+against {} away from the corners ({}).{heat} ",
+        fmt(errors.corner_radius_mm, 2),
+        range(corner),
+        range(corner_p90),
+        range(straight),
+        escape(&errors.source),
+    )
+}
+
+/// What reading the widths at other ages gives: every variant that sets the monitor's
+/// `measure_age_s`, youngest first.
+fn age_sentence(ours: &Ours) -> String {
+    let mut ages: Vec<(f64, &Variant)> = ours
+        .variants
+        .iter()
+        .filter_map(|v| match v.param("measure_age_s") {
+            Some(ParamValue::Float(age)) => Some((*age, v)),
+            _ => None,
+        })
+        .collect();
+    ages.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let read: Vec<String> = ages
+        .iter()
+        .map(|(age, v)| format!("read at {age} s: {} (variant {})", changes_text(v.changes_pct()), v.name))
+        .collect();
+    if read.is_empty() {
+        return format!("that age: {}", defaults_text(ours));
+    }
+    format!("that age: {}; {}", defaults_text(ours), read.join("; "))
 }
 
 /// Whether eq. 30 beat the recorded time on this run, in one sentence.
@@ -799,7 +984,7 @@ fn discussion(ours: &Ours) -> String {
 <p><b>Over-deposition index.</b> Ours, mean over {n} corners: {oe0:.2} % → {oe1:.2} % (paper: 106.75 % → 31.73 %, over the four corner types of its one-layer part). \
 The paper measures O_E on photographs of real prints (Figs 9-10); ours is computed on the first layer the virtual printer deposits again (a 0.02 mm fill grid, \
 stage reprint), with A_c the corner polytope, the rhombus where the two edges' ideal beads overlap (W²/sin θ), and A_o the deposited area outside the ideal \
-(mitred) bead within a disc around the vertex. Our test path has eighteen corners (45° to 120° apexes on two zig-zags, their valleys and four side corners) where \
+(mitred) bead within a disc around the vertex. Our test path has {n} corners (45° to 120° apexes on two zig-zags, their valleys and four side corners) where \
 the paper's has four types. Corners over-deposit on the virtual printer because the flow lags (τ = 0.0873 s, eq. 34) while the head slows: the beads \
 of eqs 5-11 widen and, at the sharp apexes, the deposition segments of the incoming and outgoing beads overlap; what would stand higher than the nozzle \
 plane the nozzle face squeezes out sideways, into a bulge. Only corners covered by a localised frame get a width reading and a compensation; the others \
@@ -811,30 +996,27 @@ Where the stage's defaults depart from eqs 31-33 (stage compensate's parameters,
 with its true widths: the desired width is the CAD bead's extent along each allocated direction (at a sharp corner's inner side eq. 31's w0/cos ψ is far \
 narrower than the overlapping beads, so a perfect corner would read as over-deposited); the width error is signed, as eq. 33 is, so thin stretches get \
 material too; the fit runs 3τ past each window so the lagged tail does not starve the bead after the corner; and K_e = 1, since the paper's K_e was \
-identified for corners read at 140-150 °C and ours are read in a wider band (its formula with T_p clamped to that band, stage compensate's gain = \
-\"paper\", gives on seed 3 O_E −76 %, max −2 %, RMS −21 %: it over-corrects the cooler corners).</p>\n\
+identified for corners read at 140-150 °C and ours are read in a wider band: its formula with T_p clamped to that band gives every corner read \
+below 140 °C K_e = 5/3 and every one above 150 °C K_e = 1, and gives {paper_gain}, against {defaults} with K_e = 1 (stage reprint).</p>\n\
 <p><b>Monitored layers.</b> The paper verifies on one layer; our camera has the habits of its \
 Lepton 3.5 (it repeats its last image now and then and holds one through a ~0.9 s shutter freeze once a layer; the monitor skips such repeats), so a \
-corner the freeze hides in the first layer is read in another: the widths are the median over the five filmed layers per sample (stage compensate's \
-layer and layers). With the first layer alone, seed 3 gives O_E −67 % and RMS −27 %; with a camera without those habits the first layer alone \
-does as well as all five (−69 %, −28 %).</p>\n\
+corner the freeze hides in the first layer is read in another: the widths are the median over the filmed layers per sample (stage compensate's \
+layer and layers), which gives {defaults}. With the first layer alone: {first_layer}; with a camera without those habits, the first layer \
+alone: {no_habits}.</p>\n\
 <p><b>Width feedback against the truth.</b> The virtual printer lays each bead by eqs 5-11 along the directions of eqs 13-26 (DESIGN §5.3), \
 so the paper's geometric model is the printer's own, except where the nozzle face squeezes the excess sideways. With the printer's true widths of the \
-first layer in place of the thermal ones (datasets/examples/chen2024_oracle.rs, seed 3, 20 layers), the stage's defaults lower the mean O_E by 71 % and \
-the RMS contour error by 31 %; eqs 31-33 as printed (desired width w0/cos ψ, over-deposition only) lower O_E by 79 % but the RMS by only 13 %, because \
-they also thin the flanks. Over one layer the lag delivers +0.76 mm³ too much and −0.92 mm³ too little; the true widths of the first layer see +0.54 and \
-−0.80 mm³ of it. The rest is what this reproduction names as the model's blind spot: eqs 31-33 read the flow error along the deposition directions, and \
-the squeezed-out part of a corner's excess lies around the apex, between them. The thermal widths do about as well as the true ones here: within 0.5 mm \
-of a vertex they differ from the true widths by 0.04-0.06 mm (median absolute per layer, 90th percentile 0.10-0.11 mm), against 0.005-0.007 mm away from \
-the corners, because a corner's bulge holds more heat and its warm contour spreads as it ages. Reading them young limits that (stage monitor's \
-measure_age_s = 0.1 s; on seed 3 the RMS falls by 23 % at 0.15 s and by 10 % at 0.25 s; at 0.06 s, where some corners are not yet fully in view, by \
-25 %). The first frames of every layer show no corner; placing them by their recorded time through the fitted mount (stage monitor's \
-place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest: without it O_E falls by 65 % instead \
-of 70 % and the RMS by 18 % instead of 28 %. The camera films on through the layer change, while the nozzle stands at the layer's end point; those \
+filmed layers in place of the thermal ones (stage true_widths, an evaluation stage: a perfect camera), the stage's defaults give {true_widths}; eqs 31-33 \
+as printed (desired width w0/cos ψ, over-deposition only, the fit over the extended window only) give {true_widths_as_printed}, and on the thermal \
+widths {as_printed}: eq. 31 counts the inner wedge of a sharp corner as excess, so they also thin the flanks. What even the true widths miss is what \
+this reproduction names as the model's blind spot: eqs 31-33 read the flow error along the deposition directions, and the squeezed-out part of a \
+corner's excess lies around the apex, between them. {width_errors}Reading the widths young limits that spread \
+(stage monitor's measure_age_s = {age} s; {ages}). The first frames of every layer show no corner; placing them by their recorded time through the \
+fitted mount (stage monitor's place_cornerless) lets the compensation also fill the thin start of the layer, where the flow builds up from rest; \
+without it: {cornerless}. The camera films on through the layer change, while the nozzle stands at the layer's end point; those \
 frames are placed but not timed (eq. 30 needs a moving nozzle) and give the widths of the layer's last stretch, where the head stops while the flow lags on. The very first millimetre of a layer is too thin for the threshold contour and reads as nothing; the fit \
 of eq. 39 leaves such unread samples out rather than asking for no change there, so the added flow can start with the layer. {extension}The <code>melt_squeeze_out</code> effect of the virtual printer sends part of every millisecond's melt into \
 the nearest free cells instead of along the deposition direction: the more the melt moves after it leaves the nozzle, the less a width says about the \
-flow (an earlier version of this printer that sent all of it there let true widths lower O_E by only a third).</p>\n\
+flow.</p>\n\
 {contour}\
 <p><b>Compensation time.</b> The paper's ≈ 0.5 s per corner (Sec. 3.3) includes the Faster R-CNN on an RTX 2050 GPU and the filtered B-spline solve. \
 Timings would make our tables differ from run to run, so the pipeline does not record them: <code>make bench</code> measures the constrained least-squares \
@@ -842,20 +1024,31 @@ solve of eq. 39 per corner (models/benches/thermal.rs) and the whole frame pipel
 <p><b>Corner detection.</b> The paper reports mAP 99.5 % for a Faster R-CNN trained on 69 annotated real frames (Sec. 3.2). We have no GPU, no weights and no \
 annotated real frames, so we detect corners classically (local temperature maxima with blob-like curvature) on synthetic frames whose true corner positions \
 are known, and report precision {p} % and recall {r} % against that ground truth instead; mAP is not computed. The paper keeps frames whose corners are at \
-140-150 °C; on the virtual printer a corner crosses that band about 1 s after it is printed and stays in it for about 0.2 s, so never more than two corners \
-are in it at once and eq. 27 needs four: the shipped spec widens the band (stage monitor's band_low_c/band_high_c, in the source column). A corner's heat peak \
+140-150 °C; on the virtual printer a corner reaches that band long after it is printed and passes through it quickly, so too few corners \
+are in it at once for eq. 27, which needs four: the shipped spec widens the band (stage monitor's band_low_c/band_high_c, in the source column). A corner's heat peak \
 sits inside the corner, where the material bulges; we place each matched corner at the intersection of its two bead ridges instead (vision::vertex).</p>\n\
 <p><b>Capture-time localisation.</b> The paper gives no error figure, only that the search neighbourhood δt of eq. 30 should be within 10 ms. Ours: median \
 error {loc} ms against the virtual camera's true capture times, against {base} ms when the recorded time is used as is (the camera's timestamps jitter \
 with σ = 3 ms); the paper's per-frame DLT homography (eq. 27, stage monitor with localisation = \"dlt\") gives {dlt} ms on the {dlt_frames} frames that \
-hold the four in-band corners it needs, and four to six corners on one side of the image let an 8-parameter homography extrapolate their errors onto \
+hold the four in-band corners it needs, and corners bunched on one side of the image let an 8-parameter homography extrapolate their errors onto \
 the nozzle. Our extension uses that the camera is rigid on a head that only translates: one mount homography is fitted to the whole sequence and each \
 frame needs only its translation, which a single corner gives (vision::mount, vision::rigid); corner vertices are placed where the two bead ridges meet, \
 with the arm lines through the ridges' centres so that the heat of the corner's bulge does not tilt them. The nozzle then lands within {nozzle} mm of its true \
 position, the floor set by the camera's vibration being {floor} mm. {loc_verdict} Eq. 30 pays off most with a larger or unknown capture delay (the \
 camera_latency effect of the virtual camera), which the recorded time cannot see.</p>\n",
         n = ours.reprint.corners.len(),
-        contour = contour_paragraphs(&ours.reprint, ours.extension.as_ref()),
+        contour = contour_paragraphs(ours),
+        defaults = defaults_text(ours),
+        paper_gain = variant_text(ours, "paper_gain"),
+        first_layer = variant_text(ours, "first_layer"),
+        no_habits = variant_text(ours, "no_habits"),
+        true_widths = variant_text(ours, "true_widths"),
+        true_widths_as_printed = variant_text(ours, "true_widths_as_printed"),
+        as_printed = variant_text(ours, "as_printed"),
+        width_errors = width_errors_sentence(ours),
+        age = fmt(ours.measure_age_s, 2),
+        ages = age_sentence(ours),
+        cornerless = variant_text(ours, "cornerless_unplaced"),
         extension = extension_sentence(ours),
         loc_verdict = localisation_verdict(ours),
         dlt = fmt(ours.metric("dlt_capture_time_err_median_ms"), 2),
@@ -945,6 +1138,25 @@ mod tests {
         assert!((row.ours - reduction_pct(1.52, 0.27)).abs() < 1e-9 && row.paper.is_none());
         assert!(row.source.contains("stage reprint_lag"), "{}", row.source);
         assert!(html.contains("(our extension, no widths: stage compensate_lag)"), "{html}");
+    }
+
+    #[test]
+    fn a_variant_is_read_by_name_and_one_not_run_is_said_to_be_so() {
+        let root = tempfile::tempdir().expect("tempdir");
+        let mut inputs = inputs(root.path());
+        let dir = root.path().join("reprint_paper_gain");
+        std::fs::create_dir_all(&dir).expect("dir");
+        write_reprint(&dir);
+        inputs.push(InputArtifact { name: "reprint_paper_gain".into(), dir });
+        let ours = Ours::read(&inputs).expect("reads");
+        assert_eq!(ours.variants.len(), 1);
+        assert!(ours.extension.is_none(), "only reprint_lag is the extension");
+        let (_, html) = section(&ours);
+        // Synthetic re-print: max 1.52 → 0.27 mm (−82 %), RMS 0.41 → 0.19 mm (−54 %).
+        assert!(html.contains("max −82 %, RMS −54 % (variant paper_gain)"), "{html}");
+        assert!(html.contains("— (variant first_layer was not run)"));
+        let df = super::super::chen2024_variants::variants_frame(&ours.reprint, &ours.variants).expect("frame");
+        assert_eq!(df.height(), 2, "defaults and the variant");
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! number beside ours, with where ours came from).
 
 mod chen2024;
+mod chen2024_variants;
 mod discrepancy_fdm;
 mod discrepancy_inkjet;
 mod discrepancy_thermal;

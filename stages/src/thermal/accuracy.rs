@@ -33,7 +33,7 @@
 
 use std::path::Path;
 
-use models::stats::finite_median;
+use models::stats::{finite_median, nearest_rank_quantile};
 
 use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
@@ -266,7 +266,13 @@ fn capture_time_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut 
     let (mut ours, baseline) = time_errors(frames, truth, &frames.estimated_s);
     let n = ours.len();
     metrics.push("capture_time_err_median_ms", median(&ours), "ms", n, "|t̂_c − t_c|, eq. 30");
-    metrics.push("capture_time_err_p90_ms", quantile(&mut ours, 0.9), "ms", n, "90th percentile of |t̂_c − t_c|");
+    metrics.push(
+        "capture_time_err_p90_ms",
+        nearest_rank_quantile(&mut ours, 0.9),
+        "ms",
+        n,
+        "90th percentile of |t̂_c − t_c|",
+    );
     metrics.push(
         "capture_time_err_baseline_median_ms",
         median(&baseline),
@@ -301,7 +307,13 @@ fn estimator_metrics(frames: &FrameRows, truth: &ThermalTruth, metrics: &mut Met
         let n = ours.len();
         let name = |what: &str| format!("{prefix}_{what}");
         metrics.push(&name("capture_time_err_median_ms"), median(&ours), "ms", n, "|t̂_c − t_c| of this estimator");
-        metrics.push(&name("capture_time_err_p90_ms"), quantile(&mut ours, 0.9), "ms", n, "90th percentile");
+        metrics.push(
+            &name("capture_time_err_p90_ms"),
+            nearest_rank_quantile(&mut ours, 0.9),
+            "ms",
+            n,
+            "90th percentile",
+        );
         metrics.push(
             &name("capture_time_err_baseline_median_ms"),
             median(&baseline),
@@ -452,7 +464,7 @@ fn vertex_metrics(
         n,
         "ridge vertices that placed a nozzle, to the true corner pixels (raw)",
     );
-    metrics.push("vertex_err_p90_px", quantile(&mut errors, 0.9), "px", n, "90th percentile");
+    metrics.push("vertex_err_p90_px", nearest_rank_quantile(&mut errors, 0.9), "px", n, "90th percentile");
     let Some(mounts) = mounts else { return Ok(()) };
     let (mut floor, mut applied) = (Vec::new(), Vec::new());
     let mut i = 0;
@@ -624,16 +636,6 @@ fn median(values: &[f64]) -> f64 {
     finite_median(values.iter().copied())
 }
 
-/// The `q` quantile of `values` by nearest rank (the 90th percentiles); NaN when empty.
-fn quantile(values: &mut [f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
-    values[rank - 1]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -663,11 +665,7 @@ mod tests {
     }
 
     #[test]
-    fn quantile_is_the_nearest_rank_and_the_median_the_middle_mean() {
-        let mut v = [4.0, 1.0, 3.0, 2.0];
-        assert_eq!(quantile(&mut v, 0.5), 2.0);
-        assert_eq!(quantile(&mut v, 0.9), 4.0);
-        assert!(quantile(&mut [], 0.5).is_nan());
+    fn the_median_is_the_middle_mean_of_the_finite_values() {
         assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
         assert_eq!(median(&[4.0, f64::NAN, 3.0]), 3.5);
         assert!(median(&[]).is_nan());

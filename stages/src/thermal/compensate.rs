@@ -10,8 +10,10 @@
 //! the desired change of the deposition velocity (eq. 33) and the filtered-B-spline
 //! input that produces it through G(s) within the bounds (eqs 36-39).
 //!
-//! Choices of ours, each beside the paper's text (numbers: the oracle study
-//! `datasets/examples/chen2024_oracle.rs`, which runs them with the true widths):
+//! Choices of ours, each beside the paper's text. What each costs or gains is measured,
+//! not quoted here: `specs/chen2024.toml` runs the alternatives as variants (on the
+//! thermal widths and, through `thermal.true_widths`, on the printer's true ones) and
+//! the report's table of variants scores them.
 //! - Desired width (`desired_width = "cad"`). Paper eq. 31: "w_d(t) = w0/cos(φ_eff(t))",
 //!   the width of a straight bead along a direction tilted by φ. At a sharp corner the
 //!   inner deposition directions point into the wedge where the incoming and outgoing
@@ -21,12 +23,8 @@
 //!   direction (`IdealBead::edge_distance_mm`), which equals w0/cos ψ on straight edges.
 //! - Flow excess (`volume = "linear"`): eq. 33 as printed, h·|v|·cos ψ·Δw. The option
 //!   `sweep` takes the area swept by the turning deposition segments instead (see
-//!   models::thermal::compensation); with the printer's true widths of layer 0 it lowers
-//!   the mean O_E by only 56 % where `linear` lowers it by 71 % (the oracle study, seed
-//!   3), because it counts less of the excess at the apex, where most of it is; on the
-//!   thermal widths 46-51 % against 69-70 % (seeds 1-5), below the 50 % on four
-//!   of them, though it thins the apexes less and lowers the RMS contour error by 30-32 %
-//!   against 27-29 %.
+//!   models::thermal::compensation); it counts less of the excess at the apex, where
+//!   most of it is, and thins the apexes less (variant `sweep`).
 //! - Both signs (`add_material = true`). Paper eq. 33 is signed, and the spans are
 //!   |Δw| ≥ ε. The earlier default dropped Δw < 0 because eq. 31's w0/cos ψ made them
 //!   spurious; with the CAD desired width they are the real thinning after a corner
@@ -37,8 +35,7 @@
 //!   scale (above 165 °C it turns negative); clamped to the band, it gives K_e = 1.67 to
 //!   every corner read below 140 °C and 1 to every one above 150 °C. Without an identification
 //!   experiment of ours, the mass balance (K_e = 1) is the neutral choice; `paper`
-//!   keeps the clamped formula (on `specs/chen2024.toml`, seeds 1-5: O_E −75 to −78 %
-//!   against −69 to −70 %, but RMS contour error −20 to −25 % against −27 to −29 %).
+//!   keeps the clamped formula (variant `paper_gain`).
 //! - Tail (`tail_s` = 3τ): the lagged output is fitted to zero for 0.26 s after each
 //!   extended window (the paper fits the window only).
 //!
@@ -46,12 +43,16 @@
 //! B-spline solve, but the desired output is the flow excess eq. 34 predicts for the
 //! nominal command, lag(v_e) − v_e, over the whole layer, with no widths. The paper
 //! identifies τ (Sec. 3.2) and then corrects only what the camera sees; the widths read
-//! along the deposition directions see about 70 % of the flow excess at the corners (the
-//! rest is squeezed around the apex, between them; see the report), so the model-based
-//! feed-forward is run beside the paper's width feedback and both are scored by their own
-//! re-print. On seed 3 it lowers the mean O_E as far (−69 %) but not the contour error
-//! (max +22 %, RMS −17 %): it knows nothing of the CAD bead and also removes the excess
-//! that filled its tips.
+//! along the deposition directions miss the part of a corner's flow excess that is
+//! squeezed around the apex, between them (see the report), so the model-based
+//! feed-forward is run beside the paper's width feedback and both are scored by their
+//! own re-print. It knows nothing of the CAD bead: it also removes the excess that
+//! filled the bead's tips.
+//!
+//! Inputs: the `thermal-sequence`, the monitor's folder (`widths.parquet`,
+//! `directions.parquet`, `detections.parquet`) and, optionally, a folder whose
+//! `widths.parquet` (same columns) replaces the monitor's: `thermal.true_widths`, the
+//! printer's true widths (an evaluation of the method with a perfect camera).
 //!
 //! Units: the deposition velocity v_e is the extruder's (E-axis) velocity in mm/s of
 //! filament, E = A_fil·v_e. This is the reading under which the paper's numbers fit
@@ -187,15 +188,19 @@ impl StageKind for CompensateStage {
         PARAMS
     }
     fn arity(&self) -> Arity {
-        Arity::exactly(2)
+        // sequence, monitor and, optionally, the widths to use in place of the
+        // monitor's (`thermal.true_widths`: the printer's true widths).
+        Arity { min: 2, max: 3 }
     }
 
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
         let seq = open_sequence(&ctx.inputs[0].dir)?;
         let monitor_dir = ctx.inputs[1].dir.clone();
+        let widths_dir = ctx.inputs.get(2).map_or(monitor_dir.clone(), |i| i.dir.clone());
         let tables = MonitorInputs {
             dir: &monitor_dir,
-            widths: &read_table(&monitor_dir, "widths.parquet")?,
+            widths_dir: &widths_dir,
+            widths: &read_table(&widths_dir, "widths.parquet")?,
             directions: &read_table(&monitor_dir, "directions.parquet")?,
             detections: &read_table(&monitor_dir, "detections.parquet")?,
         };
@@ -227,6 +232,8 @@ impl StageKind for CompensateStage {
 pub struct MonitorInputs<'a> {
     /// The monitor's output folder.
     pub dir: &'a Path,
+    /// The folder `widths` comes from: the monitor's, or one with the same columns.
+    pub widths_dir: &'a Path,
     /// `widths.parquet`.
     pub widths: &'a DataFrame,
     /// `directions.parquet`.
@@ -268,7 +275,8 @@ pub fn compensate(
     let trajectory = trajectory_of(seq)?;
     let first_layer = params.i64("layer");
     let layers = first_layer..first_layer + params.i64("layers");
-    let measured = MeasuredWidths::read(tables.widths, &tables.dir.join("widths.parquet"), layers, trajectory.len())?;
+    let measured =
+        MeasuredWidths::read(tables.widths, &tables.widths_dir.join("widths.parquet"), layers, trajectory.len())?;
     let frame_geometry =
         DepositionFrame::read(tables.directions, &tables.dir.join("directions.parquet"), trajectory.len())?;
     let corner_temps_c =

@@ -224,6 +224,7 @@ impl Design {
         let setup = seq.process.print_setup();
         let inputs = MonitorInputs {
             dir: scratch,
+            widths_dir: scratch,
             widths: &tables.widths,
             directions: &tables.directions,
             detections: &tables.detections,

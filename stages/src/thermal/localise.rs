@@ -44,18 +44,12 @@
 //!   ([`Placement::Parked`]). Its widths are read: they are the only view of the
 //!   layer's last stretch, where the head stops while the lagging flow goes on.
 //!
-//! Measured on the eqs 5-11 printer with the nozzle face's squeeze, filmed by a camera
-//! with the Lepton habits (five layers, seeds 1-5, `thermal.accuracy_evaluate`): median
-//! capture-time error 0.73-0.93 ms against 1.92-2.14 ms for the recorded time (the
-//! paper's DLT: 1.65-3.71 ms on its 61-79 frames), nozzle 0.024-0.029 mm against the
-//! 0.024-0.028 mm the camera vibration leaves with perfect vertices and mount, mount
-//! 0.004-0.018 mm; 45-53 frames skipped, all repeats; the 28-31 frames placed by
-//! their recorded time 0.028-0.038 mm, the 31-36 parked ones 0.012-0.019 mm. Before
-//! (ridge lines fitted from 1.2 mm of arm gap, one re-pairing from the first fit's arms)
-//! the vertices of the sharp corners sat up to 1 px inside them (0.23 px median, 0.88 px
-//! p90), the mount fit absorbed that bias and came out 0.18 mm off on every seed (the
-//! nominal mount is 0.02-0.14 mm off), and the capture error was 3.10-3.27 ms, worse
-//! than the recorded time.
+//! How well it does (capture time against the recorded time and the paper's DLT, the
+//! nozzle against the floor the camera's vibration leaves, the mount, the frames placed
+//! each way) is measured by `thermal.accuracy_evaluate` against the virtual printer's
+//! truth and reported beside the paper. Ridge lines fitted from the arm gap alone put
+//! the vertices of the sharp corners inside them; the mount fit absorbed that bias, which
+//! is why the arm lines run through the ridges' centres.
 
 use datasets::thermal::sequence::{FrameEntry, ThermalSequence};
 use models::progress::Progress;

@@ -9,7 +9,9 @@
 //! - [`compensate`]: `thermal.compensate`, the compensation of eqs 33-39.
 //! - [`reprint`]: `thermal.reprint_evaluate`, re-print with and without it and measure
 //!   eqs 40-41 (evaluation: uses the virtual printer's effects).
-//! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`.
+//! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`;
+//!   [`true_widths`]: `thermal.true_widths`, the widths a perfect camera would read
+//!   (evaluation), for the compensation fed the truth.
 //! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time, layer and
 //!   flow models get wrong about the monitor's measurements, and why (DESIGN §7);
 //!   [`discovery_power`]: `thermal.discovery_power`, its power study on virtual prints;
@@ -28,6 +30,7 @@ pub mod generate;
 pub mod localise;
 pub mod monitor;
 pub mod reprint;
+pub mod true_widths;
 
 use pipeline::Registry;
 
@@ -38,6 +41,7 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(compensate::CompensateStage));
     registry.register(Box::new(reprint::ReprintEvaluateStage));
     registry.register(Box::new(accuracy::AccuracyEvaluateStage));
+    registry.register(Box::new(true_widths::TrueWidthsStage));
     registry.register(Box::new(discrepancy::DiscrepancyStage));
     registry.register(Box::new(discovery_power::DiscoveryPowerStage));
     registry.register(Box::new(control::ControlGainStage));
