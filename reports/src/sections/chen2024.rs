@@ -15,7 +15,7 @@
 //! extension (`thermal.compensate` with `source = "lag_model"`), reported beside the
 //! paper's method with the same checks; every `reprint_X`, a variant the discussion
 //! cites, with the stages that set it apart (`chen2024_variants`; table
-//! `variants.parquet`); and `true_widths` (`thermal.true_widths`: the monitor's width
+//! `variants.parquet`); and `true_widths` (`thermal.true_widths_evaluate`: the monitor's width
 //! error against the truth). Each source names the stage, its kind and its parameters
 //! as recorded in the stage folder's `.stage.json` (the stage name alone when there is
 //! no record).
@@ -133,7 +133,7 @@ pub struct Ours {
     pub measure_age_s: Option<f64>,
 }
 
-/// `width_errors.parquet` of a `thermal.true_widths` stage: per region ("corner",
+/// `width_errors.parquet` of a `thermal.true_widths_evaluate` stage: per region ("corner",
 /// "straight"), the per-layer medians and 90th percentiles of the monitor's absolute
 /// width error (mm), and the corner radius it used.
 #[derive(Debug, Clone, Default)]

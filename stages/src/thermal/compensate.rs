@@ -12,7 +12,7 @@
 //!
 //! Choices of ours, each beside the paper's text. What each costs or gains is measured,
 //! not quoted here: `specs/chen2024.toml` runs the alternatives as variants (on the
-//! thermal widths and, through `thermal.true_widths`, on the printer's true ones) and
+//! thermal widths and, through `thermal.true_widths_evaluate`, on the printer's true ones) and
 //! the report's table of variants scores them.
 //! - Desired width (`desired_width = "cad"`). Paper eq. 31: "w_d(t) = w0/cos(φ_eff(t))",
 //!   the width of a straight bead along a direction tilted by φ. At a sharp corner the
@@ -51,7 +51,7 @@
 //!
 //! Inputs: the `thermal-sequence`, the monitor's folder (`widths.parquet`,
 //! `directions.parquet`, `detections.parquet`) and, optionally, a folder whose
-//! `widths.parquet` (same columns) replaces the monitor's: `thermal.true_widths`, the
+//! `widths.parquet` (same columns) replaces the monitor's: `thermal.true_widths_evaluate`, the
 //! printer's true widths (an evaluation of the method with a perfect camera).
 //!
 //! Units: the deposition velocity v_e is the extruder's (E-axis) velocity in mm/s of
@@ -189,7 +189,7 @@ impl StageKind for CompensateStage {
     }
     fn arity(&self) -> Arity {
         // sequence, monitor and, optionally, the widths to use in place of the
-        // monitor's (`thermal.true_widths`: the printer's true widths).
+        // monitor's (`thermal.true_widths_evaluate`: the printer's true widths).
         Arity { min: 2, max: 3 }
     }
 

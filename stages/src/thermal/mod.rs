@@ -10,7 +10,7 @@
 //! - [`reprint`]: `thermal.reprint_evaluate`, re-print with and without it and measure
 //!   eqs 40-41 (evaluation: uses the virtual printer's effects).
 //! - [`accuracy`]: `thermal.accuracy_evaluate`, the frame pipeline against `truth/`;
-//!   [`true_widths`]: `thermal.true_widths`, the widths a perfect camera would read
+//!   [`true_widths`]: `thermal.true_widths_evaluate`, the widths a perfect camera would read
 //!   (evaluation), for the compensation fed the truth.
 //! - [`discrepancy`]: `thermal.discrepancy`, what the paper's capture-time, layer and
 //!   flow models get wrong about the monitor's measurements, and why (DESIGN §7);

@@ -1,4 +1,4 @@
-//! `thermal.true_widths`: the widths a perfect camera would read (evaluation: reads
+//! `thermal.true_widths_evaluate`: the widths a perfect camera would read (evaluation: reads
 //! `truth/` of the dataset; ARCHITECTURE.md). Paper 003's compensation (Sec. 2.4, eqs
 //! 31-39) turns the widths the thermal camera reads into a flow correction; fed the
 //! printer's true widths instead, it shows the method's limit on this printer apart
@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use super::common::{f64s, ints, open_sequence, read_table, trajectory_of};
 use crate::table::{f64_col, frame, i64_col, str_col};
 
-/// The `thermal.true_widths` stage kind.
+/// The `thermal.true_widths_evaluate` stage kind.
 pub struct TrueWidthsStage;
 
 const PARAMS: &[ParamSpec] = &[ParamSpec {
@@ -42,7 +42,7 @@ const PARAMS: &[ParamSpec] = &[ParamSpec {
 
 impl StageKind for TrueWidthsStage {
     fn name(&self) -> &'static str {
-        "thermal.true_widths"
+        "thermal.true_widths_evaluate"
     }
     fn version(&self) -> u32 {
         1
