@@ -31,9 +31,15 @@
 //!
 //! Code map: steps 1-2 and the per-line sums of step 4 depend only on the line and the
 //! pair (`LineAtPair`); steps 3-4 for one training set at one pair, once per prior
-//! configuration, are `evaluate_set`. The plain grid search calls both for its lines;
-//! the Fig. 9 cross-validation (`transfer_cv`) computes each `LineAtPair` once per pair
-//! and shares it between all training subsets. Both give the same numbers.
+//! configuration, are `evaluate_set`: the p1 fit of step 3 is `p1`, the chain fixed
+//! point of step 4 under every configuration is `chains` (several configurations at
+//! once, their LU solves side by side). The rows of β and w_start of the step-4
+//! equations take the p2 sums only, so no partition changes them (`FIXED_ROWS`): the
+//! chain solve scales them for the LU once per configuration, not once per iteration.
+//! The plain grid search calls both for its lines; the Fig. 9 cross-validation
+//! (`transfer_cv`) computes each `LineAtPair` once per pair and shares it between all
+//! training subsets, and reuses a subset's p1 fit from the previous pair where the p1
+//! samples did not change (`P1Memo`). Every path gives the same numbers, bit for bit.
 
 use std::borrow::Borrow;
 
@@ -47,7 +53,13 @@ use super::piecewise::{
     bp3_time, p2_regressor, p3_regressor, p5_regressor, Bp1PowerLaw, LineChain, PiecewiseCoefficients,
 };
 use super::predict::FittedPiecewise;
-use super::small_linalg::{lu_solve, spd_solve};
+use super::small_linalg::{equilibrate_row, spd_solve, LuBatch};
+
+mod chains;
+mod p1;
+
+use chains::{solve_chains, ChainScratch, LANES, SINGULAR};
+use p1::{fit_p1, P1Samples};
 
 /// Number of chain parameters solved by least squares: `β, γ, c, ρ, w_start`.
 pub(crate) const NP: usize = 5;
@@ -122,6 +134,8 @@ pub(crate) struct PreparedLine<'a> {
     bp1_pos_mm: Option<f64>,
     /// Mean measured width (the fallback initial `c`).
     mean_width_mm: f64,
+    /// `1/w` of the p1 samples (those up to the measured bp1), for the p1 fit.
+    p1_inverse_widths: Vec<f64>,
 }
 
 pub(crate) fn prepare_lines<'a>(
@@ -147,7 +161,9 @@ pub(crate) fn prepare_line<'a>(
     let smoothed = moving_average(&line.positions_mm, &line.widths_mm, params.get().smoothing_mm);
     let bp1_pos_mm = params.has_start_blob().then(|| measured_bp1_position(line, &smoothed, params));
     let mean_width_mm = line.widths_mm.iter().sum::<f64>() / line.len() as f64;
-    Ok(PreparedLine { line, smoothed, bp1_pos_mm, mean_width_mm })
+    let p1_end = bp1_pos_mm.map_or(0, |x1| line.positions_mm.partition_point(|&x| x <= x1));
+    let p1_inverse_widths = line.widths_mm[..p1_end].iter().map(|w| 1.0 / w).collect();
+    Ok(PreparedLine { line, smoothed, bp1_pos_mm, mean_width_mm, p1_inverse_widths })
 }
 
 /// With a start blob, the pooled p1 fit of a training set needs at least three samples.
@@ -263,9 +279,10 @@ struct LineScratch {
 }
 
 /// Equal-width buckets over the times `t[i3..i4]` of the p3/p4 region: bucket `b`
-/// starts at `t0 + b·width`, and `below[b]` samples of the region have a time at or
-/// before that edge. Counting the region samples with `t ≤ bp3` then starts at the
-/// bucket of `bp3` and takes a step or two instead of a binary search. The times
+/// starts at `t0 + b·width`, `below` samples of the region have a time at or before
+/// that edge, and `next` holds the times of the two samples after it (kept side by side:
+/// one cache line per lookup). Counting the region samples with `t ≤ bp3` then starts at
+/// the bucket of `bp3` and takes a step or two instead of a binary search. The times
 /// belong to increasing positions and are therefore ascending, so the count is the
 /// `partition_point` a binary search would find.
 #[derive(Default)]
@@ -273,12 +290,21 @@ struct TimeBuckets {
     t0: f64,
     width: f64,
     per_s: f64,
-    below: Vec<u32>,
+    buckets: Vec<Bucket>,
+}
+
+/// One bucket of [`TimeBuckets`]: its edge, the region samples at or before it and the
+/// times of the next two (`∞` past the region).
+#[derive(Debug, Clone, Copy)]
+struct Bucket {
+    edge: f64,
+    next: [f64; 2],
+    below: u32,
 }
 
 impl TimeBuckets {
     fn build(&mut self, t: &[f64]) {
-        self.below.clear();
+        self.buckets.clear();
         let (Some(&t0), Some(&t1)) = (t.first(), t.last()) else {
             return;
         };
@@ -288,34 +314,38 @@ impl TimeBuckets {
         self.per_s = if self.width > 0.0 { 1.0 / self.width } else { 0.0 };
         let mut j = 0;
         for b in 0..n {
-            let edge = self.edge(b);
+            let edge = self.t0 + b as f64 * self.width;
             while j < n && t[j] <= edge {
                 j += 1;
             }
-            self.below.push(j as u32);
+            let next = |k: usize| t.get(j + k).copied().unwrap_or(f64::INFINITY);
+            self.buckets.push(Bucket { edge, next: [next(0), next(1)], below: j as u32 });
         }
-    }
-
-    fn edge(&self, b: usize) -> f64 {
-        self.t0 + b as f64 * self.width
     }
 
     /// Number of leading samples of `t` (the ascending slice the buckets were built on)
     /// with `t ≤ x`, i.e. `t.partition_point(|&ti| ti <= x)`.
     fn count_le(&self, t: &[f64], x: f64) -> usize {
         // Also catches NaN and an empty region.
-        let inside = !self.below.is_empty() && x >= self.t0;
+        let inside = !self.buckets.is_empty() && x >= self.t0;
         if !inside {
             return 0;
         }
-        let mut b = (((x - self.t0) * self.per_s) as usize).min(self.below.len() - 1);
+        // x ≥ t0 here, so the bucket index is at least 0 (and at most the last).
+        let mut b = (((x - self.t0) * self.per_s) as i64).min(self.buckets.len() as i64 - 1) as usize;
         // Rounding may put x just below its bucket's edge.
-        while self.edge(b) > x {
+        while self.buckets[b].edge > x {
             b -= 1;
         }
-        let mut j = self.below[b] as usize;
-        while j < t.len() && t[j] <= x {
-            j += 1;
+        let bucket = self.buckets[b];
+        // With one bucket per sample, x is usually at most two samples past its bucket's
+        // edge: those steps without a branch, the rare further ones in the loop.
+        let [next, after] = bucket.next;
+        let mut j = bucket.below as usize + usize::from(next <= x) + usize::from(after <= x);
+        if after <= x {
+            while j < t.len() && t[j] <= x {
+                j += 1;
+            }
         }
         j
     }
@@ -337,7 +367,20 @@ pub(crate) struct LineAtPair<'p> {
     c_n: f64,
     /// Number of p1 samples (those up to the measured bp1).
     p1_end: usize,
+    /// The p1 samples' speeds at the last update, whether that update succeeded, and
+    /// whether they were the same, bit for bit, at the successful update before it
+    /// ([`P1Memo`]).
+    p1_speeds: Vec<f64>,
+    p1_valid: bool,
+    p1_unchanged: bool,
 }
+
+/// A training set's pooled p1 fit (`None`: it failed) at the grid pair its owner
+/// evaluated last, kept for the next pair. Where none of the set's p1 speeds changed
+/// between the two pairs (often: the p1 samples lie early in the acceleration ramp, which
+/// `r_F` does not change), the p1 samples are the same, so the fit, a function of them,
+/// is the same: it is reused instead of recomputed.
+pub(crate) type P1Memo = Option<Option<((f64, f64), f64)>>;
 
 impl<'p> LineAtPair<'p> {
     /// Buffers for one line in one fit; call [`Self::update`] before use.
@@ -361,17 +404,26 @@ impl<'p> LineAtPair<'p> {
             max3: Vec::new(),
             buckets: TimeBuckets::default(),
         };
-        Self { prep, buf, fit: LineFit::default(), v_bp1: 0.0, c_sum: 0.0, c_n: 0.0, p1_end: 0 }
+        let (p1_speeds, p1_valid, p1_unchanged) = (Vec::new(), false, false);
+        let (fit, v_bp1, c_sum, c_n, p1_end) = (LineFit::default(), 0.0, 0.0, 0.0, 0);
+        Self { prep, buf, fit, v_bp1, c_sum, c_n, p1_end, p1_speeds, p1_valid, p1_unchanged }
     }
 
     /// Recomputes everything for the grid pair `(r_a, r_F)`. On error the contents are
     /// stale and must not be used.
     pub(crate) fn update(&mut self, r_a: f64, r_f: f64) -> Result<(), FitError> {
         let p = self.prep;
+        let was_valid = std::mem::replace(&mut self.p1_valid, false);
         let kin = p.line.nominal.scaled(r_a, r_f)?;
         let ls = &mut self.buf;
         kin.time_and_speed_into(&p.line.positions_mm, &mut ls.t, &mut ls.v);
         self.p1_end = p.bp1_pos_mm.map_or(0, |x1| p.line.positions_mm.partition_point(|&x| x <= x1));
+        let speeds = &ls.v[..self.p1_end];
+        let same =
+            |old: &[f64]| old.len() == speeds.len() && old.iter().zip(speeds).all(|(a, b)| a.to_bits() == b.to_bits());
+        self.p1_unchanged = was_valid && same(&self.p1_speeds);
+        self.p1_speeds.clear();
+        self.p1_speeds.extend_from_slice(speeds);
         let (lf, v_bp1) = line_moments(p, &kin, ls);
         let mid = 0.5 * (lf.start3 + lf.bp4);
         let j = lf.i3 + ls.t[lf.i3..lf.i4].partition_point(|&t| t < mid);
@@ -386,6 +438,7 @@ impl<'p> LineAtPair<'p> {
             ls.buckets.build(&ls.t[lf.i3..lf.i4]);
         }
         (self.fit, self.v_bp1, self.c_sum, self.c_n) = (lf, v_bp1, m.sy, m.n);
+        self.p1_valid = true;
         Ok(())
     }
 }
@@ -439,7 +492,7 @@ fn evaluate_pair(
         line.update(r_a, r_f)?;
     }
     let mut per_lambda = Vec::with_capacity(configs.len());
-    let alpha = evaluate_set(&scratch.lines, params, &mut scratch.set, configs, &mut per_lambda)?;
+    let alpha = evaluate_set(&scratch.lines, params, (&mut scratch.set, &mut None), configs, &mut per_lambda)?;
     Ok(GridOutcome { r_a, r_f, alpha, per_lambda })
 }
 
@@ -469,10 +522,10 @@ type PartitionKey = (usize, bool);
 /// Reusable buffers of [`evaluate_set`].
 #[derive(Default)]
 pub(crate) struct SetScratch {
-    p1: Vec<(f64, f64)>,
+    p1: P1Samples,
     data: Vec<LineFit>,
     initial: Vec<PartitionKey>,
-    keys: Vec<PartitionKey>,
+    chains: ChainScratch,
 }
 
 /// Fits one training set (`lines`, all at the same grid pair) once per prior
@@ -483,18 +536,42 @@ pub(crate) struct SetScratch {
 pub(crate) fn evaluate_set<'p, L: Borrow<LineAtPair<'p>>>(
     lines: &[L],
     params: &PiecewiseValidParams,
-    set: &mut SetScratch,
+    (set, p1): (&mut SetScratch, &mut P1Memo),
     configs: &[ChainPrior],
     out: &mut Vec<([f64; NP], f64)>,
 ) -> Result<(f64, f64), FitError> {
+    let start = set_up(lines, params, set, p1)?;
+    let (data, initial) = (&set.data, &set.initial);
     let blob = params.has_start_blob();
-    set.p1.clear();
-    for l in lines.iter().map(Borrow::borrow) {
-        let widths = &l.prep.line.widths_mm;
-        set.p1.extend((0..l.p1_end).map(|i| (l.buf.v[i], widths[i])));
-    }
+    let problem = ChainProblem { data, lines, blob, c_init: start.c_init, initial, first: start.first };
+    out.clear();
+    out.resize(configs.len(), SINGULAR);
+    solve_chains(&problem, configs, params, start.sse_p1, &mut set.chains, out);
+    Ok(start.alpha)
+}
+
+/// What [`evaluate_set`] derives from a training set before its chain solves.
+struct SetStart {
+    /// The pooled p1 law `(α1, α2)` and its SSE (0 without a start blob).
+    alpha: (f64, f64),
+    sse_p1: f64,
+    c_init: f64,
+    /// Data part of the segment equations for the initial partition.
+    first: Equations,
+}
+
+/// The pooled p1 law (from `p1` if it still holds, [`P1Memo`]), the initial `c` and
+/// every line's initial bp3 partition (into `set.data` and `set.initial`), and the
+/// first partition's equations.
+fn set_up<'p, L: Borrow<LineAtPair<'p>>>(
+    lines: &[L],
+    params: &PiecewiseValidParams,
+    set: &mut SetScratch,
+    p1: &mut P1Memo,
+) -> Result<SetStart, FitError> {
+    let blob = params.has_start_blob();
     let (alpha, sse1) = if blob {
-        fit_p1(&set.p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
+        pooled_p1(lines, &mut set.p1, p1).ok_or_else(|| FitError::Singular("phase p1 fit".into()))?
     } else {
         ((0.0, 0.0), 0.0)
     };
@@ -513,13 +590,27 @@ pub(crate) fn evaluate_set<'p, L: Borrow<LineAtPair<'p>>>(
         set.data.push(lf);
         set.initial.push(key);
     }
-    let problem = ChainProblem { data: &set.data, lines, blob, c_init, initial: &set.initial, first };
-    out.clear();
-    for &prior in configs {
-        let solved = solve_chain(&problem, &mut set.keys, prior, params);
-        out.push(solved.map_or(([f64::NAN; NP], f64::INFINITY), |(theta, sse)| (theta, sse + sse1)));
+    Ok(SetStart { alpha, sse_p1: sse1, c_init, first })
+}
+
+/// The p1 fit of the pooled p1 samples of `lines`, or `memo`'s if none of their speeds
+/// changed since it was made; `memo` then holds this one.
+fn pooled_p1<'p, L: Borrow<LineAtPair<'p>>>(
+    lines: &[L],
+    samples: &mut P1Samples,
+    memo: &mut P1Memo,
+) -> Option<((f64, f64), f64)> {
+    if let Some(fit) = (*memo).filter(|_| lines.iter().all(|l| l.borrow().p1_unchanged)) {
+        return fit;
     }
-    Ok(alpha)
+    samples.clear();
+    for l in lines.iter().map(Borrow::borrow) {
+        let end = l.p1_end;
+        samples.extend(&l.buf.v[..end], &l.prep.line.widths_mm[..end], &l.prep.p1_inverse_widths[..end]);
+    }
+    let fit = fit_p1(samples);
+    *memo = Some(fit);
+    fit
 }
 
 /// The initial `c`: the pooled mean width over the second half of the p3/p4 regions (the
@@ -634,7 +725,7 @@ fn chain_bp3(lf: &LineFit, blob: bool, theta: &[f64; NP]) -> f64 {
     }
 }
 
-/// One training set at one grid pair, ready for [`solve_chain`].
+/// One training set at one grid pair, ready for [`solve_chains`].
 struct ChainProblem<'a, L> {
     data: &'a [LineFit],
     lines: &'a [L],
@@ -643,8 +734,11 @@ struct ChainProblem<'a, L> {
     /// Partition of the initial bp3 of every line.
     initial: &'a [PartitionKey],
     /// Data part of the segment equations for that partition.
-    first: ([[f64; NP]; NP], [f64; NP]),
+    first: Equations,
 }
+
+/// Segment equations `(A, b)` of the parameters `(β, γ, c, ρ, w_start)`.
+type Equations = ([[f64; NP]; NP], [f64; NP]);
 
 impl<'p, L: Borrow<LineAtPair<'p>>> ChainProblem<'_, L> {
     fn line<'s>(&'s self, k: usize) -> &'s LineScratch
@@ -654,13 +748,16 @@ impl<'p, L: Borrow<LineAtPair<'p>>> ChainProblem<'_, L> {
         &self.lines[k].borrow().buf
     }
 
-    /// Data part of the segment equations for a partition.
-    fn system(&self, keys: &[PartitionKey]) -> ([[f64; NP]; NP], [f64; NP]) {
-        let (mut a, mut b) = ([[0.0; NP]; NP], [0.0; NP]);
-        for (k, (lf, &key)) in self.data.iter().zip(keys).enumerate() {
-            accumulate_line(lf, self.line(k), self.blob, key, &mut a, &mut b);
+    /// Data part of the segment equations for a partition, into `(a, b)`, except the
+    /// [`FIXED_ROWS`], which no partition changes: those stay 0 (they are `first`'s).
+    fn partition_rows_into(&self, keys: &[PartitionKey], (a, b): &mut Equations) {
+        for (row, rhs) in a.iter_mut().zip(b.iter_mut()) {
+            *row = [0.0; NP];
+            *rhs = 0.0;
         }
-        (a, b)
+        for (k, (lf, &key)) in self.data.iter().zip(keys).enumerate() {
+            accumulate_partition_rows(lf, self.line(k), self.blob, key, a, b);
+        }
     }
 
     /// SSE of p2-p5 over all lines for the chain of `theta` with the given partition.
@@ -696,62 +793,6 @@ impl<'p, L: Borrow<LineAtPair<'p>>> ChainProblem<'_, L> {
     }
 }
 
-/// The per-segment (MAP) least squares with consistent continuity offsets; returns
-/// `(β, γ, c, ρ, w_start)` and the training SSE of p2-p5.
-///
-/// For a fixed partition (bp3 of every line, as a sample index, and whether the plateau
-/// is reached before bp4), the offsets `w(bp2) = w(bp1) + β·g(bp2)` and `w(bp4) = c` or
-/// `w(bp2) + γ·s(bp4)` are linear in the parameters. The parameters are then the fixed
-/// point "θ minimises the segment sums of squares (plus prior) with the offsets held at
-/// their values under θ" (eq. 3 fitted segment by segment, eq. 6's constant offsets),
-/// which is one non-symmetric linear system (`solve_system`). Without a prior it is
-/// exactly the paper's sequential per-segment fit. The partition is then updated from
-/// the new bp3 and the solve repeated until the partition no longer changes. Because
-/// bp3 moves in whole samples this can end in a short cycle between neighbouring
-/// partitions; a cycle of up to `HISTORY` steps is detected and its member with the
-/// smallest training SSE is returned (likewise among the last `HISTORY` states if
-/// `max_iterations` is reached, which happens only with a strong prior).
-fn solve_chain<'p, L: Borrow<LineAtPair<'p>>>(
-    pb: &ChainProblem<L>,
-    keys: &mut Vec<PartitionKey>,
-    prior: ChainPrior,
-    params: &PiecewiseValidParams,
-) -> Result<([f64; NP], f64), FitError> {
-    const HISTORY: usize = 8;
-    let mut theta = [0.0; NP];
-    theta[C] = pb.c_init;
-    let mut history = [[f64::NAN; NP]; HISTORY];
-    keys.clear();
-    keys.extend_from_slice(pb.initial);
-    let p = params.get();
-    for it in 0..p.max_iterations {
-        let (mut a, mut b) = if it == 0 { pb.first } else { pb.system(keys) };
-        let solved = solve_system(&mut a, &mut b, prior, &theta)?;
-        let mut moved = false;
-        for (k, (lf, key)) in pb.data.iter().zip(keys.iter_mut()).enumerate() {
-            let new = partition_key(lf, pb.line(k), chain_bp3(lf, pb.blob, &solved));
-            moved |= new != *key;
-            *key = new;
-        }
-        if !moved {
-            return Ok((solved, pb.sse_at(keys, &solved)));
-        }
-        let repeat =
-            (1..HISTORY).find(|&k| it >= k && within_tolerance(&solved, &history[(it - k) % HISTORY], p.tolerance));
-        if let Some(k) = repeat {
-            let cycle = (1..k).map(|j| history[(it - j) % HISTORY]);
-            let best = cycle.fold(solved, |b, t| if pb.sse(&t) < pb.sse(&b) { t } else { b });
-            return Ok((best, pb.sse(&best)));
-        }
-        history[it % HISTORY] = solved;
-        theta = solved;
-    }
-    // No fixed point within the budget: the best of the last states visited.
-    let recent = history.iter().filter(|t| t.iter().all(|v| v.is_finite()));
-    let best = recent.fold(theta, |b, t| if pb.sse(t) < pb.sse(&b) { *t } else { b });
-    Ok((best, pb.sse(&best)))
-}
-
 /// The partition of one line's p3/p4 region for a bp3: first p4 sample, plateau reached.
 fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> PartitionKey {
     let region = &ls.t[lf.i3..lf.i4];
@@ -760,31 +801,25 @@ fn partition_key(lf: &LineFit, ls: &LineScratch, bp3: f64) -> PartitionKey {
     (j3, bp3 < lf.bp4)
 }
 
-/// Adds the prior to the data part of the segment equations, pins unidentified
-/// parameters at their current values and solves.
-fn solve_system(
-    a: &mut [[f64; NP]; NP],
-    b: &mut [f64; NP],
-    prior: ChainPrior,
-    theta: &[f64; NP],
-) -> Result<[f64; NP], FitError> {
-    if let Some(pr) = prior {
-        add_prior(a, b, &pr);
-    }
-    pin_unidentified(a, b, theta);
-    lu_solve(a, b).ok_or_else(|| FitError::Singular("segment equations".into()))
-}
-
 /// Whether every relative difference `|a − b| / (1 + |b|)` of two parameter vectors is
 /// below `tolerance` (NaN is not). Stops at the first that is not: this runs for up to
-/// seven earlier states in every iteration of the chain solve.
+/// seven earlier states in every iteration of the chain solve, and mostly the first
+/// difference is far above the tolerance. So before the division, `d > 2·tol·s` (all
+/// floating point) answers "not below" at once: it implies `d/s > tol` exactly (the two
+/// roundings of `2·tol·s` lose far less than the factor 2), and then the rounded
+/// quotient is not below `tol` either. Otherwise the quotient decides, as before.
 fn within_tolerance(a: &[f64; NP], b: &[f64; NP], tolerance: f64) -> bool {
-    (0..NP).all(|k| (a[k] - b[k]).abs() / (1.0 + b[k].abs()) < tolerance)
+    (0..NP).all(|k| {
+        let (d, s) = ((a[k] - b[k]).abs(), 1.0 + b[k].abs());
+        let far = d > 2.0 * tolerance * s;
+        !far && d / s < tolerance
+    })
 }
 
 /// Adds one line's segment equations for a partition. Row `k` is the normal equation of
 /// parameter `k` over its own segment; the offsets' dependence on the other parameters
-/// gives the off-diagonal terms (`M[γ][β] = g(bp2)·Σs`, …).
+/// gives the off-diagonal terms (`M[γ][β] = g(bp2)·Σs`, …). The rows of β and w_start
+/// ([`FIXED_ROWS`]) take p2 sums only; the partition sets those of γ, c and ρ.
 fn accumulate_line(
     lf: &LineFit,
     ls: &LineScratch,
@@ -793,14 +828,44 @@ fn accumulate_line(
     a: &mut [[f64; NP]; NP],
     b: &mut [f64; NP],
 ) {
-    let (j3, plateau) = key;
-    let m3 = ls.pre3[j3 - lf.i3];
-    let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
-    // Constant part of w(bp1): the p1 width at bp1, or 0 when w_start is a parameter.
-    let w1 = if blob { lf.w_bp1 } else { 0.0 };
-    let (p2, p5, g3) = (&lf.p2, &lf.p5, lf.g_start3);
+    accumulate_fixed_rows(lf, blob, a, b);
+    accumulate_partition_rows(lf, ls, blob, key, a, b);
+}
+
+/// Constant part of w(bp1): the p1 width at bp1, or 0 when w_start is a parameter.
+fn constant_w1(lf: &LineFit, blob: bool) -> f64 {
+    if blob {
+        lf.w_bp1
+    } else {
+        0.0
+    }
+}
+
+/// [`accumulate_line`] for the rows of β and w_start.
+fn accumulate_fixed_rows(lf: &LineFit, blob: bool, a: &mut [[f64; NP]; NP], b: &mut [f64; NP]) {
+    let (p2, w1) = (&lf.p2, constant_w1(lf, blob));
     a[BETA][BETA] += p2.sxx;
     b[BETA] += p2.sxy - w1 * p2.sx;
+    if !blob {
+        a[W_START][W_START] += p2.n;
+        a[W_START][BETA] += p2.sx;
+        a[BETA][W_START] += p2.sx;
+        b[W_START] += p2.sy;
+    }
+}
+
+/// [`accumulate_line`] for the rows of γ, c and ρ.
+fn accumulate_partition_rows(
+    lf: &LineFit,
+    ls: &LineScratch,
+    blob: bool,
+    (j3, plateau): PartitionKey,
+    a: &mut [[f64; NP]; NP],
+    b: &mut [f64; NP],
+) {
+    let m3 = ls.pre3[j3 - lf.i3];
+    let m4 = ls.pre3[lf.i4 - lf.i3].minus(&m3);
+    let (p5, g3, w1) = (&lf.p5, lf.g_start3, constant_w1(lf, blob));
     a[GAMMA][GAMMA] += m3.sxx;
     a[GAMMA][BETA] += g3 * m3.sx;
     b[GAMMA] += m3.sxy - w1 * m3.sx;
@@ -816,10 +881,6 @@ fn accumulate_line(
         b[RHO] -= w1 * p5.sx;
     }
     if !blob {
-        a[W_START][W_START] += p2.n;
-        a[W_START][BETA] += p2.sx;
-        a[BETA][W_START] += p2.sx;
-        b[W_START] += p2.sy;
         a[GAMMA][W_START] += m3.sx;
         if !plateau {
             a[RHO][W_START] += p5.sx;
@@ -827,6 +888,7 @@ fn accumulate_line(
     }
 }
 
+#[cfg(test)]
 fn add_prior(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], prior: &WeightedPrior) {
     for i in 0..NP {
         for j in 0..NP {
@@ -837,6 +899,7 @@ fn add_prior(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], prior: &WeightedPrior) 
 }
 
 /// A parameter with neither data nor prior (an empty segment) keeps its current value.
+#[cfg(test)]
 fn pin_unidentified(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], theta: &[f64; NP]) {
     for k in 0..NP {
         if a[k][k] == 0.0 {
@@ -847,76 +910,80 @@ fn pin_unidentified(a: &mut [[f64; NP]; NP], b: &mut [f64; NP], theta: &[f64; NP
     }
 }
 
-/// SSE of p2-p5 over all lines for the chain of `theta` (bp3 from the model).
-/// Fits `w = 1/(α1 v + α2)` to `(v, w)` pairs: linearised least squares on `1/w`, then
-/// Gauss-Newton on the widths. Returns `((α1, α2), SSE)`.
-pub(crate) fn fit_p1(samples: &[(f64, f64)]) -> Option<((f64, f64), f64)> {
-    if samples.len() < 3 {
-        return None;
+/// Rows of the segment equations that [`accumulate_line`] fills from the p2 sums alone
+/// (β's and w_start's), so that no partition changes them.
+const FIXED_ROWS: [usize; 2] = [BETA, W_START];
+
+/// Which rows the chain solves pass to the LU solve already equilibrated.
+const EQUILIBRATED: [bool; NP] = {
+    let mut done = [false; NP];
+    done[FIXED_ROWS[0]] = true;
+    done[FIXED_ROWS[1]] = true;
+    done
+};
+
+/// A row of the equations that no partition changes, with its prior, as the LU solve
+/// equilibrates it: once per configuration instead of once per iteration.
+#[derive(Debug, Clone, Copy)]
+enum FixedRow {
+    /// Scaled to unit maximum ([`equilibrate_row`]).
+    Scaled([f64; NP], f64),
+    /// Pinned (neither data nor prior): the unit row `x_k = θ_k`, which scaling leaves
+    /// as it is (its maximum is 1).
+    Pinned,
+}
+
+/// The [`FIXED_ROWS`] of a configuration, or `None` when one of them fails the LU
+/// solve's scaling (a zero or non-finite row: then every solve of the configuration
+/// fails, the first one included).
+fn fixed_rows(first: &Equations, prior: &ChainPrior) -> Option<[FixedRow; 2]> {
+    let mut rows = [FixedRow::Pinned; 2];
+    for (fixed, &i) in rows.iter_mut().zip(&FIXED_ROWS) {
+        let (mut row, mut rhs) = with_prior(first, i, prior);
+        if row[i] != 0.0 {
+            equilibrate_row(&mut row, &mut rhs).then_some(())?;
+            *fixed = FixedRow::Scaled(row, rhs);
+        }
     }
-    let (v_min, v_max) =
-        samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &(v, _)| (lo.min(v), hi.max(v)));
-    let valid = |a: (f64, f64)| a.0 * v_min + a.1 > 0.0 && a.0 * v_max + a.1 > 0.0;
-    let sse = |a: (f64, f64)| -> f64 { samples.iter().map(|&(v, w)| (w - 1.0 / (a.0 * v + a.1)).powi(2)).sum() };
-    let mut alpha = linearised_p1(samples).filter(|&a| valid(a)).unwrap_or_else(|| {
-        let mean = samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
-        (0.0, 1.0 / mean)
-    });
-    let mut current = sse(alpha);
-    for _ in 0..50 {
-        let Some(step) = gauss_newton_step(samples, alpha) else {
-            break;
+    Some(rows)
+}
+
+/// Row `i` of the data part `(a, b)` with the prior added (`λΣ⁻¹` to `A`, then the
+/// terms of `λΣ⁻¹μ` one by one to `b`).
+fn with_prior((a, b): &Equations, i: usize, prior: &ChainPrior) -> ([f64; NP], f64) {
+    let (mut row, mut rhs) = (a[i], b[i]);
+    if let Some(prior) = prior {
+        for j in 0..NP {
+            row[j] += prior.matrix[i][j];
+            rhs += prior.rhs_terms[i][j];
+        }
+    }
+    (row, rhs)
+}
+
+/// The equations of one chain iteration into `lane` of `batch`: the data part with the
+/// prior added, a parameter with neither data nor prior (an empty segment) pinned at
+/// its current value `theta`, and the [`FIXED_ROWS`] as `fixed` holds them (solve with
+/// [`EQUILIBRATED`]). Row by row, so that nothing larger than a row is copied.
+fn load_lane(
+    (batch, lane): (&mut LuBatch<NP, LANES>, usize),
+    equations: &Equations,
+    prior: &ChainPrior,
+    theta: &[f64; NP],
+    fixed: &[FixedRow; 2],
+) {
+    let unit = |i: usize| -> [f64; NP] { std::array::from_fn(|j| if j == i { 1.0 } else { 0.0 }) };
+    for i in 0..NP {
+        let (row, rhs) = match FIXED_ROWS.iter().position(|&f| f == i).map(|k| fixed[k]) {
+            Some(FixedRow::Scaled(row, rhs)) => (row, rhs),
+            Some(FixedRow::Pinned) => (unit(i), theta[i]),
+            None => match with_prior(equations, i, prior) {
+                (row, _) if row[i] == 0.0 => (unit(i), theta[i]),
+                free => free,
+            },
         };
-        let mut scale = 1.0;
-        let mut improved = false;
-        for _ in 0..30 {
-            let cand = (alpha.0 + scale * step.0, alpha.1 + scale * step.1);
-            if valid(cand) {
-                let s = sse(cand);
-                if s <= current {
-                    improved = current - s > 1e-15 * current.max(1e-300);
-                    alpha = cand;
-                    current = s;
-                    break;
-                }
-            }
-            scale *= 0.5;
-        }
-        if !improved {
-            break;
-        }
+        batch.set_row(lane, i, &row, rhs);
     }
-    Some((alpha, current))
-}
-
-fn linearised_p1(samples: &[(f64, f64)]) -> Option<(f64, f64)> {
-    let mut m = Moments::default();
-    for &(v, w) in samples {
-        m.add(v, 1.0 / w);
-    }
-    let det = m.n * m.sxx - m.sx * m.sx;
-    if det.abs() <= 1e-12 * m.n * m.sxx {
-        return None;
-    }
-    let a1 = (m.n * m.sxy - m.sx * m.sy) / det;
-    Some((a1, (m.sy - a1 * m.sx) / m.n))
-}
-
-fn gauss_newton_step(samples: &[(f64, f64)], a: (f64, f64)) -> Option<(f64, f64)> {
-    // r = w − 1/d, d = α1 v + α2; ∂r/∂α = (v, 1)/d².
-    let (mut j11, mut j12, mut j22, mut g1, mut g2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for &(v, w) in samples {
-        let d = a.0 * v + a.1;
-        let r = w - 1.0 / d;
-        let (d1, d2) = (v / (d * d), 1.0 / (d * d));
-        j11 += d1 * d1;
-        j12 += d1 * d2;
-        j22 += d2 * d2;
-        g1 += d1 * r;
-        g2 += d2 * r;
-    }
-    let x = spd_solve(&[[j11, j12], [j12, j22]], &[-g1, -g2])?;
-    Some((x[0], x[1]))
 }
 
 /// The best grid pair for the `k`-th λ, turned into a fitted model.
@@ -1055,7 +1122,7 @@ mod tests {
                 (v, 1.0 / (0.02 * v + 1.1))
             })
             .collect();
-        let ((a1, a2), sse) = fit_p1(&s).unwrap();
+        let ((a1, a2), sse) = fit_p1(&mut P1Samples::from_pairs(&s)).unwrap();
         assert!((a1 - 0.02).abs() < 1e-9 && (a2 - 1.1).abs() < 1e-9 && sse < 1e-20);
     }
 
@@ -1128,6 +1195,42 @@ mod tests {
         let theta = o.per_lambda[0].0;
         assert_eq!(fit.coefficients.gamma, theta[GAMMA]);
         assert_eq!(fit.coefficients.alpha1, o.alpha.0);
+    }
+
+    #[test]
+    fn within_tolerance_short_cut_agrees_with_the_quotient() {
+        // The early "not below" (`d > 2·tol·s`) must never answer otherwise than the
+        // quotient test it skips: differences at, just around and far from the tolerance
+        // and from twice it, and NaN, infinite and zero entries.
+        use rand::{Rng, SeedableRng};
+        let quotient =
+            |a: &[f64; NP], b: &[f64; NP], tol: f64| (0..NP).all(|k| (a[k] - b[k]).abs() / (1.0 + b[k].abs()) < tol);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(18);
+        let factors = [0.0, 0.5, 1.0 - 1e-15, 1.0, 1.0 + 1e-15, 2.0 - 1e-15, 2.0, 2.0 + 1e-15, 3.0, 1e300];
+        let specials = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 0.0, -0.0, 1e-300];
+        let (mut below, mut not_below) = (0, 0);
+        for case in 0..200_000 {
+            let tol = 10f64.powi(rng.random_range(-14..-2));
+            let b: [f64; NP] =
+                std::array::from_fn(|_| rng.random_range(-2.0..2.0) * 10f64.powi(rng.random_range(-3..3)));
+            // One component probes the boundaries; the others are well within tolerance.
+            let probe = rng.random_range(0..NP);
+            let mut a: [f64; NP] = std::array::from_fn(|k| {
+                let f = if k == probe { factors[rng.random_range(0..factors.len())] } else { 0.5 };
+                b[k] + f * if rng.random_bool(0.5) { tol } else { -tol } * (1.0 + b[k].abs())
+            });
+            if case % 7 == 0 {
+                a[probe] = specials[rng.random_range(0..specials.len())];
+            }
+            let expected = quotient(&a, &b, tol);
+            assert_eq!(within_tolerance(&a, &b, tol), expected, "{a:?} {b:?} {tol}");
+            if expected {
+                below += 1
+            } else {
+                not_below += 1
+            }
+        }
+        assert!(below > 1000 && not_below > 1000, "{below} below, {not_below} not");
     }
 
     #[test]

@@ -32,7 +32,10 @@
 //!    p1 law, the initial `c`, bp3 and the chain fixed point remain. Each fixed-point
 //!    iteration costs O(lines) (prefix sums, and a bucket index of the sample times in
 //!    place of a binary search) plus one 5 × 5 solve. Within one pair the first
-//!    partition's equations are assembled once for all configurations.
+//!    partition's equations are assembled once for all configurations, the
+//!    configurations' fixed points run side by side with their LU solves batched
+//!    (`fit::chains`), and a set's p1 law is reused from the previous pair where none
+//!    of its p1 samples moved (`fit::P1Memo`).
 //! 3. **Predictions are grouped by grid pair.** The actual times and speeds of a held-out
 //!    line depend only on the selected pair, so they are computed once per pair and line.
 //!
@@ -52,10 +55,10 @@
 //! only quantity not computed is each internal model's training RMSE, which the rows
 //! do not report.
 //!
-//! Cost on the real Taz 5 → Taz 6 data (9 + 9 lines, paper grids): about 10 s on two
-//! cores, against about 6 minutes for the direct loop. Most of the rest is the
-//! ~75 million fixed-point iterations (510 sets × 441 pairs × 43 configurations × ~7.6),
-//! each a 5 × 5 LU solve.
+//! What remains is dominated by the fixed-point iterations: 510 sets × 441 pairs × 43
+//! configurations, a handful of iterations each, every one a partition update per line,
+//! the equations of the changed rows and a 5 × 5 LU solve (the `fdm` bench measures
+//! it, `examples/transfer_matrix_full.rs` the four-printer matrix).
 
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
@@ -65,7 +68,7 @@ use rayon::prelude::*;
 
 use super::errors::FitError;
 use super::fit::{
-    check_p1_count, evaluate_set, fit_bp1_law, fitted_model, full_grid, prepare_line, ChainPrior, LineAtPair,
+    check_p1_count, evaluate_set, fit_bp1_law, fitted_model, full_grid, prepare_line, ChainPrior, LineAtPair, P1Memo,
     PreparedLine, SegmentPrior, SetScratch, WeightedPrior, NP,
 };
 use super::hyperparams::PiecewiseValidParams;
@@ -375,7 +378,7 @@ fn fit_grid_block(
         .enumerate()
         .with_min_len(8)
         .fold(
-            || (PairWork::new(prepared), empty()),
+            || (PairWork::new(prepared, subsets.len()), empty()),
             |(mut work, mut best), (k, &r)| {
                 work.evaluate(start + k, r, subsets, params, &configs.priors, &mut best);
                 (work, best)
@@ -390,15 +393,18 @@ struct PairWork<'p> {
     lines: Vec<LineAtPair<'p>>,
     status: Vec<Result<(), FitError>>,
     set: SetScratch,
+    /// Every subset's p1 fit at the last pair, for the next.
+    p1: Vec<P1Memo>,
     out: Vec<([f64; NP], f64)>,
 }
 
 impl<'p> PairWork<'p> {
-    fn new(prepared: &'p [PreparedLine<'p>]) -> Self {
+    fn new(prepared: &'p [PreparedLine<'p>], subsets: usize) -> Self {
         Self {
             lines: prepared.iter().map(LineAtPair::indexed).collect(),
             status: vec![Ok(()); prepared.len()],
             set: SetScratch::default(),
+            p1: vec![None; subsets],
             out: Vec::new(),
         }
     }
@@ -421,11 +427,12 @@ impl<'p> PairWork<'p> {
             // As in `fit`, the first failing line makes the pair fail for this set.
             if let Some(e) = subset.indices.iter().find_map(|&i| self.status[i].as_ref().err()) {
                 best.fail(s, pair, e);
+                self.p1[s] = None;
                 continue;
             }
             refs.clear();
             refs.extend(subset.indices.iter().map(|&i| &self.lines[i]));
-            match evaluate_set(&refs, params, &mut self.set, configs, &mut self.out) {
+            match evaluate_set(&refs, params, (&mut self.set, &mut self.p1[s]), configs, &mut self.out) {
                 Ok(alpha) => best.offer(s, pair, alpha, &self.out),
                 Err(e) => best.fail(s, pair, &e),
             }

@@ -1,0 +1,131 @@
+//! The full-size transfer matrix of issue 18 (paper 000, Ren et al. 2021, Sec. II-B and
+//! III-B, Algorithm 1, eqs 4-6, carried to four printers): four printers of nine lines,
+//! every ordered pair and every printer from the three others, every method, the λ grid
+//! of `fdm.transfer_matrix` (1e-6 to 1e4 in whole decades), each target as one work unit
+//! (`transfer_matrix_for_target`), as `specs/ren2021_transfer.toml` runs it.
+//!
+//! ```text
+//! cargo run --release -p models --example transfer_matrix_full -- [DATA_DIR] [--dump FILE] [--target K]
+//! ```
+//!
+//! With `DATA_DIR` (the folder holding `taz5/` and `taz6/` of `fsu-linewidth`) the
+//! printers are those of the spec: the real Taz 5 and Taz 6, the Taz 5 with a 0.8 mm
+//! nozzle (widths × 1.6) and the Taz 6 with a slow melt (widths lagged over 8 mm).
+//! Without it they are the synthetic printers of the `fdm` bench. `--dump` writes every
+//! row with its RMSE and λ as exact bit patterns, so two builds can be compared bit for
+//! bit (`cmp`); `--target K` runs printer `K`'s unit only. This example reads files;
+//! the `models` library itself does no I/O.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use models::fdm::synthetic::{synthetic_truth, TABLE_I};
+use models::fdm::{
+    default_tasks, other_family_widths, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
+    PiecewiseParams, StudyPrinter, TransferParams,
+};
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dump = args.iter().position(|a| a == "--dump").map(|i| PathBuf::from(&args[i + 1]));
+    let only = args.iter().position(|a| a == "--target").map(|i| args[i + 1].parse::<usize>().unwrap());
+    let data = args.first().filter(|a| !a.starts_with("--")).map(PathBuf::from);
+    let (lines, blob) = match &data {
+        Some(dir) => (spec_printers(dir), [true, false, true, false]),
+        None => (synthetic_printers(), [true, false, true, false]),
+    };
+    let (with_blob, without) = (
+        PiecewiseParams::paper_defaults().check().unwrap(),
+        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
+    );
+    let names = ["taz5", "taz6", "taz5-0.8mm", "taz6-slow-melt"];
+    let printers: Vec<StudyPrinter> = (0..4)
+        .map(|k| StudyPrinter { name: names[k], lines: &lines[k], params: if blob[k] { &with_blob } else { &without } })
+        .collect();
+    let transfer = TransferParams {
+        lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
+        ..TransferParams::paper_defaults()
+    }
+    .check()
+    .unwrap();
+    let tasks = default_tasks(4, true);
+    let mut rows = Vec::new();
+    let start = Instant::now();
+    for target in (0..4).filter(|t| only.is_none_or(|o| o == *t)) {
+        let unit = Instant::now();
+        rows.extend(transfer_matrix_for_target(&printers, &tasks, &transfer, target).unwrap());
+        eprintln!("target {}: {:.2} s", names[target], unit.elapsed().as_secs_f64());
+    }
+    eprintln!("four targets, {} rows: {:.2} s", rows.len(), start.elapsed().as_secs_f64());
+    if let Some(path) = dump {
+        std::fs::write(&path, dump_rows(&rows)).unwrap();
+    }
+}
+
+/// One line per row: task, n, subset, held-out line, method, prior, and the RMSE and λ
+/// as bit patterns.
+fn dump_rows(rows: &[MatrixRow]) -> String {
+    let mut out = String::new();
+    for r in rows {
+        let (rmse, lambda) = (r.rmse_mm.to_bits(), r.lambda.to_bits());
+        let (t, n, s, k, m, p) = (r.task, r.n_train, &r.subset, r.test_index, r.method.name(), &r.prior);
+        writeln!(out, "{t} {n} {s} {k} {m} {p} {rmse:016x} {lambda:016x}").unwrap();
+    }
+    out
+}
+
+/// The spec's four printers from the measured lines in `dir`.
+fn spec_printers(dir: &Path) -> Vec<Vec<MeasuredLine>> {
+    let (taz5, taz6) = (read_printer(dir, "taz5", "xiao120"), read_printer(dir, "taz6", "ino120"));
+    let other = |lines: &[MeasuredLine], scale: f64, lag_mm: f64| -> Vec<MeasuredLine> {
+        lines
+            .iter()
+            .map(|l| {
+                let w = other_family_widths(&l.positions_mm, &l.widths_mm, scale, lag_mm);
+                MeasuredLine::new(l.nominal, l.positions_mm.clone(), w).unwrap()
+            })
+            .collect()
+    };
+    let (wide, slow) = (other(&taz5, 1.6, 0.0), other(&taz6, 1.0, 8.0));
+    vec![taz5, taz6, wide, slow]
+}
+
+/// The nine lines of one printer folder in Table I order (`S<a>F<f>_<suffix>.csv`).
+fn read_printer(dir: &Path, printer: &str, suffix: &str) -> Vec<MeasuredLine> {
+    TABLE_I
+        .iter()
+        .map(|&(a, f)| {
+            let name = format!("S{}F{}_{suffix}.csv", a as u32, (f * 60.0) as u32);
+            let text = std::fs::read_to_string(dir.join(printer).join(&name)).expect("read csv");
+            let (mut xs, mut ws) = (Vec::new(), Vec::new());
+            for row in text.lines().filter(|r| !r.trim().is_empty()) {
+                let mut it = row.split(',').map(|v| v.trim().parse::<f64>().unwrap());
+                xs.push(it.next().unwrap());
+                ws.push(it.next().unwrap());
+            }
+            MeasuredLine::new(LineKinematics::paper_line(a, f).unwrap(), xs, ws).unwrap()
+        })
+        .collect()
+}
+
+/// The `fdm` bench's four synthetic printers, all nine lines each.
+fn synthetic_printers() -> Vec<Vec<MeasuredLine>> {
+    let lines = |blob: bool, bump: f64, scale: f64| -> Vec<MeasuredLine> {
+        let model = synthetic_truth(blob);
+        TABLE_I
+            .iter()
+            .enumerate()
+            .map(|(k, &(a, f))| {
+                let nominal = LineKinematics::paper_line(a, f).unwrap();
+                let xs: Vec<f64> = (0..2500).map(|i| i as f64 * 0.048).collect();
+                let mut ws = model.predict(&nominal, &xs).unwrap();
+                for (i, w) in ws.iter_mut().enumerate() {
+                    *w = scale * (*w + bump * ((i * 13 + k * 5) as f64).sin());
+                }
+                MeasuredLine::new(nominal, xs, ws).unwrap()
+            })
+            .collect()
+    };
+    vec![lines(true, 0.01, 1.0), lines(false, 0.012, 1.0), lines(true, 0.008, 1.3), lines(false, 0.01, 1.3)]
+}
