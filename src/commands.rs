@@ -5,6 +5,8 @@ use anyhow::{bail, Context, Result};
 use datasets::fsu::{self, FsuPrinter, ImportOptions};
 use pipeline::execute::{open_out_dir, run_plan, run_plan_locked, RunOptions};
 use pipeline::graph::{render, GraphFormat};
+use pipeline::plan::sources_text;
+use pipeline::stage::Count;
 use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
@@ -145,8 +147,17 @@ fn list_stages(args: StagesArgs) -> Result<()> {
 }
 
 fn kind_text(kind: &dyn StageKind) -> String {
-    let mut s =
-        format!("{} (v{})\n  {}\n  implements: {}\n", kind.name(), kind.version(), kind.summary(), kind.implements());
+    let info = kind.info();
+    let mut s = format!("{} (v{})\n  {}\n  implements: {}\n", info.name, info.version, info.summary, info.implements);
+    for input in info.inputs {
+        s += &format!(
+            "  input {:<14} {:<10} {}: {}\n",
+            input.role,
+            count_text(input.count),
+            sources_text(input.takes),
+            input.doc
+        );
+    }
     for p in kind.params() {
         s += &format!("    {:<18} {:<28} default {:<12} {}\n", p.name, p.ty.to_string(), p.default.to_string(), p.doc);
     }
@@ -154,13 +165,26 @@ fn kind_text(kind: &dyn StageKind) -> String {
 }
 
 fn kind_markdown(kind: &dyn StageKind) -> String {
+    let info = kind.info();
     let mut s = format!(
         "## `{}` (version {})\n\n{}\n\nImplements: {}.\n\n",
-        kind.name(),
-        kind.version(),
-        kind.summary(),
-        kind.implements()
+        info.name, info.version, info.summary, info.implements
     );
+    if info.inputs.is_empty() {
+        s += "No inputs.\n\n";
+    } else {
+        s += "| input role | count | takes | read for |\n|---|---|---|---|\n";
+        for input in info.inputs {
+            s += &format!(
+                "| `{}` | {} | {} | {} |\n",
+                input.role,
+                count_text(input.count),
+                sources_text(input.takes),
+                input.doc.replace('|', "\\|")
+            );
+        }
+        s += "\n";
+    }
     if kind.params().is_empty() {
         return s + "No parameters.\n\n";
     }
@@ -169,6 +193,15 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
         s += &format!("| `{}` | {} | `{}` | {} |\n", p.name, p.ty, p.default, p.doc.replace('|', "\\|"));
     }
     s + "\n"
+}
+
+/// How many inputs a role takes, in words.
+fn count_text(count: Count) -> String {
+    match count {
+        Count::One => "one".into(),
+        Count::Optional => "optional".into(),
+        Count::Many { min } => format!("{min} or more"),
+    }
 }
 
 fn import_fsu(args: FsuImportArgs) -> Result<()> {

@@ -145,7 +145,11 @@ fn spec_typos_name_the_field() {
         ("[run]\nname = \"x\"\n[dataset.d]\npath = \".\"\n[stage.a]\nkind = \"fdm.line_summary\"\ninputs = [\"d\"]\nparams = { steady_to_m = 1.0 }\n", "stage.a.params.steady_to_m: unknown parameter"),
         ("[run]\nname = \"x\"\n[stage.a]\nkind = \"fdm.line_summary\"\ninputs = [\"b\"]\n[stage.b]\nkind = \"fdm.line_summary\"\ninputs = [\"a\"]\n", "cycle among stages: a → b"),
         ("[run]\nname = \"x\"\n[dataset.d]\npath = \".\"\n[stage.a]\nkind = \"fdm.import\"\ninputs = [\"d\"]\n", "stage.a.params.printer: required"),
-        ("[run]\nname = \"x\"\n[dataset.d]\npath = \".\"\n[stage.a]\nkind = \"fdm.import\"\ninputs = [\"d\", \"d\"]\nparams = { printer = \"taz5\" }\n", "stage.a.inputs: `fdm.import` takes 1 input(s), got 2"),
+        ("[run]\nname = \"x\"\n[dataset.d]\npath = \".\"\n[stage.a]\nkind = \"fdm.import\"\ninputs = [\"d\", \"d\"]\nparams = { printer = \"taz5\" }\n", "stage.a.inputs: `fdm.import` takes its inputs in this order: raw (one: a folder of raw data (no dataset.toml)); got 2 input(s)"),
+        ("[run]\nname = \"x\"\n[dataset.d]\npath = \".\"\n[stage.a]\nkind = \"fdm.line_summary\"\ninputs = [\"d\"]\n", "stage.a.inputs: role `widths` of `fdm.line_summary` takes a `fdm-widths` dataset (or a stage writing one); got `d`, a folder without dataset.toml"),
+        ("[run]\nname = \"x\"\n[stage.g]\nkind = \"inkjet.generate_scans\"\nparams = { scenario = \"cuboid\" }\n[stage.a]\nkind = \"fdm.lag_model\"\ninputs = [\"g\"]\nparams = { start_blob = true }\n", "stage.a.inputs: role `widths` of `fdm.lag_model` takes a `fdm-widths` dataset (or a stage writing one); got `g`, a `inkjet.generate_scans` stage (writing a `inkjet-scans` dataset)"),
+        ("[run]\nname = \"x\"\n[dataset.raw]\npath = \"/nonexistent/fsu\"\n[stage.t]\nkind = \"fdm.import\"\ninputs = [\"raw\"]\nparams = { printer = \"taz5\" }\n[stage.lag]\nkind = \"fdm.lag_model\"\ninputs = [\"t\"]\nparams = { start_blob = true }\n[stage.fig]\nkind = \"figure.fdm_r_surface\"\ninputs = [\"lag\"]\n", "stage.fig.inputs: role `loo` of `figure.fdm_r_surface` reads `r_surface.parquet`, which a `fdm.lag_model` stage does not write; got `lag`, a `fdm.lag_model` stage"),
+        ("[run]\nname = \"x\"\n[stage.a]\nkind = \"inkjet.generate_scans\"\nparams = { scenario = \"cuboid\", effects = \"curing_shrinkage=0.01, nozle_bias=0.02\" }\n", "stage.a.params.effects: "),
     ];
     for (i, (body, expected)) in cases.iter().enumerate() {
         let spec = tmp.path().join(format!("typo{i}.toml"));
@@ -157,8 +161,8 @@ fn spec_typos_name_the_field() {
     }
 }
 
-/// Parameters valid one by one but not together fail when the stage runs, naming
-/// the stage and what was expected, and publish nothing.
+/// Parameters valid one by one but not together are refused by the planner, before
+/// anything runs, naming the spec, the stage and the field.
 #[test]
 fn steady_window_that_ends_before_it_starts() {
     let tmp = tempfile::tempdir().unwrap();
@@ -167,8 +171,10 @@ fn steady_window_that_ends_before_it_starts() {
     std::fs::write(&spec, text).unwrap();
     let err = fails(tmp.path(), &["run", spec.to_str().unwrap()]);
     assert!(
-        err.contains("stage `line_summary` params: expected steady_from_mm < steady_to_mm, got 90 and 80"),
+        err.contains(
+            "fsu_linewidth.toml: stage.line_summary.params.steady_to_mm: expected steady_from_mm < steady_to_mm, got 90 and 80"
+        ),
         "{err}"
     );
-    assert!(!tmp.path().join("out/fdm/line_summary.parquet").exists());
+    assert!(!tmp.path().join("out").exists(), "nothing ran");
 }

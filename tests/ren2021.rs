@@ -8,6 +8,7 @@ use std::path::Path;
 
 use common::*;
 use polars::prelude::{DataFrame, ParquetReader, SerReader};
+use tables::fdm::loo;
 
 fn read(path: &Path) -> DataFrame {
     ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
@@ -37,11 +38,11 @@ fn reproduces_table_ii_and_fig9_tables_on_the_real_data() {
     ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
     let out = tmp.path().join("out/fdm");
 
-    let loo = read(&out.join("loo.parquet"));
-    assert_eq!(loo.height(), 36, "2 printers × 9 lines × 2 models");
-    let (printer, model) = (strs(&loo, "printer"), strs(&loo, "model"));
-    let (rmse, feed) = (f64s(&loo, "rmse_mm"), f64s(&loo, "feed_mm_s"));
-    let taz5: Vec<usize> = (0..loo.height()).filter(|&i| printer[i] == "taz5" && model[i] == "piecewise").collect();
+    let folds = read(&out.join("loo.parquet"));
+    assert_eq!(folds.height(), 36, "2 printers × 9 lines × 2 models");
+    let (printer, model) = (strs(&folds, loo::printer), strs(&folds, loo::model));
+    let (rmse, feed) = (f64s(&folds, loo::rmse_mm), f64s(&folds, loo::feed_mm_s));
+    let taz5: Vec<usize> = (0..folds.height()).filter(|&i| printer[i] == "taz5" && model[i] == "piecewise").collect();
     assert_eq!(taz5.len(), 9);
     let mut taz5_rmse: Vec<f64> = taz5.iter().map(|&i| rmse[i]).collect();
     for r in &taz5_rmse {

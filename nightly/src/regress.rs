@@ -153,21 +153,18 @@ fn run_failures(latest: &Night) -> Vec<Finding> {
 
 /// The band of `values` (finite ones only); `None` when there are none.
 pub fn band(values: &[f64], rules: &Rules) -> Option<Band> {
-    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    let centre = median(&mut finite)?;
-    let mut deviations: Vec<f64> = finite.iter().map(|v| (v - centre).abs()).collect();
-    let mad = median(&mut deviations).unwrap_or(0.0);
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    let centre = median(&finite)?;
+    let deviations: Vec<f64> = finite.iter().map(|v| (v - centre).abs()).collect();
+    let mad = median(&deviations).unwrap_or(0.0);
     let half_width = (rules.mad_k * 1.4826 * mad).max(rules.relative_floor * centre.abs()).max(rules.absolute_floor);
     Some(Band { median: centre, half_width })
 }
 
-fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 { values[n / 2] } else { 0.5 * (values[n / 2 - 1] + values[n / 2]) })
+/// The median of the finite values ([`models::stats::finite_median`]); `None` when there are none.
+fn median(values: &[f64]) -> Option<f64> {
+    let median = models::stats::finite_median(values.iter().copied());
+    median.is_finite().then_some(median)
 }
 
 /// The window's values of every series: numbers and verdicts.
@@ -239,9 +236,9 @@ fn slower_stages(latest: &Night, window: &[Night], rules: &Rules) -> Vec<Finding
         .iter()
         .filter_map(|s| {
             let times = past.get(&(s.run.as_str(), s.stage.as_str()))?;
-            let median_s = median(&mut times.clone())?;
-            let mut deviations: Vec<f64> = times.iter().map(|t| (t - median_s).abs()).collect();
-            let noise_s = rules.mad_k * 1.4826 * median(&mut deviations).unwrap_or(0.0);
+            let median_s = median(times)?;
+            let deviations: Vec<f64> = times.iter().map(|t| (t - median_s).abs()).collect();
+            let noise_s = rules.mad_k * 1.4826 * median(&deviations).unwrap_or(0.0);
             let margin_s = ((rules.slower_ratio - 1.0) * median_s).max(rules.slower_min_s).max(noise_s);
             (s.wall_time_s - median_s > margin_s).then(|| Finding {
                 subject: format!("{} / {}", s.run, s.stage),

@@ -64,6 +64,10 @@ pub enum StageError {
     /// An error from a domain library (dataset reader, model fit), with its message.
     #[error(transparent)]
     Domain(Box<dyn std::error::Error + Send + Sync>),
+    /// The stage wrote a table that breaks its declaration (`pipeline::schema`): a bug
+    /// in amrepro, caught before the file is written.
+    #[error("internal error, a bug in amrepro (please report it): {0}")]
+    Declaration(String),
     /// The stage's code panicked: a bug in amrepro, caught so the run ends cleanly.
     #[error("internal error, a bug in amrepro (please report it with the input that caused it): {0}")]
     Panic(String),
@@ -73,6 +77,11 @@ impl StageError {
     /// Wraps a domain library error.
     pub fn domain<E: std::error::Error + Send + Sync + 'static>(err: E) -> Self {
         Self::Domain(Box::new(err))
+    }
+
+    /// A check across `ctx`'s parameters that failed when the stage ran.
+    pub fn params(ctx: &crate::stage::StageContext, err: crate::params::ParamError) -> Self {
+        Self::Params { stage: ctx.stage.clone(), message: format!("{}: {}", err.field, err.message) }
     }
 
     /// Wraps an I/O error on `path`.

@@ -373,8 +373,10 @@ impl Executor<'_> {
         stage
             .inputs
             .iter()
-            .map(|input| InputArtifact {
+            .zip(&stage.input_roles)
+            .map(|(input, role)| InputArtifact {
                 name: self.plan.input_name(*input).to_string(),
+                role,
                 dir: match input {
                     InputRef::Dataset(d) => self.plan.datasets[*d].dir.clone(),
                     InputRef::Stage(j) => done[*j].as_ref().expect("upstream ran in an earlier wave").dir.clone(),
@@ -493,6 +495,7 @@ impl StageJob<'_> {
             out_dir,
             rows: 0,
             progress: progress.cloned(),
+            writes: self.registry.get(self.stage.kind).map_or(&[], |k| k.writes()),
         }
     }
 

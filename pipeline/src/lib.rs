@@ -23,6 +23,7 @@ pub mod manifest;
 pub mod panic;
 pub mod params;
 pub mod plan;
+pub mod schema;
 pub mod snakefile;
 pub mod spec;
 pub mod stage;

@@ -1,14 +1,17 @@
 //! Spec → validated, resolved plan. Nothing executes an unchecked spec: every name,
-//! input, parameter, publish path and the absence of cycles is checked here, and each
-//! error names the spec file, the stage and the field.
+//! input (each filling a named role of its stage's kind that accepts what it is given),
+//! parameter (types, ranges and the kind's constraints across parameters), publish path
+//! and the absence of cycles is checked here, and each error names the spec file, the
+//! stage and the field.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Component, Path, PathBuf};
 
 use crate::error::SpecError;
 use crate::params::Params;
+use crate::schema::Reads;
 use crate::spec::{expand_path, read_spec, RawSpec, RawStage};
-use crate::stage::Registry;
+use crate::stage::{Count, Input, Output, Registry, Source};
 
 /// A checked, ordered plan.
 #[derive(Debug, Clone)]
@@ -38,6 +41,36 @@ pub struct PlannedDataset {
     pub dir: PathBuf,
     /// Where to get it if it is missing.
     pub source: String,
+    /// What its `dataset.toml` says it is, as far as the planner can tell.
+    pub kind: DatasetKind,
+}
+
+/// The kind of a dataset folder, read from its `dataset.toml` at planning time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DatasetKind {
+    /// `dataset.toml` names this kind.
+    Declared(String),
+    /// The folder has no `dataset.toml`: raw data for an importer.
+    Raw,
+    /// Not known before the run: the folder is missing or its `dataset.toml` unreadable
+    /// (the stage reading it names the problem).
+    Unknown,
+}
+
+impl DatasetKind {
+    /// The kind of the folder `dir`.
+    pub fn of(dir: &Path) -> Self {
+        if !dir.is_dir() {
+            return Self::Unknown;
+        }
+        let Ok(text) = std::fs::read_to_string(dir.join("dataset.toml")) else {
+            return if dir.join("dataset.toml").exists() { Self::Unknown } else { Self::Raw };
+        };
+        match text.parse::<toml::Table>().ok().and_then(|t| t.get("kind")?.as_str().map(str::to_string)) {
+            Some(kind) => Self::Declared(kind),
+            None => Self::Unknown,
+        }
+    }
 }
 
 /// Where a stage input comes from.
@@ -62,6 +95,8 @@ pub struct PlannedStage {
     pub params: Params,
     /// Inputs in spec order.
     pub inputs: Vec<InputRef>,
+    /// The role of the kind each input fills, parallel to `inputs`.
+    pub input_roles: Vec<&'static str>,
     /// Output file → stable path relative to the out folder.
     pub publish: Vec<(String, PathBuf)>,
 }
@@ -88,7 +123,7 @@ impl Plan {
         let order = topological_order(&raw, &datasets).map_err(|(l, m)| err(l, m))?;
         let mut stages = Vec::with_capacity(order.len());
         for name in &order {
-            let planned = plan_stage(name, &raw.stage[name], registry, &datasets, &order)
+            let planned = plan_stage(name, &raw.stage[name], registry, &datasets, &order, &stages)
                 .map_err(|(field, m)| err(format!("stage.{name}.{field}"), m))?;
             stages.push(planned);
         }
@@ -150,7 +185,8 @@ fn plan_datasets(
                     format!("{} is a file, expected a dataset folder", dir.display()),
                 ));
             }
-            Ok(PlannedDataset { name: name.clone(), dir, source: ds.source.clone() })
+            let kind = DatasetKind::of(&dir);
+            Ok(PlannedDataset { name: name.clone(), dir, source: ds.source.clone(), kind })
         })
         .collect()
 }
@@ -199,17 +235,15 @@ fn plan_stage(
     registry: &Registry,
     datasets: &[PlannedDataset],
     order: &[String],
+    planned: &[PlannedStage],
 ) -> Result<PlannedStage, Located> {
     let kind = registry.get(&raw.kind).ok_or_else(|| ("kind".to_string(), unknown_kind(&raw.kind, registry)))?;
-    let arity = kind.arity();
-    if raw.inputs.len() < arity.min || raw.inputs.len() > arity.max {
-        return Err((
-            "inputs".into(),
-            format!("`{}` takes {} input(s), got {}", kind.name(), arity_text(arity), raw.inputs.len()),
-        ));
-    }
+    let info = kind.info();
+    let roles = assign_roles(info.inputs, raw.inputs.len())
+        .map_err(|()| ("inputs".to_string(), roles_text(info.name, info.inputs, raw.inputs.len())))?;
     let params = Params::check(kind.params(), &raw.params).map_err(|(f, m)| (format!("params.{f}"), m))?;
-    let inputs = raw
+    kind.check(&params).map_err(|e| (format!("params.{}", e.field), e.message))?;
+    let inputs: Vec<InputRef> = raw
         .inputs
         .iter()
         .map(|i| match datasets.iter().position(|d| &d.name == i) {
@@ -217,6 +251,32 @@ fn plan_stage(
             None => InputRef::Stage(order.iter().position(|s| s == i).expect("checked in ordering")),
         })
         .collect();
+    let wiring = Wiring { registry, datasets, stages: planned };
+    for ((input, role), given) in inputs.iter().zip(&roles).zip(&raw.inputs) {
+        if let Err(why) = wiring.check_reads(role.reads, *input) {
+            return Err((
+                "inputs".into(),
+                format!(
+                    "role `{}` of `{}` reads {why}; got `{given}`, {}",
+                    role.role,
+                    info.name,
+                    wiring.describe(*input)
+                ),
+            ));
+        }
+        if !wiring.accepts(role.takes, *input) {
+            return Err((
+                "inputs".into(),
+                format!(
+                    "role `{}` of `{}` takes {}; got `{given}`, {}",
+                    role.role,
+                    info.name,
+                    sources_text(role.takes),
+                    wiring.describe(*input)
+                ),
+            ));
+        }
+    }
     let publish = raw
         .publish
         .iter()
@@ -226,19 +286,208 @@ fn plan_stage(
         .collect::<Result<_, _>>()?;
     Ok(PlannedStage {
         name: name.to_string(),
-        kind: kind.name(),
-        kind_version: kind.version(),
+        kind: info.name,
+        kind_version: info.version,
         params,
+        input_roles: roles.iter().map(|r| r.role).collect(),
         inputs,
         publish,
     })
 }
 
-fn arity_text(arity: crate::stage::Arity) -> String {
-    match (arity.min, arity.max) {
-        (a, b) if a == b => a.to_string(),
-        (a, usize::MAX) => format!("at least {a}"),
-        (a, b) => format!("{a} to {b}"),
+/// The role each of `n` inputs fills, in spec order: roles take inputs in their declared
+/// order, one each, an optional role one when more are left than the roles after it
+/// need, a many-role all but what the roles after it need.
+fn assign_roles(roles: &'static [Input], n: usize) -> Result<Vec<&'static Input>, ()> {
+    let min_of = |r: &Input| match r.count {
+        Count::One => 1,
+        Count::Optional => 0,
+        Count::Many { min } => min,
+    };
+    let mut assigned = Vec::with_capacity(n);
+    let mut left = n;
+    for (i, role) in roles.iter().enumerate() {
+        let needed_after: usize = roles[i + 1..].iter().map(min_of).sum();
+        let spare = left.checked_sub(needed_after).ok_or(())?;
+        let take = match role.count {
+            Count::One => 1,
+            Count::Optional => spare.min(1),
+            Count::Many { .. } => spare,
+        };
+        if take < min_of(role) || take > left {
+            return Err(());
+        }
+        assigned.extend(std::iter::repeat_n(role, take));
+        left -= take;
+    }
+    if left == 0 {
+        Ok(assigned)
+    } else {
+        Err(())
+    }
+}
+
+/// "`kind` takes its inputs as: …; got N", listing each role and its count.
+fn roles_text(kind: &str, roles: &[Input], n: usize) -> String {
+    if roles.is_empty() {
+        return format!("`{kind}` takes no inputs, got {n}");
+    }
+    let each: Vec<String> = roles
+        .iter()
+        .map(|r| {
+            let count = match r.count {
+                Count::One => "one".to_string(),
+                Count::Optional => "optional".to_string(),
+                Count::Many { min } => format!("at least {min}"),
+            };
+            format!("{} ({count}: {})", r.role, sources_text(r.takes))
+        })
+        .collect();
+    format!("`{kind}` takes its inputs in this order: {}; got {n} input(s)", each.join(", "))
+}
+
+/// What a role accepts, in words.
+pub fn sources_text(takes: &[Source]) -> String {
+    let each: Vec<String> = takes
+        .iter()
+        .map(|s| match s {
+            Source::Dataset(kind) => format!("a `{kind}` dataset (or a stage writing one)"),
+            Source::RawFolder => "a folder of raw data (no dataset.toml)".to_string(),
+            Source::Stage(kind) => format!("a `{kind}` stage"),
+            Source::AnyStage => "any stage".to_string(),
+        })
+        .collect();
+    each.join(" or ")
+}
+
+/// Whether an upstream stage writes a table a role reads, as far as the declarations
+/// tell (ordered: one input that writes it, or might, is enough for a concatenation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Written {
+    /// Its kind declares its tables, and this is not one of them.
+    No,
+    /// Its kind declares no tables yet.
+    Unknown,
+    /// It writes the table with the columns read.
+    Yes,
+}
+
+/// What the planner knows of a stage's possible inputs, to match them against roles.
+struct Wiring<'a> {
+    registry: &'a Registry,
+    datasets: &'a [PlannedDataset],
+    stages: &'a [PlannedStage],
+}
+
+impl Wiring<'_> {
+    /// Whether `input` is something `takes` accepts.
+    fn accepts(&self, takes: &[Source], input: InputRef) -> bool {
+        match input {
+            InputRef::Dataset(d) => takes.iter().any(|s| match (&self.datasets[d].kind, s) {
+                (DatasetKind::Declared(kind), Source::Dataset(want)) => kind == want,
+                (DatasetKind::Raw, Source::RawFolder) => true,
+                (DatasetKind::Unknown, Source::Dataset(_) | Source::RawFolder) => true,
+                _ => false,
+            }),
+            InputRef::Stage(i) => {
+                let stage = &self.stages[i];
+                let output = self.output_of(stage);
+                let direct = takes.iter().any(|s| match s {
+                    Source::Stage(kind) => *kind == stage.kind,
+                    Source::Dataset(kind) => output == Output::Dataset(kind),
+                    Source::AnyStage => true,
+                    Source::RawFolder => false,
+                });
+                let through = output == Output::LikeInputs
+                    && !stage.inputs.is_empty()
+                    && stage.inputs.iter().all(|i| self.accepts(takes, *i));
+                direct || through
+            }
+        }
+    }
+
+    /// Whether `input` writes the declared tables and columns `reads`. A stage whose
+    /// output is its inputs' (`table.concat`) writes a table when one of its inputs does,
+    /// and every input that does must write the columns read (the concatenation skips an
+    /// input without the table); a kind that declares no tables is not checked.
+    fn check_reads(&self, reads: &[Reads], input: InputRef) -> Result<(), String> {
+        let InputRef::Stage(i) = input else { return Ok(()) };
+        for read in reads {
+            if self.written(read, i)? == Written::No {
+                let stage = &self.stages[i];
+                return Err(match self.output_of(stage) {
+                    Output::LikeInputs => {
+                        format!("`{}`, which no input of the `{}` stage writes", read.table.file(), stage.kind)
+                    }
+                    _ => format!("`{}`, which a `{}` stage does not write", read.table.file(), stage.kind),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether stage `i` writes the table `read` reads, with its columns (an error
+    /// names a column it lacks or writes as another type).
+    fn written(&self, read: &Reads, i: usize) -> Result<Written, String> {
+        let stage = &self.stages[i];
+        if self.output_of(stage) == Output::LikeInputs {
+            let mut found = Written::No;
+            for input in &stage.inputs {
+                let part = match *input {
+                    InputRef::Stage(j) => self.written(read, j)?,
+                    InputRef::Dataset(_) => Written::Unknown,
+                };
+                found = found.max(part);
+            }
+            return Ok(found);
+        }
+        let writes = self.registry.get(stage.kind).map_or(&[][..], |k| k.writes());
+        if writes.is_empty() {
+            return Ok(Written::Unknown);
+        }
+        let Some(written) = writes.iter().find(|t| t.name == read.table.name) else { return Ok(Written::No) };
+        for column in read.columns {
+            let wanted = read.table.column(column).map(|c| c.dtype);
+            match written.column(column) {
+                Some(c) if Some(c.dtype) == wanted => {}
+                Some(c) => {
+                    return Err(format!(
+                        "column `{column}` of `{}` as {}, which a `{}` stage writes as {}",
+                        read.table.file(),
+                        wanted.map_or("an undeclared type".into(), |d| d.to_string()),
+                        stage.kind,
+                        c.dtype
+                    ))
+                }
+                None => {
+                    return Err(format!(
+                        "column `{column}` of `{}`, which a `{}` stage does not write",
+                        read.table.file(),
+                        stage.kind
+                    ))
+                }
+            }
+        }
+        Ok(Written::Yes)
+    }
+
+    fn output_of(&self, stage: &PlannedStage) -> Output {
+        self.registry.get(stage.kind).map_or(Output::Tables, |k| k.info().output)
+    }
+
+    /// What `input` is, in words.
+    fn describe(&self, input: InputRef) -> String {
+        match input {
+            InputRef::Dataset(d) => match &self.datasets[d].kind {
+                DatasetKind::Declared(kind) => format!("a `{kind}` dataset"),
+                DatasetKind::Raw => "a folder without dataset.toml".to_string(),
+                DatasetKind::Unknown => "a dataset of unknown kind".to_string(),
+            },
+            InputRef::Stage(i) => match self.output_of(&self.stages[i]) {
+                Output::Dataset(kind) => format!("a `{}` stage (writing a `{kind}` dataset)", self.stages[i].kind),
+                _ => format!("a `{}` stage", self.stages[i].kind),
+            },
+        }
     }
 }
 
@@ -315,42 +564,195 @@ fn waves(stages: &[PlannedStage]) -> Vec<Vec<usize>> {
 mod tests {
     use super::*;
     use crate::error::StageError;
-    use crate::params::{ParamDefault, ParamSpec, ParamType};
+    use crate::params::ParamError;
     use crate::spec::parse_spec;
-    use crate::stage::{Arity, StageContext, StageKind};
+    use crate::stage::{Stage, StageContext, StageInfo};
 
     struct Noop;
 
-    const NOOP_PARAMS: &[ParamSpec] =
-        &[ParamSpec { name: "k", ty: ParamType::Int { min: 0, max: 9 }, default: ParamDefault::Int(1), doc: "a knob" }];
+    crate::params! {
+        struct NoopParams {
+            /// A knob.
+            k: i64 [0, 9] = 1,
+            /// Must not be below `k`.
+            k_max: i64 [0, 9] = 5,
+        }
+    }
 
-    impl StageKind for Noop {
-        fn name(&self) -> &'static str {
-            "test.noop"
+    const ANY: Input = Input::many("any", 0, &[Source::AnyStage, Source::RawFolder, Source::Dataset("d")], "anything");
+
+    impl Stage for Noop {
+        type Params = NoopParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.noop",
+            version: 1,
+            summary: "does nothing",
+            implements: "tests",
+            inputs: &[ANY],
+            output: Output::Tables,
+        };
+        fn check(p: &NoopParams) -> Result<(), ParamError> {
+            if p.k_max < p.k {
+                return Err(ParamError::new("k_max", format!("must be at least k = {}, got {}", p.k, p.k_max)));
+            }
+            Ok(())
         }
-        fn version(&self) -> u32 {
-            1
+        fn run(&self, _: &mut StageContext, _: &NoopParams) -> Result<(), StageError> {
+            Ok(())
         }
-        fn summary(&self) -> &'static str {
-            "does nothing"
+    }
+
+    struct Picky;
+
+    const WIDTHS: Input = Input::one("widths", &[Source::Dataset("w")], "the widths");
+    const MODEL: Input = Input::optional("model", &[Source::Stage("test.noop")], "a model");
+    const EXTRA: Input = Input::many("extra", 1, &[Source::AnyStage], "more");
+
+    impl Stage for Picky {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.picky",
+            version: 1,
+            summary: "takes roles",
+            implements: "tests",
+            inputs: &[WIDTHS, MODEL, EXTRA],
+            output: Output::Dataset("w"),
+        };
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
         }
-        fn implements(&self) -> &'static str {
-            "tests"
+    }
+
+    crate::table! {
+        /// What the writer writes.
+        mod written = "w" {
+            /// A.
+            a: Float64 "mm",
         }
-        fn params(&self) -> &'static [ParamSpec] {
-            NOOP_PARAMS
+    }
+
+    crate::table! {
+        /// What the reader expects of the same file.
+        mod expected = "w" {
+            /// A.
+            a: Float64 "mm",
+            /// B.
+            b: Int64 "1",
         }
-        fn arity(&self) -> Arity {
-            Arity { min: 0, max: 3 }
+    }
+
+    struct Writer;
+
+    impl Stage for Writer {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.writer",
+            version: 1,
+            summary: "writes w",
+            implements: "tests",
+            inputs: &[],
+            output: Output::Tables,
+        };
+        const WRITES: &'static [&'static crate::schema::Table] = &[&written::TABLE];
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
         }
-        fn run(&self, _: &mut StageContext) -> Result<(), StageError> {
+    }
+
+    struct Reader;
+
+    const W: Input = Input::one("w", &[Source::Stage("test.writer"), Source::Stage("test.noop")], "w")
+        .reading(&[Reads { table: &expected::TABLE, columns: &[expected::a, expected::b] }]);
+
+    impl Stage for Reader {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.reader",
+            version: 1,
+            summary: "reads w",
+            implements: "tests",
+            inputs: &[W],
+            output: Output::Tables,
+        };
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    crate::table! {
+        /// Another table.
+        mod other = "other" {
+            /// C.
+            c: Str "",
+        }
+    }
+
+    /// A kind declaring only `other`, and a concatenation passing its inputs' tables on.
+    struct OtherWriter;
+    struct Concat;
+
+    impl Stage for OtherWriter {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.other",
+            version: 1,
+            summary: "writes other",
+            implements: "tests",
+            inputs: &[],
+            output: Output::Tables,
+        };
+        const WRITES: &'static [&'static crate::schema::Table] = &[&other::TABLE];
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    const PARTS: Input = Input::many("parts", 1, &[Source::AnyStage], "parts");
+
+    impl Stage for Concat {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.concat",
+            version: 1,
+            summary: "stacks",
+            implements: "tests",
+            inputs: &[PARTS],
+            output: Output::LikeInputs,
+        };
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    struct ReaderOfA;
+
+    const WA: Input = Input::one("w", &[Source::Stage("test.writer"), Source::Stage("test.other")], "w")
+        .reading(&[Reads { table: &expected::TABLE, columns: &[expected::a] }]);
+
+    impl Stage for ReaderOfA {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.reader_a",
+            version: 1,
+            summary: "reads a of w",
+            implements: "tests",
+            inputs: &[WA],
+            output: Output::Tables,
+        };
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
             Ok(())
         }
     }
 
     fn plan(text: &str) -> Result<Plan, SpecError> {
         let mut registry = Registry::new();
+        registry.register(Box::new(OtherWriter));
+        registry.register(Box::new(Concat));
+        registry.register(Box::new(ReaderOfA));
         registry.register(Box::new(Noop));
+        registry.register(Box::new(Picky));
+        registry.register(Box::new(Writer));
+        registry.register(Box::new(Reader));
         let file = Path::new("t.toml");
         Plan::check(file, parse_spec(file, text)?, &registry, |_| None)
     }
@@ -396,5 +798,96 @@ mod tests {
     fn edit_distance_suggests_close_kinds() {
         assert_eq!(edit_distance("fdm.line_sumary", "fdm.line_summary"), 1);
         assert_eq!(edit_distance("", "abc"), 3);
+    }
+
+    #[test]
+    fn a_constraint_across_parameters_is_checked_at_plan_time() {
+        let err =
+            plan("[run]\nname = \"d\"\n[stage.a]\nkind = \"test.noop\"\nparams = { k = 4, k_max = 2 }\n").unwrap_err();
+        assert_eq!(err.location, "stage.a.params.k_max");
+        assert_eq!(err.message, "must be at least k = 4, got 2");
+    }
+
+    #[test]
+    fn inputs_fill_roles_in_order_and_wrong_wiring_names_the_role_and_what_it_got() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, kind) in [("w", "w"), ("v", "v")] {
+            std::fs::create_dir(dir.path().join(name)).unwrap();
+            std::fs::write(dir.path().join(name).join("dataset.toml"), format!("kind = \"{kind}\"\n")).unwrap();
+        }
+        std::fs::create_dir(dir.path().join("raw")).unwrap();
+        let head = format!(
+            "[run]\nname = \"d\"\n[dataset.w]\npath = \"{0}/w\"\n[dataset.v]\npath = \"{0}/v\"\n\
+             [dataset.raw]\npath = \"{0}/raw\"\n[stage.n]\nkind = \"test.noop\"\ninputs = [\"raw\"]\n",
+            dir.path().display()
+        );
+        let picky = |inputs: &str| plan(&format!("{head}[stage.p]\nkind = \"test.picky\"\ninputs = [{inputs}]\n"));
+        let p = picky("\"w\", \"n\", \"n\"").unwrap();
+        assert_eq!(p.stages[p.stage_index("p").unwrap()].input_roles, ["widths", "model", "extra"]);
+        let p = picky("\"w\", \"n\"").unwrap();
+        assert_eq!(
+            p.stages[p.stage_index("p").unwrap()].input_roles,
+            ["widths", "extra"],
+            "the optional role is skipped"
+        );
+        let err = picky("\"v\", \"n\"").unwrap_err();
+        assert_eq!(err.location, "stage.p.inputs");
+        assert_eq!(
+            err.message,
+            "role `widths` of `test.picky` takes a `w` dataset (or a stage writing one); got `v`, a `v` dataset"
+        );
+        let err = picky("\"raw\", \"n\"").unwrap_err();
+        assert!(err.message.ends_with("got `raw`, a folder without dataset.toml"), "{}", err.message);
+        let err = picky("\"w\"").unwrap_err();
+        assert!(err.message.starts_with("`test.picky` takes its inputs in this order: widths (one"), "{}", err.message);
+        assert!(err.message.ends_with("got 1 input(s)"), "{}", err.message);
+    }
+
+    #[test]
+    fn a_stage_writing_a_dataset_fills_a_role_that_takes_that_dataset() {
+        let text = "[run]\nname = \"d\"\n[stage.n]\nkind = \"test.noop\"\n\
+                    [stage.p]\nkind = \"test.picky\"\ninputs = [\"n\", \"n\"]\n";
+        let err = plan(text).unwrap_err();
+        assert!(err.message.contains("got `n`, a `test.noop` stage"), "{}", err.message);
+        let chained = "[run]\nname = \"d\"\n[stage.n]\nkind = \"test.noop\"\n\
+                       [stage.p]\nkind = \"test.picky\"\ninputs = [\"missing_dataset\", \"n\"]\n\
+                       [dataset.missing_dataset]\npath = \"/nonexistent/amrepro\"\n\
+                       [stage.q]\nkind = \"test.picky\"\ninputs = [\"p\", \"p\"]\n";
+        let p = plan(chained).unwrap();
+        assert_eq!(p.stages[p.stage_index("q").unwrap()].input_roles, ["widths", "extra"]);
+    }
+
+    #[test]
+    fn a_column_the_upstream_kind_does_not_write_is_refused_at_plan_time() {
+        let text = "[run]\nname = \"d\"\n[stage.a]\nkind = \"test.writer\"\n\
+                    [stage.r]\nkind = \"test.reader\"\ninputs = [\"a\"]\n";
+        let err = plan(text).unwrap_err();
+        assert_eq!(err.location, "stage.r.inputs");
+        assert_eq!(
+            err.message,
+            "role `w` of `test.reader` reads column `b` of `w.parquet`, which a `test.writer` stage does not write; \
+             got `a`, a `test.writer` stage"
+        );
+        let undeclared = "[run]\nname = \"d\"\n[stage.a]\nkind = \"test.noop\"\n\
+                          [stage.r]\nkind = \"test.reader\"\ninputs = [\"a\"]\n";
+        assert!(plan(undeclared).is_ok(), "a kind that declares no tables is not checked");
+    }
+
+    #[test]
+    fn a_concatenation_writes_a_table_when_one_of_its_inputs_does() {
+        let head = "[run]\nname = \"d\"\n[stage.w]\nkind = \"test.writer\"\n[stage.o]\nkind = \"test.other\"\n";
+        let read = |parts: &str| {
+            plan(&format!(
+                "{head}[stage.c]\nkind = \"test.concat\"\ninputs = [{parts}]\n\
+                 [stage.r]\nkind = \"test.reader_a\"\ninputs = [\"c\"]\n"
+            ))
+        };
+        assert!(read("\"w\", \"o\"").is_ok(), "the writer's part has the table; the other part is skipped");
+        let err = read("\"o\"").unwrap_err();
+        assert_eq!(
+            err.message,
+            "role `w` of `test.reader_a` reads `w.parquet`, which no input of the `test.concat` stage writes; \
+             got `c`, a `test.concat` stage"
+        );
     }
 }

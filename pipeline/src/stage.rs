@@ -1,5 +1,7 @@
-//! The one trait every stage kind implements, the context a stage runs in, and the
-//! registry from which the planner, `amrepro stages` and the docs are generated.
+//! The one trait every stage kind implements ([`Stage`]: its [`StageInfo`] with the named
+//! roles of its inputs, and its parameters as one typed struct), the context a stage
+//! runs in, and the registry from which the planner, `amrepro stages` and the docs are
+//! generated.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -8,56 +10,171 @@ use polars::prelude::DataFrame;
 
 use crate::artifact;
 use crate::error::StageError;
-use crate::params::{ParamSpec, Params};
+use crate::params::{ParamError, ParamSpec, Params, StageParams};
+use crate::schema::{Reads, Table};
 
-/// How many inputs a stage kind takes.
+/// What the registry, the planner, `amrepro stages` and the docs know of a stage kind,
+/// declared once beside it (its parameters are its [`Stage::Params`]).
+#[derive(Debug)]
+pub struct StageInfo {
+    /// The registry name, `domain.step` (`fdm.line_summary`).
+    pub name: &'static str,
+    /// Bump when the outputs for the same inputs change; invalidates the cache.
+    pub version: u32,
+    /// One sentence: what the stage computes.
+    pub summary: &'static str,
+    /// The paper section or equation it implements (or the design section).
+    pub implements: &'static str,
+    /// Its inputs, as named roles in the order a spec lists them.
+    pub inputs: &'static [Input],
+    /// What its output folder is, for the roles of stages downstream.
+    pub output: Output,
+}
+
+/// One named input role of a stage kind: what it accepts and how many.
 #[derive(Debug, Clone, Copy)]
-pub struct Arity {
-    /// Fewest inputs.
-    pub min: usize,
-    /// Most inputs.
-    pub max: usize,
+pub struct Input {
+    /// The role's name (`sequence`, `monitor`), used in errors and docs.
+    pub role: &'static str,
+    /// What a spec may wire to it.
+    pub takes: &'static [Source],
+    /// How many inputs fill it.
+    pub count: Count,
+    /// One sentence: what the stage reads from it.
+    pub doc: &'static str,
+    /// The declared tables (and their columns) the stage reads from it; the planner
+    /// checks that an upstream stage writes them ([`Stage::WRITES`]).
+    pub reads: &'static [Reads],
 }
 
-impl Arity {
-    /// Exactly `n` inputs.
-    pub const fn exactly(n: usize) -> Self {
-        Self { min: n, max: n }
+impl Input {
+    /// One input of this role.
+    pub const fn one(role: &'static str, takes: &'static [Source], doc: &'static str) -> Self {
+        Self { role, takes, count: Count::One, doc, reads: &[] }
     }
 
-    /// At least `n` inputs.
-    pub const fn at_least(n: usize) -> Self {
-        Self { min: n, max: usize::MAX }
+    /// At most one input of this role.
+    pub const fn optional(role: &'static str, takes: &'static [Source], doc: &'static str) -> Self {
+        Self { role, takes, count: Count::Optional, doc, reads: &[] }
+    }
+
+    /// At least `min` inputs of this role.
+    pub const fn many(role: &'static str, min: usize, takes: &'static [Source], doc: &'static str) -> Self {
+        Self { role, takes, count: Count::Many { min }, doc, reads: &[] }
+    }
+
+    /// The same role, reading these columns of these declared tables.
+    pub const fn reading(self, reads: &'static [Reads]) -> Self {
+        Self { reads, ..self }
     }
 }
 
-/// A stage kind: a small struct that turns input folders into output files.
+/// What an input role accepts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// A dataset of this kind (its `dataset.toml` says `kind = "…"`), given in the spec
+    /// or written by a stage whose [`Output`] is that dataset.
+    Dataset(&'static str),
+    /// A folder of raw data without a `dataset.toml` (an importer's input).
+    RawFolder,
+    /// The output of a stage of this kind.
+    Stage(&'static str),
+    /// The output of any stage.
+    AnyStage,
+}
+
+/// How many inputs fill a role.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Count {
+    /// Exactly one.
+    One,
+    /// None or one.
+    Optional,
+    /// At least `min`.
+    Many {
+        /// Fewest inputs.
+        min: usize,
+    },
+}
+
+/// What a stage's output folder holds, as the planner matches it against roles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// Tables (and files) of its own kind.
+    Tables,
+    /// A dataset of this kind.
+    Dataset(&'static str),
+    /// The same kinds of tables as its inputs (`table.concat`): accepted wherever all its
+    /// inputs would be.
+    LikeInputs,
+}
+
+/// A stage kind with its parameters as one typed struct: what every stage implements.
 ///
 /// A stage reads only the files of the inputs it declared (dataset folders or the
 /// output folders of upstream stages) and writes only into its own output folder,
 /// through the [`StageContext`]. It must be deterministic given its parameters, the
 /// seed and its inputs: the engine caches it on exactly those.
-pub trait StageKind: Send + Sync {
-    /// The registry name, `domain.step` (`fdm.line_summary`).
-    fn name(&self) -> &'static str;
-    /// Bump when the outputs for the same inputs change; invalidates the cache.
-    fn version(&self) -> u32;
-    /// One sentence: what the stage computes.
-    fn summary(&self) -> &'static str;
-    /// The paper section or equation it implements (or the design section).
-    fn implements(&self) -> &'static str;
-    /// Its parameters.
-    fn params(&self) -> &'static [ParamSpec];
-    /// How many inputs it takes.
-    fn arity(&self) -> Arity;
-    /// Runs the stage. A kind that splits ([`StageKind::split`]) runs as
-    /// [`crate::units::run_split`]: every unit, then the merge.
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError>;
+pub trait Stage: Send + Sync + 'static {
+    /// Its parameters, declared with [`crate::params!`].
+    type Params: StageParams;
+    /// Its name, version, docs, input roles and output.
+    const INFO: &'static StageInfo;
+    /// The declared tables it writes: each written frame is checked against its
+    /// declaration, and stages reading it are checked against it at plan time. (Kinds
+    /// whose tables are not declared yet leave it empty.)
+    const WRITES: &'static [&'static Table] = &[];
+    /// Constraints across parameters, checked by the planner before anything runs.
+    fn check(_params: &Self::Params) -> Result<(), ParamError> {
+        Ok(())
+    }
+    /// Runs the stage with its checked parameters. A kind that splits
+    /// ([`Stage::split`]) runs as [`crate::units::run_split`]: every unit, then the merge.
+    fn run(&self, ctx: &mut StageContext, params: &Self::Params) -> Result<(), StageError>;
     /// How the kind's work splits into independent units (draws, subsets, re-prints),
     /// for runs spread over processes or machines ([`crate::units`]); `None`, the
     /// default, for a stage that is one unit.
     fn split(&self) -> Option<&dyn Split> {
         None
+    }
+}
+
+/// A stage kind as the registry holds it: [`Stage`] with its parameter type erased.
+pub trait StageKind: Send + Sync {
+    /// Its name, version, docs, input roles and output.
+    fn info(&self) -> &'static StageInfo;
+    /// Its parameter declarations.
+    fn params(&self) -> &'static [ParamSpec];
+    /// The declared tables it writes ([`Stage::WRITES`]).
+    fn writes(&self) -> &'static [&'static Table];
+    /// The cross-parameter check of [`Stage::check`] on values checked against
+    /// [`StageKind::params`].
+    fn check(&self, params: &Params) -> Result<(), ParamError>;
+    /// Runs the stage.
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError>;
+    /// See [`Stage::split`].
+    fn split(&self) -> Option<&dyn Split>;
+}
+
+impl<S: Stage> StageKind for S {
+    fn info(&self) -> &'static StageInfo {
+        S::INFO
+    }
+    fn params(&self) -> &'static [ParamSpec] {
+        S::Params::specs()
+    }
+    fn writes(&self) -> &'static [&'static Table] {
+        S::WRITES
+    }
+    fn check(&self, params: &Params) -> Result<(), ParamError> {
+        S::check(&S::Params::from_params(params))
+    }
+    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+        let params = S::Params::from_params(&ctx.params);
+        Stage::run(self, ctx, &params)
+    }
+    fn split(&self) -> Option<&dyn Split> {
+        Stage::split(self)
     }
 }
 
@@ -93,6 +210,8 @@ pub trait Split: Send + Sync {
 pub struct InputArtifact {
     /// The dataset or stage name in the spec.
     pub name: String,
+    /// The role of the stage's kind it fills.
+    pub role: &'static str,
     /// The folder holding its files.
     pub dir: PathBuf,
 }
@@ -103,7 +222,8 @@ pub struct StageContext {
     pub stage: String,
     /// The checked parameters.
     pub params: Params,
-    /// The inputs in the order the spec lists them.
+    /// The inputs in the order the spec lists them (each role's inputs together, roles
+    /// in their declared order); read them by role with [`StageContext::input`].
     pub inputs: Vec<InputArtifact>,
     /// A seed derived from the spec's run seed and the stage name.
     pub seed: u64,
@@ -114,6 +234,7 @@ pub struct StageContext {
     pub(crate) out_dir: PathBuf,
     pub(crate) rows: u64,
     pub(crate) progress: Option<indicatif::MultiProgress>,
+    pub(crate) writes: &'static [&'static Table],
 }
 
 impl StageContext {
@@ -127,13 +248,37 @@ impl StageContext {
         Ok(path)
     }
 
+    /// The one input of role `role` (a role counted [`Count::One`]).
+    ///
+    /// # Panics
+    /// When the kind does not declare `role` as one input: a bug in the stage, not a
+    /// spec error (the planner fills every declared role).
+    pub fn input(&self, role: &Input) -> &InputArtifact {
+        self.optional_input(role)
+            .unwrap_or_else(|| panic!("stage `{}` has no input of role `{}`", self.stage, role.role))
+    }
+
+    /// The input of role `role`, if the spec gave one.
+    pub fn optional_input(&self, role: &Input) -> Option<&InputArtifact> {
+        self.inputs.iter().find(|i| i.role == role.role)
+    }
+
+    /// Every input of role `role`, in spec order.
+    pub fn inputs_of(&self, role: &Input) -> Vec<&InputArtifact> {
+        self.inputs.iter().filter(|i| i.role == role.role).collect()
+    }
+
     /// The stage's output folder (not yet visible to anyone else).
     pub fn output_dir(&self) -> &Path {
         &self.out_dir
     }
 
-    /// Writes `df` as Parquet `name.parquet` with the run's key/value metadata.
+    /// Writes `df` as Parquet `name.parquet` with the run's key/value metadata. A table
+    /// the kind declares ([`Stage::WRITES`]) must match its declaration exactly.
     pub fn write_table(&mut self, name: &str, df: &mut DataFrame) -> Result<PathBuf, StageError> {
+        if let Some(table) = self.writes.iter().find(|t| t.name == name) {
+            table.check_frame(df).map_err(StageError::Declaration)?;
+        }
         let path = self.output_path(&format!("{name}.parquet"))?;
         let meta = artifact::TableMeta {
             stage: self.stage.clone(),
@@ -159,6 +304,7 @@ impl StageContext {
             out_dir,
             rows: 0,
             progress: None,
+            writes: self.writes,
         }
     }
 
@@ -189,6 +335,34 @@ fn counting_style() -> indicatif::ProgressStyle {
     indicatif::ProgressStyle::with_template("{prefix:>18} counting the work, {elapsed}").expect("valid template")
 }
 
+/// Checks a kind's declaration: parameter names unique (a group may not repeat a field
+/// of its struct), every default admissible for its type, input roles uniquely named and
+/// at most one of them taking many inputs, with no optional role after it (roles are
+/// filled in order, so inputs after a many-role could only go to required roles).
+pub fn check_declaration(kind: &dyn StageKind) -> Result<(), String> {
+    let params = kind.params();
+    for (i, p) in params.iter().enumerate() {
+        if params[..i].iter().any(|q| q.name == p.name) {
+            return Err(format!("parameter `{}` is declared twice", p.name));
+        }
+    }
+    for p in params {
+        p.check_default().map_err(|why| format!("default of `{}` is not admissible: {why}", p.name))?;
+    }
+    let roles = kind.info().inputs;
+    for (i, r) in roles.iter().enumerate() {
+        if roles[..i].iter().any(|q| q.role == r.role) {
+            return Err(format!("input role `{}` is declared twice", r.role));
+        }
+    }
+    if let Some(many) = roles.iter().position(|r| matches!(r.count, Count::Many { .. })) {
+        if roles[many + 1..].iter().any(|r| r.count != Count::One) {
+            return Err(format!("only single roles may follow the many-role `{}`", roles[many].role));
+        }
+    }
+    Ok(())
+}
+
 /// All registered stage kinds, by name.
 #[derive(Default)]
 pub struct Registry {
@@ -201,9 +375,13 @@ impl Registry {
         Self::default()
     }
 
-    /// Adds a kind. Panics on a duplicate name: that is a programming error.
+    /// Adds a kind. Panics on a duplicate name or a malformed declaration
+    /// ([`check_declaration`]): those are programming errors, caught by any test.
     pub fn register(&mut self, kind: Box<dyn StageKind>) {
-        let name = kind.name();
+        let name = kind.info().name;
+        if let Err(why) = check_declaration(kind.as_ref()) {
+            panic!("stage kind `{name}` is declared wrongly: {why}");
+        }
         assert!(self.kinds.insert(name, kind).is_none(), "stage kind `{name}` registered twice");
     }
 

@@ -7,8 +7,7 @@
 use std::io::Write;
 
 use crate::error::StageError;
-use crate::params::{ParamDefault, ParamSpec, ParamType};
-use crate::stage::{Arity, StageContext, StageKind};
+use crate::stage::{Input, Output, Source, Stage, StageContext, StageInfo};
 
 /// The environment variable that makes the CLI register [`FaultKind`].
 pub const ENV_VAR: &str = "AMREPRO_TEST_KINDS";
@@ -16,62 +15,63 @@ pub const ENV_VAR: &str = "AMREPRO_TEST_KINDS";
 /// `test.fault`: see the module documentation.
 pub struct FaultKind;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "action",
-        ty: ParamType::Choice(&["write", "fail", "panic"]),
-        default: ParamDefault::Str("write"),
-        doc: "write `value.txt`; or fail with an error; or panic (after the sleep)",
-    },
-    ParamSpec { name: "text", ty: ParamType::Text, default: ParamDefault::Str(""), doc: "first line of `value.txt`" },
-    ParamSpec {
-        name: "pad_bytes",
-        ty: ParamType::Int { min: 0, max: 1 << 32 },
-        default: ParamDefault::Int(0),
-        doc: "also write `pad.bin` of this many bytes (to fill a disk)",
-    },
-    ParamSpec {
-        name: "sleep_ms",
-        ty: ParamType::Int { min: 0, max: 600_000 },
-        default: ParamDefault::Int(0),
-        doc: "sleep this long first (to be killed or collided with)",
-    },
-];
+crate::choice! {
+    /// What a `test.fault` stage does.
+    pub enum Action {
+        /// Write `value.txt`.
+        Write = "write",
+        /// Fail with an error.
+        Fail = "fail",
+        /// Panic (after the sleep).
+        Panic = "panic",
+    }
+}
 
-impl StageKind for FaultKind {
-    fn name(&self) -> &'static str {
-        "test.fault"
+crate::params! {
+    /// The parameters of `test.fault`.
+    pub struct FaultParams {
+        /// write `value.txt`; or fail with an error; or panic (after the sleep)
+        pub action: Action = Action::Write,
+        /// first line of `value.txt`
+        pub text: String = "",
+        /// also write `pad.bin` of this many bytes (to fill a disk)
+        pub pad_bytes: u64 [0, 1 << 32] = 0,
+        /// sleep this long first (to be killed or collided with)
+        pub sleep_ms: u64 [0, 600_000] = 0,
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "testing only: writes its text and its inputs' texts, or fails, or panics"
-    }
-    fn implements(&self) -> &'static str {
-        "the engine's failure semantics (ARCHITECTURE.md)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity { min: 0, max: 8 }
-    }
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        std::thread::sleep(std::time::Duration::from_millis(ctx.params.i64("sleep_ms") as u64));
-        match ctx.params.str("action") {
-            "fail" => return Err(StageError::Params { stage: ctx.stage.clone(), message: "told to fail".into() }),
-            "panic" => panic!("test.fault told to panic"),
-            _ => {}
+}
+
+/// The inputs of `test.fault`: other faults' folders, whose texts it appends.
+const UPSTREAM: Input = Input::many("upstream", 0, &[Source::Stage("test.fault")], "other `test.fault` stages");
+
+impl Stage for FaultKind {
+    type Params = FaultParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "test.fault",
+        version: 1,
+        summary: "testing only: writes its text and its inputs' texts, or fails, or panics",
+        implements: "the engine's failure semantics (ARCHITECTURE.md)",
+        inputs: &[UPSTREAM],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &FaultParams) -> Result<(), StageError> {
+        std::thread::sleep(std::time::Duration::from_millis(p.sleep_ms));
+        match p.action {
+            Action::Fail => {
+                return Err(StageError::Params { stage: ctx.stage.clone(), message: "told to fail".into() })
+            }
+            Action::Panic => panic!("test.fault told to panic"),
+            Action::Write => {}
         }
-        let mut text = format!("{}\n", ctx.params.str("text"));
-        for input in &ctx.inputs {
+        let mut text = format!("{}\n", p.text);
+        for input in ctx.inputs_of(&UPSTREAM) {
             let path = input.dir.join("value.txt");
             text += &std::fs::read_to_string(&path).map_err(|e| StageError::io(&path, e))?;
         }
         let path = ctx.output_path("value.txt")?;
         std::fs::write(&path, text).map_err(|e| StageError::io(&path, e))?;
-        write_padding(ctx, ctx.params.i64("pad_bytes") as u64)
+        write_padding(ctx, p.pad_bytes)
     }
 }
 

@@ -329,7 +329,7 @@ impl<'a> Shared<'a> {
     fn keyed(&mut self, s: usize) -> Result<Option<Keyed>, RunError> {
         let stage = &self.plan.stages[s];
         let (mut inputs, mut input_hashes) = (Vec::new(), BTreeMap::new());
-        for input in &stage.inputs {
+        for (input, role) in stage.inputs.iter().zip(&stage.input_roles) {
             let name = self.plan.input_name(*input).to_string();
             let (dir, hash) = match *input {
                 InputRef::Dataset(d) => (
@@ -342,7 +342,7 @@ impl<'a> Shared<'a> {
                 },
             };
             input_hashes.insert(name.clone(), hash);
-            inputs.push(InputArtifact { name, dir });
+            inputs.push(InputArtifact { name, role, dir });
         }
         let seed = stage_seed(self.plan.seed, &stage.name);
         let key_hash = self.cache_key(s, seed, &input_hashes).hash();
@@ -511,8 +511,7 @@ impl<'a> Shared<'a> {
 /// Every unit of a split kind, in parallel, into `.units/` of the stage's output
 /// folder, then the merge, then the parts removed: a one-process run goes through
 /// exactly the steps a spread-out run does. Draws a progress bar over the units.
-pub fn run_split<K: crate::StageKind + ?Sized>(kind: &K, ctx: &mut StageContext) -> Result<(), StageError> {
-    let split = kind.split().expect("run_split is for kinds that split");
+pub fn run_split(split: &dyn Split, ctx: &mut StageContext) -> Result<(), StageError> {
     let units = split.units(&ctx.params, ctx.inputs.len());
     let root = ctx.output_dir().join(".units");
     let bar = ctx.progress(units.len() as u64);

@@ -3,44 +3,45 @@
 //! must have the same columns in the same order; rows keep input order.
 
 use pipeline::artifact::read_parquet;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
 
 /// The `table.concat` stage kind.
 pub struct ConcatStage;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "tables",
-    ty: ParamType::Text,
-    default: ParamDefault::Required,
-    doc: "Comma-separated table names (without .parquet); a table missing from an input is skipped for that input.",
-}];
+pipeline::params! {
+    /// The parameters of `table.concat`.
+    pub struct ConcatParams {
+        /// Comma-separated table names (without .parquet); a table missing from an input is skipped for that input.
+        pub tables: String,
+    }
+}
 
-impl StageKind for ConcatStage {
-    fn name(&self) -> &'static str {
-        "table.concat"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Stacks same-named Parquet tables of its inputs into one table each"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §3 (stages meet only through Parquet)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
+/// The stages whose tables are stacked.
+const PARTS: Input = Input::many("parts", 1, &[Source::AnyStage], "stages writing the named tables");
+
+impl Stage for ConcatStage {
+    type Params = ConcatParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "table.concat",
+        version: 1,
+        summary: "Stacks same-named Parquet tables of its inputs into one table each",
+        implements: "DESIGN §3 (stages meet only through Parquet)",
+        inputs: &[PARTS],
+        output: Output::LikeInputs,
+    };
+
+    fn check(p: &ConcatParams) -> Result<(), ParamError> {
+        if table_names(&p.tables).next().is_none() {
+            return Err(ParamError::new("tables", "name at least one table"));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let names: Vec<String> = ctx.params.str("tables").split(',').map(|s| s.trim().to_string()).collect();
-        for name in names.iter().filter(|n| !n.is_empty()) {
+    fn run(&self, ctx: &mut StageContext, p: &ConcatParams) -> Result<(), StageError> {
+        for name in table_names(&p.tables) {
             let mut stacked = stack(ctx, name)?;
             ctx.write_table(name, &mut stacked)?;
         }
@@ -48,9 +49,14 @@ impl StageKind for ConcatStage {
     }
 }
 
+/// The non-empty names of a comma-separated list.
+fn table_names(list: &str) -> impl Iterator<Item = &str> {
+    list.split(',').map(str::trim).filter(|n| !n.is_empty())
+}
+
 fn stack(ctx: &StageContext, name: &str) -> Result<DataFrame, StageError> {
     let mut stacked: Option<DataFrame> = None;
-    for input in &ctx.inputs {
+    for input in ctx.inputs_of(&PARTS) {
         let path = input.dir.join(format!("{name}.parquet"));
         if !path.exists() {
             continue;

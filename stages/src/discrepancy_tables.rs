@@ -8,73 +8,53 @@
 
 use discrepancy::power::{Outcome, PowerRow};
 use discrepancy::{Discovery, Model, Settings, VariableKind, Verdict};
-use pipeline::params::ParamDefault;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError};
+use pipeline::params::ParamError;
+use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
 
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
-/// The family-wise false-alarm rate, as every discrepancy stage declares it.
-pub(crate) const ALPHA: ParamSpec = ParamSpec {
-    name: "alpha",
-    ty: ParamType::Float { min: 0.001, max: 0.5 },
-    default: ParamDefault::Float(0.05),
-    doc: "Family-wise false-alarm rate of each round, over its candidates (Holm).",
-};
+pipeline::params! {
+    /// The family-wise false-alarm rate, as every discrepancy stage and study declares it.
+    pub struct FalseAlarm {
+        /// Family-wise false-alarm rate of each round, over its candidates (Holm).
+        pub alpha: f64 [0.001, 0.5] = 0.05,
+    }
+}
 
-/// The bins of `residuals.parquet`.
-pub(crate) const BINS: ParamSpec = ParamSpec {
-    name: "bins",
-    ty: ParamType::Int { min: 2, max: 60 },
-    default: ParamDefault::Int(12),
-    doc: "Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).",
-};
+pipeline::params! {
+    /// The engine's parameters every discrepancy stage declares (beyond `max_rounds`,
+    /// whose range is the domain's number of candidates).
+    pub struct EngineParams {
+        /// Most bins per variable in residuals.parquet (equal-count bins, one per value when fewer).
+        pub bins: i64 [2, 60] = 12,
+        /// Bootstrap draws over groups of every gain interval.
+        pub bootstrap_draws: i64 [100, 100_000] = 2000,
+    }
+    groups { pub false_alarm: FalseAlarm }
+}
 
-/// The bootstrap draws of every gain interval.
-pub(crate) const BOOTSTRAP_DRAWS: ParamSpec = ParamSpec {
-    name: "bootstrap_draws",
-    ty: ParamType::Int { min: 100, max: 100_000 },
-    default: ParamDefault::Int(2000),
-    doc: "Bootstrap draws over groups of every gain interval.",
-};
-
-/// The most rounds for a domain with `candidates` candidates, `default` by default.
-pub(crate) const fn max_rounds(candidates: i64, default: i64) -> ParamSpec {
-    ParamSpec {
-        name: "max_rounds",
-        ty: ParamType::Int { min: 1, max: candidates },
-        default: ParamDefault::Int(default),
-        doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
+impl EngineParams {
+    /// The engine's settings with `max_rounds` rounds and seed `seed`, checked.
+    pub(crate) fn settings(&self, max_rounds: i64, seed: u64) -> Result<Settings, ParamError> {
+        let settings = Settings {
+            alpha: self.false_alarm.alpha,
+            max_rounds: max_rounds as usize,
+            bins: self.bins as usize,
+            bootstrap_draws: self.bootstrap_draws as usize,
+            level: 0.95,
+            seed,
+        };
+        settings.check().map_err(|e| ParamError::new("alpha", e.to_string()))?;
+        Ok(settings)
     }
 }
 
 /// The engine's settings for a study stage (a power or control study) from its `alpha`
 /// and `max_rounds` and seed, with `bootstrap_draws` draws of each gain interval (the
 /// studies use the fits, not those intervals) and the default bins.
-pub(crate) fn study_settings(ctx: &StageContext, bootstrap_draws: usize) -> Settings {
-    let p = &ctx.params;
-    Settings {
-        alpha: p.f64("alpha"),
-        max_rounds: p.i64("max_rounds") as usize,
-        bootstrap_draws,
-        ..Settings::standard(ctx.seed)
-    }
-}
-
-/// The engine's settings from a discrepancy stage's parameters (`alpha`, `max_rounds`,
-/// `bins`, `bootstrap_draws`) and seed, checked.
-pub(crate) fn engine_settings(ctx: &StageContext) -> Result<Settings, StageError> {
-    let p = &ctx.params;
-    let settings = Settings {
-        alpha: p.f64("alpha"),
-        max_rounds: p.i64("max_rounds") as usize,
-        bins: p.i64("bins") as usize,
-        bootstrap_draws: p.i64("bootstrap_draws") as usize,
-        level: 0.95,
-        seed: ctx.seed,
-    };
-    settings.check().map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
-    Ok(settings)
+pub(crate) fn study_settings(alpha: f64, max_rounds: i64, seed: u64, bootstrap_draws: usize) -> Settings {
+    Settings { alpha, max_rounds: max_rounds as usize, bootstrap_draws, ..Settings::standard(seed) }
 }
 
 /// The name of a mechanism of the model (`None`: the baseline).

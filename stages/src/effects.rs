@@ -2,7 +2,7 @@
 //! separated by commas, each domain checking the names and strengths itself; and the
 //! power studies' per-effect strength lists.
 
-use pipeline::{StageContext, StageError};
+use pipeline::params::ParamError;
 
 /// Parses `name=strength, name=strength` (empty: none) into pairs.
 pub fn pairs(text: &str) -> Result<Vec<(&str, f64)>, String> {
@@ -18,18 +18,16 @@ pub fn pairs(text: &str) -> Result<Vec<(&str, f64)>, String> {
     Ok(pairs)
 }
 
-/// The strengths listed in the text parameter `name` (comma-separated; empty: none),
-/// each a magnitude in `(0, top]`; a bad one is a parameter error naming it, with
-/// `range_note` after the range.
-pub fn strength_list(ctx: &StageContext, name: &str, top: f64, range_note: &str) -> Result<Vec<f64>, StageError> {
-    ctx.params
-        .str(name)
-        .split(',')
+/// The strengths listed in `list`, the text parameter `field` (comma-separated; empty:
+/// none), each a magnitude in `(0, top]`; a bad one is a parameter error naming it, with
+/// `range_note` after the range. Stages call it in their plan-time check and again when
+/// they run.
+pub fn strength_list(field: &'static str, list: &str, top: f64, range_note: &str) -> Result<Vec<f64>, ParamError> {
+    list.split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
         .map(|s| {
-            let bad =
-                |why: String| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: `{s}` {why}") };
+            let bad = |why: String| ParamError::new(field, format!("`{s}` {why}"));
             let x: f64 = s.parse().map_err(|_| bad("is not a number".into()))?;
             if x > 0.0 && x <= top {
                 Ok(x)

@@ -1,4 +1,4 @@
-//! Domain stage kinds: each a small struct implementing [`pipeline::StageKind`],
+//! Domain stage kinds: each a small struct implementing [`pipeline::stage::Stage`],
 //! registered in [`register`]. Stages read only their declared input folders (through
 //! the `datasets` readers or Parquet) and write only through their context; they never
 //! draw (figures live in `reports`).
@@ -11,6 +11,7 @@ pub mod fdm;
 pub mod inkjet;
 pub mod parts;
 pub mod progress;
+pub mod roles;
 pub mod table;
 pub mod thermal;
 

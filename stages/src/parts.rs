@@ -10,8 +10,7 @@ use std::path::PathBuf;
 
 use discrepancy::power::{summarize, DrawScore, Outcome};
 use pipeline::artifact::read_parquet;
-use pipeline::params::ParamDefault;
-use pipeline::{ParamSpec, ParamType, Params, StageContext, StageError, Unit};
+use pipeline::{StageContext, StageError, Unit};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, PlSmallStr, Series};
 
 use crate::discrepancy_tables::power_frame;
@@ -23,18 +22,17 @@ pub const PART_TABLE: &str = "part";
 /// no interval), which the summary needs and `power_draws.parquet` does not carry.
 pub const COVERED: &str = "covered";
 
-/// The `draws_per_unit` parameter of every power study.
-pub const DRAWS_PER_UNIT: ParamSpec = ParamSpec {
-    name: "draws_per_unit",
-    ty: ParamType::Int { min: 1, max: 100_000 },
-    default: ParamDefault::Int(50),
-    doc: "Draws per work unit of a spread-out run (`amrepro plan`, docs/SCALE.md); how the work is cut, not what it gives.",
-};
+pipeline::params! {
+    /// How a power study's draws are cut into work units, as every study declares it.
+    pub struct UnitSize {
+        /// Draws per work unit of a spread-out run (`amrepro plan`, docs/SCALE.md); how the work is cut, not what it gives.
+        pub draws_per_unit: i64 [1, 100_000] = 50,
+    }
+}
 
-/// How many strengths the text parameter `name` lists (the cells of one effect),
-/// counted before they are checked (a bad one fails the unit that parses it).
-pub fn listed(params: &Params, name: &str) -> usize {
-    params.str(name).split(',').filter(|s| !s.trim().is_empty()).count()
+/// How many strengths a comma-separated list names (the cells of one effect).
+pub fn listed(list: &str) -> usize {
+    list.split(',').filter(|s| !s.trim().is_empty()).count()
 }
 
 /// Writes one unit's part of a power study on a virtual printer: its rows of
@@ -100,23 +98,31 @@ pub fn draw_units(bases: usize, draws: usize, per_unit: usize) -> Vec<Unit> {
         .collect()
 }
 
-/// The units of a power study from its parameters: `null_draws` plus `draws` per
-/// strength listed for each of `effects`, on each of `bases` bases, in blocks of
-/// `draws_per_unit` ([`draw_units`]).
-pub fn study_units<'a>(params: &Params, bases: usize, effects: impl IntoIterator<Item = &'a str>) -> Vec<Unit> {
-    let cells: usize = effects.into_iter().map(|e| listed(params, e)).sum();
-    let draws = params.i64("null_draws") as usize + cells * params.i64("draws") as usize;
-    draw_units(bases, draws, per_unit(params))
+/// The design of a power study as its units see it: `null_draws` plus `draws` per
+/// strength listed in each of `strength_lists` (one comma-separated list per effect).
+pub struct StudySize<'a> {
+    /// Draws per base with nothing injected.
+    pub null_draws: i64,
+    /// Draws per base, effect and strength.
+    pub draws: i64,
+    /// Each studied effect's list of strengths.
+    pub strength_lists: Vec<&'a str>,
+    /// How the draws are cut.
+    pub unit_size: &'a UnitSize,
+}
+
+/// The units of a power study on each of `bases` bases, in blocks of `draws_per_unit`
+/// ([`draw_units`]).
+pub fn study_units(size: &StudySize, bases: usize) -> Vec<Unit> {
+    let cells: usize = size.strength_lists.iter().map(|list| listed(list)).sum();
+    let draws = size.null_draws as usize + cells * size.draws as usize;
+    draw_units(bases, draws, size.unit_size.draws_per_unit as usize)
 }
 
 /// Unit `index` of [`study_units`] as (base, range of its draws) in a study of `draws`
 /// draws per base.
-pub fn study_unit_draws(params: &Params, index: usize, draws: usize) -> (usize, Range<usize>) {
-    unit_draws(index, draws, per_unit(params))
-}
-
-fn per_unit(params: &Params) -> usize {
-    params.i64(DRAWS_PER_UNIT.name) as usize
+pub fn study_unit_draws(unit_size: &UnitSize, index: usize, draws: usize) -> (usize, Range<usize>) {
+    unit_draws(index, draws, unit_size.draws_per_unit as usize)
 }
 
 /// One unit per data set of a stage that reads `inputs` folders, `per_set` of them a

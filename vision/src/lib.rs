@@ -10,7 +10,10 @@
 //! Our extension of Sec. 2.3: the camera is rigid on a head that only translates, so one
 //! mount homography fitted to the whole sequence ([`mount`]) and one translation per
 //! frame replace the per-frame homography; [`rigid`] localises a frame that way from any
-//! number of corners, one included.
+//! number of corners, one included. [`localiser`] runs both estimators over a whole
+//! filmed sequence (the mount's fit-and-re-pair rounds, dead reckoning of frames without
+//! corners, repeated and parked frames), reading the frames through a trait a dataset
+//! reader implements.
 //!
 //! For paper 000 (FDM line width, Sec. III), [`lines`] measures the width of a single
 //! printed line along its length from a top-view photo, to a fraction of a pixel, by
@@ -25,6 +28,7 @@ pub mod corners;
 pub mod frame;
 pub mod homography;
 pub mod lines;
+pub mod localiser;
 pub mod localize;
 pub mod matching;
 pub mod mount;

@@ -121,9 +121,7 @@ mod tests {
     }
 
     fn median(v: &[f64]) -> f64 {
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        s[s.len() / 2]
+        crate::stats::finite_median(v.iter().copied())
     }
 
     #[test]

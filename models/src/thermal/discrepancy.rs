@@ -87,6 +87,7 @@ use ::discrepancy::{Candidate, Group, Mechanism, Model, ModelError, Parameter, V
 use super::dynamics::first_order_lag;
 use super::errors::ThermalError;
 use super::Trajectory;
+use crate::stats::finite_median;
 
 /// One localised frame's capture offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -381,8 +382,8 @@ fn layer_pair_scale(readings: impl Iterator<Item = (usize, usize, f64)> + Clone,
     readings.for_each(|(layer, sample, value)| by_layer[layer][sample] = value);
     let mut all = Vec::new();
     for pair in by_layer.windows(2) {
-        let mut d: Vec<f64> = pair[0].iter().zip(&pair[1]).map(|(a, b)| b - a).filter(|d| d.is_finite()).collect();
-        let median = median_of(&mut d);
+        let d: Vec<f64> = pair[0].iter().zip(&pair[1]).map(|(a, b)| b - a).filter(|d| d.is_finite()).collect();
+        let median = finite_median(d.iter().copied());
         all.extend(d.iter().map(|x| x - median));
     }
     robust_scale(all, floor)
@@ -420,19 +421,11 @@ fn check_deposition(d: &Deposition<'_>, samples: usize) -> Result<FlowModel, The
     })
 }
 
-fn median_of(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
-}
-
 /// 1.4826·median|x − median|/√2, at least `floor` (noiseless data).
-fn robust_scale(mut diffs: Vec<f64>, floor: f64) -> f64 {
-    let median = median_of(&mut diffs);
-    let mut dev: Vec<f64> = diffs.iter().map(|d| (d - median).abs()).collect();
-    (1.4826 * median_of(&mut dev) / std::f64::consts::SQRT_2).max(floor)
+fn robust_scale(diffs: Vec<f64>, floor: f64) -> f64 {
+    let median = finite_median(diffs.iter().copied());
+    let dev = diffs.iter().map(|d| (d - median).abs());
+    (1.4826 * finite_median(dev) / std::f64::consts::SQRT_2).max(floor)
 }
 
 /// A group: one filmed layer.

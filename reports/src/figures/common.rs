@@ -1,21 +1,11 @@
 //! What the figures share: the `title` parameter, the viridis scale and its colour bar,
 //! and the grid arithmetic of heat maps.
 
-use pipeline::params::ParamDefault;
-use pipeline::{ParamSpec, ParamType};
 use plotters::prelude::{DrawingAreaErrorKind, DrawingBackend, RGBColor};
 
-/// The `title` parameter of a figure whose default title is a fixed description.
-pub(crate) const TITLE: ParamSpec = ParamSpec {
-    name: "title",
-    ty: ParamType::Text,
-    default: ParamDefault::Str(""),
-    doc: "Figure title (default: a generic description).",
-};
-
-/// The figure's `title` parameter, or `default()` when the spec leaves it empty.
-pub(crate) fn title_or(ctx: &pipeline::StageContext, default: impl FnOnce() -> String) -> String {
-    match ctx.params.str("title") {
+/// A figure's `title` parameter, or `default()` when the spec leaves it empty.
+pub(crate) fn title_or(title: &str, default: impl FnOnce() -> String) -> String {
+    match title {
         "" => default(),
         title => title.to_string(),
     }

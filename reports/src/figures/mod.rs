@@ -1,6 +1,6 @@
 //! Figure stage kinds: each reads published tables of its input stages and draws one
 //! figure as PNG and SVG, in the style of the paper it reproduces. Grouped by domain:
-//! [`fdm`] (paper 000 and the FDM discrepancy), [`inkjet`] (paper 002), [`thermal`]
+//! `fdm` (paper 000 and the FDM discrepancy), `inkjet` (paper 002), `thermal`
 //! (paper 003), and the power-by-effect figure every domain's discovery study draws.
 
 mod common;

@@ -8,9 +8,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
@@ -18,36 +17,39 @@ use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
 /// The `figure.discovery_power_by_effect` stage kind.
 pub struct DiscoveryPowerByEffectFigure;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "title",
-    ty: ParamType::Text,
-    default: ParamDefault::Str("How strong a hidden effect must be before the engine names it"),
-    doc: "Figure title.",
-}];
+pipeline::params! {
+    /// The parameters of `figure.discovery_power_by_effect`.
+    pub struct PowerByEffectParams {
+        /// Figure title.
+        pub title: String = "How strong a hidden effect must be before the engine names it",
+    }
+}
 
-impl StageKind for DiscoveryPowerByEffectFigure {
-    fn name(&self) -> &'static str {
-        "figure.discovery_power_by_effect"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "A power study's curves, one panel per hidden effect on its own strength axis, with the null draws' false-alarm bound → discovery_power.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 (tests that hide an effect and require finding it)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+/// The power study drawn: any domain's (their `power.parquet` share its columns).
+const POWER: Input = Input::one(
+    "power",
+    &[
+        Source::Stage("inkjet.discovery_power"),
+        Source::Stage("thermal.discovery_power"),
+        Source::Stage("fdm.discovery_power"),
+    ],
+    "a power study's rates per effect and strength (`power.parquet`)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let study = Study::read(&ctx.inputs[0].dir.join("power.parquet"))?;
-        let title = ctx.params.str("title").to_string();
+impl Stage for DiscoveryPowerByEffectFigure {
+    type Params = PowerByEffectParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.discovery_power_by_effect",
+        version: 1,
+        summary: "A power study's curves, one panel per hidden effect on its own strength axis, with the null draws' false-alarm bound → discovery_power.png/.svg",
+        implements: "DESIGN §7 (tests that hide an effect and require finding it)",
+        inputs: &[POWER],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &PowerByEffectParams) -> Result<(), StageError> {
+        let study = Study::read(&ctx.input(&POWER).dir.join("power.parquet"))?;
+        let title = p.title.clone();
         let columns = study.curves.len().clamp(1, 4);
         let rows = study.curves.len().div_ceil(columns).max(1);
         let size = (420 * columns as u32 + 40, 360 * rows as u32 + 120);

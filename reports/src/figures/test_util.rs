@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use pipeline::artifact::{write_parquet, TableMeta};
+use pipeline::schema::Table;
 use polars::prelude::DataFrame;
 
 /// A blank 1400×700 PNG compresses to a few kB; a drawn figure with text and data is
@@ -15,6 +16,16 @@ const MIN_PNG_BYTES: u64 = 20_000;
 pub fn write_table(dir: &Path, name: &str, mut df: DataFrame) {
     let meta = TableMeta { stage: "test".into(), stage_hash: "0".into(), params_hash: "0".into(), schema_version: 1 };
     write_parquet(&dir.join(format!("{name}.parquet")), &mut df, &meta).expect("test table is written");
+}
+
+/// Writes `df` as the declared table `table` (`<dir>/<table>.parquet`), after checking
+/// it has exactly the columns and types the writing stage declares, so a fixture cannot
+/// drift from its writer.
+pub fn write_declared(dir: &Path, table: &Table, df: DataFrame) {
+    if let Err(e) = table.check_frame(&df) {
+        panic!("the fixture does not match its declaration: {e}");
+    }
+    write_table(dir, table.name, df);
 }
 
 /// Asserts `<stem>.png` and `<stem>.svg` exist and the PNG holds more than a blank

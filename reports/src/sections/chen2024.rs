@@ -9,8 +9,8 @@
 //! stage it came from.
 //!
 //! Inputs, in order: a `thermal.compensate` stage (`spans.parquet`), a
-//! `thermal.reprint` stage (`corners.parquet`, `contour.parquet`, `contour_regions.parquet`), a
-//! `thermal.accuracy` stage (`accuracy.parquet`) and a `thermal.monitor` stage
+//! `thermal.reprint_evaluate` stage (`corners.parquet`, `contour.parquet`, `contour_regions.parquet`), a
+//! `thermal.accuracy_evaluate` stage (`accuracy.parquet`) and a `thermal.monitor` stage
 //! (`frames.parquet`); then, by name: `reprint_lag`, the re-print of our lag-model
 //! extension (`thermal.compensate` with `source = "lag_model"`), reported beside the
 //! paper's method with the same checks; every `reprint_X`, a variant the discussion
@@ -24,9 +24,9 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::params::ParamValue;
-use pipeline::stage::Arity;
-use pipeline::{InputArtifact, ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::{NoParams, ParamValue};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{InputArtifact, StageContext, StageError};
 
 use super::chen2024_variants::{read_variants, variants_frame, Variant};
 use super::{comparison_frame, Row};
@@ -35,6 +35,42 @@ use crate::read::{bools, f64s, ints, no_rows, read_parquet, strs};
 
 /// The `report.chen2024` stage kind.
 pub struct Chen2024Section;
+
+/// The compensation of the paper's method.
+const COMPENSATE: Input =
+    Input::one("compensate", &[Source::Stage("thermal.compensate")], "the compensated spans (`spans.parquet`)");
+
+/// The re-print of the paper's method.
+const REPRINT: Input = Input::one(
+    "reprint",
+    &[Source::Stage("thermal.reprint_evaluate")],
+    "O_E per corner and the contour error (`corners.parquet`, `contour.parquet`, `contour_regions.parquet`)",
+);
+
+/// The monitor's accuracy against the truth.
+const ACCURACY: Input = Input::one(
+    "accuracy",
+    &[Source::Stage("thermal.accuracy_evaluate")],
+    "the corner detector's and the localisation's scores (`accuracy.parquet`)",
+);
+
+/// The monitor of the paper's method.
+const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "how every frame was placed or skipped (`frames.parquet`), and its `measure_age_s`",
+);
+
+/// Inputs found by their stage name: `reprint_lag`, every variant's chain (`reprint_X`
+/// and `<stage>_X`, compared with the shipped chain's records) and `true_widths`. Any
+/// stage: a variant may change any stage of the chain (a sequence, a monitor, a
+/// compensation), and what it changes is read from the stages' records, not by kind.
+const NAMED: Input = Input::many(
+    "named",
+    0,
+    &[Source::AnyStage],
+    "the extension, the variants and the true widths, found by their stage names (see the section's docs)",
+);
 
 /// Sec. 3.3: mean O_E over the corners before and after compensation (%).
 pub const PAPER_OE_PCT: (f64, f64) = (106.75, 31.73);
@@ -47,27 +83,18 @@ pub const PAPER_REDUCTION_PCT: (f64, f64) = (85.31, 53.10);
 /// Sec. 3.2: mAP of the Faster R-CNN corner detector (%).
 pub const PAPER_MAP_PCT: f64 = 99.5;
 
-impl StageKind for Chen2024Section {
-    fn name(&self) -> &'static str {
-        "report.chen2024"
-    }
-    fn version(&self) -> u32 {
-        17
-    }
-    fn summary(&self) -> &'static str {
-        "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Sec. 3.2-3.3, eqs 40-41, Table 3"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(4)
-    }
+impl Stage for Chen2024Section {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.chen2024",
+        version: 17,
+        summary: "Paper 003 vs ours: O_E (eq. 40), contour error (Table 3), compensation time, corner detection, capture-time localisation, done-when checks → section.html, comparison.parquet",
+        implements: "paper 003 Sec. 3.2-3.3, eqs 40-41, Table 3",
+        inputs: &[COMPENSATE, REPRINT, ACCURACY, MONITOR, NAMED],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let ours = Ours::read(&ctx.inputs)?;
         let (rows, html) = section(&ours);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
@@ -75,6 +102,15 @@ impl StageKind for Chen2024Section {
         ctx.write_table("variants", &mut variants_frame(&ours.reprint, &ours.variants)?)?;
         Ok(())
     }
+}
+
+/// The one input of `role` among the section's `inputs` (all of them, as its context
+/// lists them).
+///
+/// # Panics
+/// When no input fills `role`: the planner fills every declared role, so this is a bug.
+fn input_of<'a>(inputs: &'a [InputArtifact], role: &Input) -> &'a InputArtifact {
+    inputs.iter().find(|i| i.role == role.role).unwrap_or_else(|| panic!("no input of role `{}`", role.role))
 }
 
 /// Where a number came from: stage name, kind and parameters, and the file.
@@ -277,12 +313,13 @@ impl Reprint {
 }
 
 impl Ours {
-    /// Reads the four inputs (compensate, reprint, accuracy, monitor) and the optional
-    /// named ones: `reprint_lag` (the extension), every `reprint_X` (a variant) with
-    /// its stages, and `true_widths`.
+    /// Reads the section's `inputs` by role: compensate, reprint, accuracy, monitor, and
+    /// among those of role `named`: `reprint_lag` (the extension), every `reprint_X` (a
+    /// variant) with its stages, and `true_widths`.
     pub fn read(inputs: &[InputArtifact]) -> Result<Self, StageError> {
-        let named = |name: &str| inputs.iter().skip(4).find(|i| i.name == name);
-        let (compensate, reprint, accuracy, monitor) = (&inputs[0], &inputs[1], &inputs[2], &inputs[3]);
+        let named = |name: &str| inputs.iter().filter(|i| i.role == NAMED.role).find(|i| i.name == name);
+        let (compensate, reprint) = (input_of(inputs, &COMPENSATE), input_of(inputs, &REPRINT));
+        let (accuracy, monitor) = (input_of(inputs, &ACCURACY), input_of(inputs, &MONITOR));
         let frames = read_frames(&monitor.dir.join("frames.parquet"))?;
         Ok(Self {
             reprint: Reprint::read(reprint)?,
@@ -442,7 +479,7 @@ fn changes_text(changes_pct: [f64; 3]) -> String {
 
 /// The paper method's changes with the stage's defaults (stage reprint).
 fn defaults_text(ours: &Ours) -> String {
-    let defaults = Variant { name: "defaults".into(), reprint: ours.reprint.clone(), changes: Vec::new() };
+    let defaults = Variant::defaults(&ours.reprint);
     changes_text(defaults.changes_pct())
 }
 
@@ -467,7 +504,7 @@ RMS (eq. 41, over every re-printed layer); what differs is read from the variant
 <table><tr><th class=\"t\">variant</th><th class=\"t\">what differs</th><th>mean O_E (%)</th><th>max (mm)</th><th>RMS (mm)</th>\
 <th>O_E change (%)</th><th>max change (%)</th><th>RMS change (%)</th></tr>\n",
     );
-    let defaults = Variant { name: "defaults".into(), reprint: ours.reprint.clone(), changes: Vec::new() };
+    let defaults = Variant::defaults(&ours.reprint);
     for v in std::iter::once(&defaults).chain(&ours.variants) {
         let (oe0, oe1) = v.reprint.mean_oe_pct();
         let [(max0, rms0), (max1, rms1)] = v.reprint.contour_mm;
@@ -1072,9 +1109,12 @@ mod tests {
     }
 
     fn inputs(root: &Path) -> Vec<InputArtifact> {
-        let names = ["compensate", "reprint", "accuracy", "monitor"];
-        let inputs: Vec<InputArtifact> =
-            names.iter().map(|n| InputArtifact { name: n.to_string(), dir: root.join(n) }).collect();
+        // The four single roles, each filled by a stage named like it.
+        let roles = [COMPENSATE, REPRINT, ACCURACY, MONITOR];
+        let inputs: Vec<InputArtifact> = roles
+            .iter()
+            .map(|r| InputArtifact { name: r.role.to_string(), role: r.role, dir: root.join(r.role) })
+            .collect();
         for i in &inputs {
             std::fs::create_dir_all(&i.dir).expect("dir");
         }
@@ -1131,7 +1171,7 @@ mod tests {
         let dir = root.path().join("reprint_lag");
         std::fs::create_dir_all(&dir).expect("dir");
         write_reprint(&dir);
-        inputs.push(InputArtifact { name: "reprint_lag".into(), dir });
+        inputs.push(InputArtifact { name: "reprint_lag".into(), role: NAMED.role, dir });
         let ours = Ours::read(&inputs).expect("reads");
         let (rows, html) = section(&ours);
         let row = rows.iter().find(|r| r.item == "extension (lag model): max contour error reduction").expect("row");
@@ -1147,7 +1187,7 @@ mod tests {
         let dir = root.path().join("reprint_paper_gain");
         std::fs::create_dir_all(&dir).expect("dir");
         write_reprint(&dir);
-        inputs.push(InputArtifact { name: "reprint_paper_gain".into(), dir });
+        inputs.push(InputArtifact { name: "reprint_paper_gain".into(), role: NAMED.role, dir });
         let ours = Ours::read(&inputs).expect("reads");
         assert_eq!(ours.variants.len(), 1);
         assert!(ours.extension.is_none(), "only reprint_lag is the extension");

@@ -52,6 +52,11 @@ pub struct Variant {
 }
 
 impl Variant {
+    /// The shipped chain's re-print, as the row `defaults`.
+    pub fn defaults(reprint: &Reprint) -> Self {
+        Self { name: "defaults".into(), reprint: reprint.clone(), changes: Vec::new() }
+    }
+
     /// Change of the mean O_E, of the max and of the RMS contour error from the
     /// conventional print to the compensated one (%; negative: a reduction).
     pub fn changes_pct(&self) -> [f64; 3] {
@@ -146,7 +151,7 @@ fn changes_between(
 /// variant, what differs, the mean O_E and the contour error's max and RMS before and
 /// after, their changes (%) and the source.
 pub fn variants_frame(main: &Reprint, variants: &[Variant]) -> Result<DataFrame, StageError> {
-    let defaults = Variant { name: "defaults".into(), reprint: main.clone(), changes: Vec::new() };
+    let defaults = Variant::defaults(main);
     let all: Vec<&Variant> = std::iter::once(&defaults).chain(variants).collect();
     let strs = |name: &str, f: &dyn Fn(&Variant) -> String| -> Column {
         Series::new(name.into(), all.iter().map(|v| f(v)).collect::<Vec<String>>()).into_column()

@@ -9,8 +9,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -19,28 +20,35 @@ use crate::read::{bools, f64s, ints, read_parquet, strs};
 /// The `report.discrepancy_fdm` stage kind.
 pub struct DiscrepancyFdmSection;
 
-impl StageKind for DiscrepancyFdmSection {
-    fn name(&self) -> &'static str {
-        "report.discrepancy_fdm"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "What the lag model gets wrong on the measured lines, the cause named, the extension and its gain, and the engine's power → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 000's Taz 5 / Taz 6 data"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(2)
-    }
+/// The engine run on the lag model.
+const DISCREPANCY: Input = Input::one(
+    "discrepancy",
+    &[Source::Stage("fdm.discrepancy")],
+    "the causes, extension, gain and residual structure of the lag model (`causes.parquet`, `extension.parquet`, `gain.parquet`, `residuals.parquet`)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = &ctx.inputs[0].dir;
+/// The power studies and the engine runs on other baselines, told apart by their tables.
+const OTHERS: Input = Input::many(
+    "others",
+    1,
+    &[Source::Stage("fdm.discovery_power"), Source::Stage("fdm.discrepancy")],
+    "power studies (`power.parquet`) and engine runs on another baseline (`causes.parquet`), in any order",
+);
+
+impl Stage for DiscrepancyFdmSection {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.discrepancy_fdm",
+        version: 2,
+        summary: "What the lag model gets wrong on the measured lines, the cause named, the extension and its gain, and the engine's power → section.html, comparison.parquet",
+        implements: "DESIGN §7 on paper 000's Taz 5 / Taz 6 data",
+        inputs: &[DISCREPANCY, OTHERS],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let discrepancy = ctx.input(&DISCREPANCY);
+        let dir = &discrepancy.dir;
         let causes = Cause::read(&dir.join("causes.parquet"), &FDM)?;
         let params = Param::read(&dir.join("extension.parquet"), &FDM)?;
         let gains = GainRow::read(&dir.join("gain.parquet"), &FDM)?;
@@ -48,7 +56,7 @@ impl StageKind for DiscrepancyFdmSection {
         // The other inputs: power studies (power.parquet), and engine runs on another
         // baseline (causes.parquet without power.parquet).
         let (mut power, mut power_stages, mut other_baselines) = (Vec::new(), Vec::new(), Vec::new());
-        for input in &ctx.inputs[1..] {
+        for input in ctx.inputs_of(&OTHERS) {
             if input.dir.join("power.parquet").exists() || !input.dir.join("causes.parquet").exists() {
                 power.extend(PowerRow::read(&input.dir.join("power.parquet"))?);
                 power_stages.push(input.name.as_str());
@@ -56,7 +64,7 @@ impl StageKind for DiscrepancyFdmSection {
                 other_baselines.push(input);
             }
         }
-        let stage = ctx.inputs[0].name.clone();
+        let stage = discrepancy.name.clone();
         let power_stage = power_stages.join(", ");
         let mut html = String::from("<h3>What the lag model gets wrong, and why</h3>\n");
         html += &method(&causes);

@@ -10,8 +10,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::discrepancy_fdm::{causes_table, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow};
 use super::{comparison_frame, Row};
@@ -42,29 +43,35 @@ pub(super) struct DatasetText {
 /// The `report.discrepancy_inkjet` stage kind.
 pub struct DiscrepancyInkjetSection;
 
-impl StageKind for DiscrepancyInkjetSection {
-    fn name(&self) -> &'static str {
-        "report.discrepancy_inkjet"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "What the layer-to-layer model gets wrong on ink-jet scans, the cause named, the extension and its gain, and (with a power study) how often hidden effects are named → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 002's layer-to-layer model"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
-    }
+/// The engine run on the layer-to-layer model.
+const DISCREPANCY: Input = Input::one(
+    "discrepancy",
+    &[Source::Stage("inkjet.discrepancy")],
+    "the causes, extension and gain per dataset (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = &ctx.inputs[0].dir;
-        let stage = ctx.inputs[0].name.clone();
+/// The optional studies, told apart by their tables.
+const STUDIES: Input = Input::many(
+    "studies",
+    0,
+    &[Source::Stage("inkjet.discovery_power"), Source::Stage("inkjet.control_gain")],
+    "a power study (`power.parquet`) and a control study (`control_gain.parquet`), in any order",
+);
+
+impl Stage for DiscrepancyInkjetSection {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.discrepancy_inkjet",
+        version: 2,
+        summary: "What the layer-to-layer model gets wrong on ink-jet scans, the cause named, the extension and its gain, and (with a power study) how often hidden effects are named → section.html, comparison.parquet",
+        implements: "DESIGN §7 on paper 002's layer-to-layer model",
+        inputs: &[DISCREPANCY, STUDIES],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let discrepancy = ctx.input(&DISCREPANCY);
+        let (dir, stage) = (&discrepancy.dir, discrepancy.name.clone());
         let causes = Cause::read(&dir.join("causes.parquet"), &INKJET.names)?;
         let params = Param::read(&dir.join("extension.parquet"), &INKJET.names)?;
         let gains = GainRow::read(&dir.join("gain.parquet"), &INKJET.names)?;
@@ -74,7 +81,7 @@ impl StageKind for DiscrepancyInkjetSection {
         for g in &gains {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows, &INKJET);
         }
-        for input in &ctx.inputs[1..] {
+        for input in ctx.inputs_of(&STUDIES) {
             let control = input.dir.join("control_gain.parquet");
             if control.is_file() {
                 html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);

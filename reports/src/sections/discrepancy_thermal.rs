@@ -12,8 +12,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::discrepancy_fdm::{Cause, GainRow, Names, Param, PowerRow};
 use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
@@ -34,29 +35,35 @@ const THERMAL: DatasetText = DatasetText {
 /// The `report.discrepancy_thermal` stage kind.
 pub struct DiscrepancyThermalSection;
 
-impl StageKind for DiscrepancyThermalSection {
-    fn name(&self) -> &'static str {
-        "report.discrepancy_thermal"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity { min: 1, max: 3 }
-    }
+/// The engine run on the capture-time, layer and flow models.
+const DISCREPANCY: Input = Input::one(
+    "discrepancy",
+    &[Source::Stage("thermal.discrepancy")],
+    "the causes, extension and gain per filmed print (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = &ctx.inputs[0].dir;
-        let stage = ctx.inputs[0].name.clone();
+/// The optional studies, told apart by their tables.
+const STUDIES: Input = Input::many(
+    "studies",
+    0,
+    &[Source::Stage("thermal.discovery_power"), Source::Stage("thermal.control_gain")],
+    "a power study (`power.parquet`) and a control study (`control_gain.parquet`), in any order",
+);
+
+impl Stage for DiscrepancyThermalSection {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.discrepancy_thermal",
+        version: 2,
+        summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
+        implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
+        inputs: &[DISCREPANCY, STUDIES],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let discrepancy = ctx.input(&DISCREPANCY);
+        let (dir, stage) = (&discrepancy.dir, discrepancy.name.clone());
         let causes = Cause::read(&dir.join("causes.parquet"), &THERMAL.names)?;
         let params = Param::read(&dir.join("extension.parquet"), &THERMAL.names)?;
         let gains = GainRow::read(&dir.join("gain.parquet"), &THERMAL.names)?;
@@ -66,7 +73,7 @@ impl StageKind for DiscrepancyThermalSection {
         for g in &gains {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows, &THERMAL);
         }
-        for input in &ctx.inputs[1..] {
+        for input in ctx.inputs_of(&STUDIES) {
             let control = input.dir.join("control_gain.parquet");
             if control.is_file() {
                 html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);

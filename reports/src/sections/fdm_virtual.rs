@@ -13,8 +13,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::loo;
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -24,52 +27,105 @@ use models::stats::finite_median;
 /// The `report.fdm_virtual` stage kind.
 pub struct FdmVirtualSection;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "engine_photo_sets",
-    ty: pipeline::ParamType::Text,
-    default: pipeline::params::ParamDefault::Required,
-    doc: "The photo-set stages behind the two discrepancy-engine inputs, `clean, hidden` (their effects are read from the accuracy stage's photo_sets.parquet).",
-}];
+pipeline::params! {
+    /// The parameters of `report.fdm_virtual`.
+    pub struct FdmVirtualParams {
+        /// The photo-set stages behind the two discrepancy-engine inputs, `clean, hidden` (their
+        /// effects are read from the accuracy stage's photo_sets.parquet).
+        pub engine_photo_sets: String,
+    }
+}
 
-impl StageKind for FdmVirtualSection {
-    fn name(&self) -> &'static str {
-        "report.fdm_virtual"
+impl FdmVirtualParams {
+    /// The photo-set stage names of `engine_photo_sets`: the clean one, then the one with
+    /// a hidden effect.
+    fn photo_sets(&self) -> Result<[&str; 2], ParamError> {
+        let sets: Vec<&str> = self.engine_photo_sets.split(',').map(str::trim).collect();
+        <[&str; 2]>::try_from(sets).map_err(|_| {
+            let message = "expected two photo-set stage names, of the clean and of the hidden-effect run";
+            ParamError::new("engine_photo_sets", message)
+        })
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Paper 000 from photos: virtual vs real lines, segmentation accuracy, leave-one-out on photos vs real widths, the discrepancy engine on photos → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III (widths from camera images), DESIGN §5.1 and §7"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(7)
+}
+
+/// Both models' leave-one-out (a `table.concat` of their stages).
+const LOO_KINDS: &[Source] = &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")];
+/// What `loo_part` reads of a leave-one-out.
+const LOO_READS: &[Reads] = &[Reads { table: &loo::TABLE, columns: &[loo::printer, loo::model, loo::rmse_mm] }];
+
+/// The virtual printers against the real lines.
+const AGREEMENT: Input = Input::one(
+    "agreement",
+    &[Source::Stage("fdm.virtual_agreement")],
+    "the held-out RMSE and virtual scatter per line (`agreement.parquet`)",
+);
+
+/// The segmentation's accuracy against the truth.
+const ACCURACY: Input = Input::one(
+    "accuracy",
+    &[Source::Stage("fdm.segment_accuracy")],
+    "the width RMSE and bias per photo, and what each photo set holds (`segment_accuracy.parquet`, `photo_sets.parquet`)",
+);
+
+/// The segmentation's diagnostics (a `table.concat` of the segmentations').
+const DIAGNOSTICS: Input = Input::one(
+    "diagnostics",
+    &[Source::Stage("fdm.segment_widths")],
+    "the positions the segmentation skipped and why (`segment_diagnostics.parquet`)",
+);
+
+/// Paper 000's leave-one-out on the segmented widths.
+const PHOTO_LOO: Input =
+    Input::one("photo_loo", LOO_KINDS, "the held-out RMSE on the widths from photos (`loo.parquet`)")
+        .reading(LOO_READS);
+
+/// Paper 000's leave-one-out on the measured widths.
+const REAL_LOO: Input =
+    Input::one("real_loo", LOO_KINDS, "the held-out RMSE on the real widths (`loo.parquet`)").reading(LOO_READS);
+
+/// The engine on the clean photo set.
+const CLEAN_ENGINE: Input = Input::one(
+    "clean_engine",
+    &[Source::Stage("fdm.discrepancy")],
+    "the engine's causes and extension on the photo set as printed (`causes.parquet`, `extension.parquet`)",
+);
+
+/// The engine on the photo set with a hidden effect.
+const HIDDEN_ENGINE: Input = Input::one(
+    "hidden_engine",
+    &[Source::Stage("fdm.discrepancy")],
+    "the engine's causes and extension on the photo set with a hidden effect (`causes.parquet`, `extension.parquet`)",
+);
+
+impl Stage for FdmVirtualSection {
+    type Params = FdmVirtualParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.fdm_virtual",
+        version: 1,
+        summary: "Paper 000 from photos: virtual vs real lines, segmentation accuracy, leave-one-out on photos vs real widths, the discrepancy engine on photos → section.html, comparison.parquet",
+        implements: "paper 000 Sec. III (widths from camera images), DESIGN §5.1 and §7",
+        inputs: &[AGREEMENT, ACCURACY, DIAGNOSTICS, PHOTO_LOO, REAL_LOO, CLEAN_ENGINE, HIDDEN_ENGINE],
+        output: Output::Tables,
+    };
+
+    fn check(p: &FdmVirtualParams) -> Result<(), ParamError> {
+        p.photo_sets().map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = |k: usize| ctx.inputs[k].dir.clone();
-        let name = |k: usize| ctx.inputs[k].name.clone();
+    fn run(&self, ctx: &mut StageContext, p: &FdmVirtualParams) -> Result<(), StageError> {
+        let dir = |role: &Input| ctx.input(role).dir.clone();
+        let name = |role: &Input| ctx.input(role).name.clone();
         let mut rows = Vec::new();
         let mut html =
             String::from("<h3>Paper 000 from photos: the virtual printers, their camera and the segmentation</h3>\n");
-        html += &agreement_part(&dir(0), &name(0), &mut rows)?;
-        html += &accuracy_part(&dir(1), &name(1), &mut rows)?;
-        html += &skipped_part(&dir(2))?;
-        html += &loo_part(&dir(3), &dir(4), (&name(3), &name(4)), &mut rows)?;
-        let sets = read_photo_sets(&dir(1))?;
-        let photo_sets: Vec<&str> = ctx.params.str("engine_photo_sets").split(',').map(str::trim).collect();
-        if photo_sets.len() != 2 {
-            let message =
-                "engine_photo_sets: expected two photo-set stage names, of the clean and of the hidden-effect run"
-                    .into();
-            return Err(StageError::Params { stage: ctx.stage.clone(), message });
-        }
-        html += &discrepancy_part(&[(dir(5), name(5)), (dir(6), name(6))], &photo_sets, &sets, &mut rows)?;
+        html += &agreement_part(&dir(&AGREEMENT), &name(&AGREEMENT), &mut rows)?;
+        html += &accuracy_part(&dir(&ACCURACY), &name(&ACCURACY), &mut rows)?;
+        html += &skipped_part(&dir(&DIAGNOSTICS))?;
+        html += &loo_part(&dir(&PHOTO_LOO), &dir(&REAL_LOO), (&name(&PHOTO_LOO), &name(&REAL_LOO)), &mut rows)?;
+        let sets = read_photo_sets(&dir(&ACCURACY))?;
+        let photo_sets = p.photo_sets().map_err(|e| StageError::params(ctx, e))?;
+        let runs = [(dir(&CLEAN_ENGINE), name(&CLEAN_ENGINE)), (dir(&HIDDEN_ENGINE), name(&HIDDEN_ENGINE))];
+        html += &discrepancy_part(&runs, &photo_sets, &sets, &mut rows)?;
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
         Ok(())
@@ -167,10 +223,10 @@ fn skipped_part(dir: &Path) -> Result<String, StageError> {
 /// Per printer and model: the median leave-one-out RMSE on the photos and on the real lines.
 fn loo_part(photos: &Path, real: &Path, stages: (&str, &str), rows: &mut Vec<Row>) -> Result<String, StageError> {
     let read = |dir: &Path| -> Result<BTreeMap<(String, String), Vec<f64>>, StageError> {
-        let path = dir.join("loo.parquet");
+        let path = dir.join(loo::TABLE.file());
         let df = read_parquet(&path)?;
         let (printer, model, rmse) =
-            (strs(&df, "printer", &path)?, strs(&df, "model", &path)?, f64s(&df, "rmse_mm", &path)?);
+            (strs(&df, loo::printer, &path)?, strs(&df, loo::model, &path)?, f64s(&df, loo::rmse_mm, &path)?);
         let mut out: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
         for i in 0..df.height() {
             out.entry((printer[i].clone(), model[i].clone())).or_default().push(rmse[i]);

@@ -13,14 +13,43 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::{comparison_frame, Row};
 use crate::read::{f64s, read_parquet, strs};
 
 /// The `report.lu2015` stage kind.
 pub struct Lu2015Section;
+
+/// The print experiments' summaries (a `table.concat` of them).
+const SUMMARY: Input = Input::one(
+    "summary",
+    &[Source::Stage("inkjet.print_experiment")],
+    "every experiment's mean error, std, average height and RMSD (`summary.parquet`)",
+);
+
+/// The exact-recovery check of Sec. IV-C.
+const RECOVERY: Input = Input::one(
+    "recovery",
+    &[Source::Stage("inkjet.recovery")],
+    "the trials that recovered the applied pattern (`recovery.parquet`)",
+);
+
+/// The pipe junction's prints (a `table.concat` of them).
+const EDGE_DEFORMATION: Input = Input::one(
+    "edge_deformation",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the pipe junction's edge deformation per region (`edge_deformation.parquet`)",
+);
+
+/// The model's residuals on virtual scans (a `table.concat` of them).
+const SCAN_RESIDUALS: Input = Input::one(
+    "scan_residuals",
+    &[Source::Stage("inkjet.scan_residuals")],
+    "the layer-to-layer model's residuals per scan set (`scan_residuals.parquet`)",
+);
 
 /// One experiment the paper reports: (scenario, controller, variation %, metric,
 /// paper value µm, where in the paper).
@@ -68,29 +97,20 @@ impl Metric {
     }
 }
 
-impl StageKind for Lu2015Section {
-    fn name(&self) -> &'static str {
-        "report.lu2015"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "Paper 002 vs ours: cylinder (Figs 11-12), cuboid (Table II, 3 and 4 layers), exact recovery (Sec. IV-C), pipe junction edge deformation (Figs 13-15), model residuals on virtual scans per effect → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Figs 11-15, Table II, Sec. IV-C, Sec. V-D-1"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(4)
-    }
+impl Stage for Lu2015Section {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.lu2015",
+        version: 2,
+        summary: "Paper 002 vs ours: cylinder (Figs 11-12), cuboid (Table II, 3 and 4 layers), exact recovery (Sec. IV-C), pipe junction edge deformation (Figs 13-15), model residuals on virtual scans per effect → section.html, comparison.parquet",
+        implements: "paper 002 Figs 11-15, Table II, Sec. IV-C, Sec. V-D-1",
+        inputs: &[SUMMARY, RECOVERY, EDGE_DEFORMATION, SCAN_RESIDUALS],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let summary = Summary::read(&ctx.inputs[0].dir.join("summary.parquet"))?;
-        let (recovered, trials) = recovery(&ctx.inputs[1].dir.join("recovery.parquet"))?;
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let summary = Summary::read(&ctx.input(&SUMMARY).dir.join("summary.parquet"))?;
+        let (recovered, trials) = recovery(&ctx.input(&RECOVERY).dir.join("recovery.parquet"))?;
         let (mut rows, mut html) = experiments(&summary);
         let _ = writeln!(
             html,
@@ -105,8 +125,9 @@ impl StageKind for Lu2015Section {
             source: "out/inkjet/recovery.parquet (stage recovery, inkjet.recovery)".into(),
         });
         html += &cuboid_layers(&summary, &mut rows);
-        html += &pipe_junction(&summary, &ctx.inputs[2].dir.join("edge_deformation.parquet"), &mut rows)?;
-        html += &scan_residuals(&ctx.inputs[3].dir.join("scan_residuals.parquet"), &mut rows)?;
+        html +=
+            &pipe_junction(&summary, &ctx.input(&EDGE_DEFORMATION).dir.join("edge_deformation.parquet"), &mut rows)?;
+        html += &scan_residuals(&ctx.input(&SCAN_RESIDUALS).dir.join("scan_residuals.parquet"), &mut rows)?;
         html += &discussion(&summary);
         html += &std_gap(&summary);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;

@@ -10,8 +10,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::loo;
 
 use models::stats::finite_median;
 
@@ -21,6 +24,24 @@ use crate::read::{f64s, ints, read_parquet, strs};
 
 /// The `report.ren2021` stage kind.
 pub struct Ren2021Section;
+
+/// The leave-one-out beside Table II: both models' (a `table.concat` of their stages).
+const LOO: Input = Input::one(
+    "loo",
+    &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")],
+    "the held-out RMSE per printer, model and condition (`loo.parquet`)",
+)
+.reading(&[Reads {
+    table: &loo::TABLE,
+    columns: &[loo::printer, loo::model, loo::condition, loo::rmse_mm, loo::r_a, loo::r_f],
+}]);
+
+/// The transfer learning beside Fig. 9.
+const TRANSFER: Input = Input::one(
+    "transfer",
+    &[Source::Stage("fdm.transfer_cv")],
+    "the held-out RMSE per training-set size and method (`transfer_cv.parquet`)",
+);
 
 /// Paper 000 Table II: LOO RMSE (mm) per Table I sample `(a mm/s², F mm/s)`.
 pub const TABLE_II: [(&str, f64, f64, f64); 9] = [
@@ -41,29 +62,20 @@ pub const PAPER_MAX_IMPROVEMENT_PCT: f64 = 24.0;
 /// Leave-one-out results keyed by (printer, model, condition) → (rmse, r_a, r_f).
 type LooMap = BTreeMap<(String, String, String), (f64, f64, f64)>;
 
-impl StageKind for Ren2021Section {
-    fn name(&self) -> &'static str {
-        "report.ren2021"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Paper 000 vs ours: Table II and Fig. 9 side by side, with a paragraph on the differences → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Table II, Fig. 9, Sec. IV"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+impl Stage for Ren2021Section {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.ren2021",
+        version: 1,
+        summary: "Paper 000 vs ours: Table II and Fig. 9 side by side, with a paragraph on the differences → section.html, comparison.parquet",
+        implements: "paper 000 Table II, Fig. 9, Sec. IV",
+        inputs: &[LOO, TRANSFER],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let loo = read_loo(&ctx.inputs[0].dir.join("loo.parquet"))?;
-        let medians = transfer_medians(&ctx.inputs[1].dir.join("transfer_cv.parquet"))?;
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let loo = read_loo(&ctx.input(&LOO).dir.join(loo::TABLE.file()))?;
+        let medians = transfer_medians(&ctx.input(&TRANSFER).dir.join("transfer_cv.parquet"))?;
         let (loo_rows, loo_html) = table_ii(&loo);
         let (fig9_rows, fig9_html) = fig9(&medians);
         let mut html = String::from("<h3>Paper 000 vs ours</h3>\n");
@@ -80,8 +92,8 @@ impl StageKind for Ren2021Section {
 fn read_loo(path: &Path) -> Result<LooMap, StageError> {
     let df = read_parquet(path)?;
     let (printer, model, condition) =
-        (strs(&df, "printer", path)?, strs(&df, "model", path)?, strs(&df, "condition", path)?);
-    let (rmse, r_a, r_f) = (f64s(&df, "rmse_mm", path)?, f64s(&df, "r_a", path)?, f64s(&df, "r_f", path)?);
+        (strs(&df, loo::printer, path)?, strs(&df, loo::model, path)?, strs(&df, loo::condition, path)?);
+    let (rmse, r_a, r_f) = (f64s(&df, loo::rmse_mm, path)?, f64s(&df, loo::r_a, path)?, f64s(&df, loo::r_f, path)?);
     Ok((0..df.height())
         .map(|i| ((printer[i].clone(), model[i].clone(), condition[i].clone()), (rmse[i], r_a[i], r_f[i])))
         .collect())

@@ -10,8 +10,9 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::{comparison_frame, Row};
 use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix};
@@ -19,6 +20,13 @@ use crate::html::escape;
 
 /// The `report.transfer_matrix` stage kind.
 pub struct TransferMatrixSection;
+
+/// The transfer matrix reported.
+const MATRIX: Input = Input::one(
+    "matrix",
+    &[Source::Stage("fdm.transfer_matrix")],
+    "the median improvements with their intervals per task, n and method (`transfer_matrix.parquet`)",
+);
 
 /// Methods in table order, with what a reader of the paper calls them.
 const METHODS: [(&str, &str); 4] = [
@@ -31,28 +39,19 @@ const METHODS: [(&str, &str); 4] = [
 const SHOWN_N: [i64; 2] = [2, 3];
 const SOURCE: &str = "fdm/transfer_matrix.parquet (stage matrix, fdm.transfer_matrix)";
 
-impl StageKind for TransferMatrixSection {
-    fn name(&self) -> &'static str {
-        "report.transfer_matrix"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Transfer among printers: per method the cells worse / better than single-printer learning beyond their interval, per task the guarded improvement → section.html, comparison.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III-B and Fig. 9, over several printers"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for TransferMatrixSection {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "report.transfer_matrix",
+        version: 1,
+        summary: "Transfer among printers: per method the cells worse / better than single-printer learning beyond their interval, per task the guarded improvement → section.html, comparison.parquet",
+        implements: "paper 000 Sec. III-B and Fig. 9, over several printers",
+        inputs: &[MATRIX],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let matrix = load(&ctx.inputs[0].dir)?;
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let matrix = load(&ctx.input(&MATRIX).dir)?;
         let (rows, tally_html) = tally(&matrix);
         let mut html = String::from("<h3>Transfer among printers: when it helps, and the guard</h3>\n");
         html += &tally_html;

@@ -22,79 +22,81 @@ use discrepancy::stats::mix_seed;
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
 use models::fdm::discrepancy::power::{names, run_draw_range, Base, DrawResult, Noise, PowerDesign};
 use models::fdm::discrepancy::FdmModel;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::{IntoColumn, NamedFrom, Series};
 
+use crate::discrepancy_tables::study_settings;
 use crate::effects::strength_list;
-use crate::fdm::discrepancy::{engine_failed, read_printers, StartBlob, SMOOTHING, START_BLOB};
-use crate::parts::{read_parts, study_unit_draws, study_units, without, COVERED, DRAWS_PER_UNIT, PART_TABLE};
+use crate::fdm::discrepancy::{engine_failed, read_printers, LagBaseline, StartBlob};
+use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize, COVERED, PART_TABLE};
+use crate::roles;
 use crate::table::{f64_col, f64s, frame, i64_col, opt_bools, str_col, strs};
 
 /// The `fdm.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
 
-const PARAMS: &[ParamSpec] = &[
-    START_BLOB,
-    SMOOTHING,
-    ParamSpec {
-        name: "bed_tilt",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.02, 0.05, 0.1, 0.2"),
-        doc: "Strengths of bed_tilt (relative width change end to end, its sign drawn per draw), comma-separated; empty for none.",
-    },
-    ParamSpec {
-        name: "gear_eccentricity",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.02, 0.05, 0.1"),
-        doc: "Strengths of gear_eccentricity (relative flow ripple; period drawn in 4-40 mm, phase per line), comma-separated.",
-    },
-    ParamSpec {
-        name: "flow_saturation",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.05, 0.1, 0.2, 0.4"),
-        doc: "Strengths of flow_saturation (relative width loss at the fastest line's cruise), comma-separated.",
-    },
-    ParamSpec {
-        name: "noise",
-        ty: ParamType::Choice(&["measured", "white"]),
-        default: ParamDefault::Str("measured"),
-        doc: "A draw's noise around the own-cause model: `measured` (a phase-randomised copy of each line's residual, slow swells included) or `white` (independent noise of the lines' sample-to-sample scatter: measurement noise only).",
-    },
-    ParamSpec {
-        name: "draws",
-        ty: ParamType::Int { min: 1, max: 100_000 },
-        default: ParamDefault::Int(20),
-        doc: "Draws per base, effect and strength.",
-    },
-    ParamSpec {
-        name: "null_draws",
-        ty: ParamType::Int { min: 0, max: 100_000 },
-        default: ParamDefault::Int(100),
-        doc: "Draws per base with nothing injected.",
-    },
-    ParamSpec {
-        name: "alpha",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "The engine's family-wise false-alarm rate per round.",
-    },
-    ParamSpec {
-        name: "max_rounds",
-        ty: ParamType::Int { min: 1, max: 7 },
-        default: ParamDefault::Int(3),
-        doc: "The engine's most rounds per draw (beyond the data's own causes).",
-    },
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(500),
-        doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
-    },
-    DRAWS_PER_UNIT,
-];
+pipeline::choice! {
+    /// A draw's noise around the own-cause model.
+    pub enum DrawNoise {
+        /// A phase-randomised copy of each line's residual, slow swells included.
+        Measured = "measured",
+        /// Independent noise of the lines' sample-to-sample scatter: measurement noise only.
+        White = "white",
+    }
+}
+
+pipeline::params! {
+    /// The parameters of `fdm.discovery_power`.
+    pub struct DiscoveryPowerParams {
+        /// Strengths of bed_tilt (relative width change end to end, its sign drawn per draw), comma-separated; empty for none.
+        pub bed_tilt: String = "0.02, 0.05, 0.1, 0.2",
+        /// Strengths of gear_eccentricity (relative flow ripple; period drawn in 4-40 mm, phase per line), comma-separated.
+        pub gear_eccentricity: String = "0.02, 0.05, 0.1",
+        /// Strengths of flow_saturation (relative width loss at the fastest line's cruise), comma-separated.
+        pub flow_saturation: String = "0.05, 0.1, 0.2, 0.4",
+        /// A draw's noise around the own-cause model: `measured` (a phase-randomised copy of each line's residual, slow swells included) or `white` (independent noise of the lines' sample-to-sample scatter: measurement noise only).
+        pub noise: DrawNoise = DrawNoise::Measured,
+        /// Draws per base, effect and strength.
+        pub draws: i64 [1, 100_000] = 20,
+        /// Draws per base with nothing injected.
+        pub null_draws: i64 [0, 100_000] = 100,
+        /// The engine's family-wise false-alarm rate per round.
+        pub alpha: f64 [0.001, 0.5] = 0.05,
+        /// The engine's most rounds per draw (beyond the data's own causes).
+        pub max_rounds: i64 [1, 7] = 3,
+        /// Bootstrap draws of each gain interval inside a draw (the power table uses none of them).
+        pub bootstrap_draws: i64 [100, 100_000] = 500,
+    }
+    groups { pub lag: LagBaseline, pub unit_size: UnitSize }
+}
+
+impl DiscoveryPowerParams {
+    /// The strength list of `effect` (none for the null).
+    fn list(&self, effect: Effect) -> &str {
+        match effect {
+            Effect::None => "",
+            Effect::BedTilt => &self.bed_tilt,
+            Effect::GearEccentricity => &self.gear_eccentricity,
+            Effect::FlowSaturation => &self.flow_saturation,
+        }
+    }
+
+    /// The strengths listed for `effect`, each checked against the effect's range.
+    fn strengths(&self, effect: Effect) -> Result<Vec<f64>, ParamError> {
+        let (lo, hi) = effect.strength_range();
+        strength_list(effect.name(), self.list(effect), hi.max(-lo), "")
+    }
+
+    fn noise(&self) -> Noise {
+        match self.noise {
+            DrawNoise::Measured => Noise::Measured,
+            DrawNoise::White => Noise::White,
+        }
+    }
+}
 
 /// The effects the study hides, in the order of its cells.
 const STUDIED: [Effect; 3] = [Effect::BedTilt, Effect::GearEccentricity, Effect::FlowSaturation];
@@ -102,27 +104,22 @@ const STUDIED: [Effect; 3] = [Effect::BedTilt, Effect::GearEccentricity, Effect:
 /// The part's bookkeeping columns, beyond those of `power_draws.parquet`.
 const PART_ONLY: [&str; 2] = ["own_causes", COVERED];
 
-impl StageKind for DiscoveryPowerStage {
-    fn name(&self) -> &'static str {
-        "fdm.discovery_power"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "Power study of the discrepancy engine: effects hidden in surrogate draws of each measured base at a grid of strengths, plus null draws, scored against the injection → power.parquet, power_draws.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 (tests that hide an effect and require finding it), on paper 000's lines"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
+impl Stage for DiscoveryPowerStage {
+    type Params = DiscoveryPowerParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.discovery_power",
+        version: 2,
+        summary: "Power study of the discrepancy engine: effects hidden in surrogate draws of each measured base at a grid of strengths, plus null draws, scored against the injection → power.parquet, power_draws.parquet",
+        implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 000's lines",
+        inputs: &[roles::FDM_WIDTHS_MANY],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
+        STUDIED.iter().try_for_each(|e| p.strengths(*e).map(|_| ()))
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &DiscoveryPowerParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -133,17 +130,25 @@ impl StageKind for DiscoveryPowerStage {
 
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, inputs: usize) -> Vec<Unit> {
-        study_units(params, inputs, STUDIED.map(|e| e.name()))
+        let p = DiscoveryPowerParams::from_params(params);
+        let size = StudySize {
+            null_draws: p.null_draws,
+            draws: p.draws,
+            strength_lists: STUDIED.map(|e| p.list(e)).to_vec(),
+            unit_size: &p.unit_size,
+        };
+        study_units(&size, inputs)
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        let printers = read_printers(ctx)?;
-        let blob = StartBlob::parse(ctx, &printers)?;
-        let design = design(ctx)?;
-        let (b, range) = study_unit_draws(&ctx.params, index, design.draw_count());
+        let p = DiscoveryPowerParams::from_params(&ctx.params);
+        let printers = read_printers(ctx.inputs_of(&roles::FDM_WIDTHS_MANY))?;
+        let blob = StartBlob::parse(&p.lag.start_blob, &printers).map_err(|e| StageError::params(ctx, e))?;
+        let design = design(&p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
+        let (b, range) = study_unit_draws(&p.unit_size, index, design.draw_count());
         let mut rows = DrawRows::default();
         if let Some((printer, lines)) = printers.into_iter().nth(b) {
-            let model = FdmModel::new(&lines, blob.has(&printer), ctx.params.f64("smoothing_mm"));
+            let model = FdmModel::new(&lines, blob.has(&printer), p.lag.smoothing_mm);
             let base =
                 Base::new(printer.clone(), model, lines, &design.engine).map_err(|e| engine_failed(&printer, e))?;
             let base_design = PowerDesign { seed: mix_seed(design.seed, b as u64, 0), ..design };
@@ -156,8 +161,9 @@ impl Split for DiscoveryPowerStage {
     }
 
     fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
+        let p = DiscoveryPowerParams::from_params(&ctx.params);
         let all = read_parts(parts)?;
-        let mut power = power_rows(ctx, &all)?.into_frame()?;
+        let mut power = power_rows(ctx, p.noise(), &all)?.into_frame()?;
         ctx.write_table("power", &mut power)?;
         let mut per_draw = without(&all, &PART_ONLY)?;
         ctx.write_table("power_draws", &mut per_draw)?;
@@ -166,7 +172,7 @@ impl Split for DiscoveryPowerStage {
 }
 
 /// The power table of the stacked parts: per base, in order, its draws summarised.
-fn power_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<PowerRows, StageError> {
+fn power_rows(ctx: &StageContext, noise: Noise, all: &polars::prelude::DataFrame) -> Result<PowerRows, StageError> {
     let bad = |what: &str, value: &str| StageError::BadInput {
         file: ctx.output_dir().join("parts"),
         location: None,
@@ -176,7 +182,6 @@ fn power_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Po
     let text = |name: &str| strs(all, name, &file);
     let (base, own, effect, outcome) = (text("base")?, text(PART_ONLY[0])?, text("effect")?, text("outcome")?);
     let (strength, covered) = (f64s(all, "strength", &file)?, opt_bools(all, PART_ONLY[1], &file)?);
-    let noise = if ctx.params.str("noise") == "white" { Noise::White } else { Noise::Measured };
     let mut labels: Vec<&str> = Vec::new();
     for b in &base {
         if !labels.contains(&b.as_str()) {
@@ -201,35 +206,23 @@ fn power_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Po
 }
 
 /// The study's design from the parameters.
-fn design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
-    let p = &ctx.params;
+fn design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError> {
     let mut cells = Vec::new();
     for effect in STUDIED {
-        for strength in strengths(ctx, effect)? {
+        for strength in p.strengths(effect)? {
             cells.push((effect, strength));
         }
     }
-    let engine = discrepancy::Settings {
-        alpha: p.f64("alpha"),
-        max_rounds: p.i64("max_rounds") as usize,
-        bootstrap_draws: p.i64("bootstrap_draws") as usize,
-        ..discrepancy::Settings::standard(ctx.seed)
-    };
+    let engine = study_settings(p.alpha, p.max_rounds, seed, p.bootstrap_draws as usize);
     Ok(PowerDesign {
         cells,
-        draws_per_cell: p.i64("draws") as usize,
-        null_draws: p.i64("null_draws") as usize,
-        seed: ctx.seed,
+        draws_per_cell: p.draws as usize,
+        null_draws: p.null_draws as usize,
+        seed,
         engine,
-        inject: InjectSettings { smoothing_mm: p.f64("smoothing_mm"), gear_period_mm: None },
-        noise: if p.str("noise") == "white" { Noise::White } else { Noise::Measured },
+        inject: InjectSettings { smoothing_mm: p.lag.smoothing_mm, gear_period_mm: None },
+        noise: p.noise(),
     })
-}
-
-/// The strengths listed for `effect`, each checked against the effect's range.
-fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
-    let (lo, hi) = effect.strength_range();
-    strength_list(ctx, effect.name(), hi.max(-lo), "")
 }
 
 /// Columns of `power.parquet`.

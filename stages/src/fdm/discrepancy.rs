@@ -17,100 +17,88 @@ use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
 use models::progress::Progress;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{InputArtifact, StageContext, StageError};
 
-use crate::discrepancy_tables::{engine_settings, DiscrepancyTables, Domain, Kind, Table, Value, ALPHA, BINS};
-use crate::fdm::lines::PrinterLines;
+use crate::discrepancy_tables::{DiscrepancyTables, Domain, EngineParams, Kind, Table, Value};
+use crate::fdm::lines::{model_param_error, PrinterLines};
 use crate::progress::StageProgress;
+use crate::roles;
 
 /// The `fdm.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-const PARAMS: &[ParamSpec] = &[
-    START_BLOB,
-    ParamSpec {
-        name: "baseline",
-        ty: ParamType::Choice(&["lag_model", "piecewise_model"]),
-        default: ParamDefault::Str("lag_model"),
-        doc: "The model whose errors are searched: the lag model (DESIGN §5.1; seven candidates) or paper 000's piecewise model (eqs 1-3 with the r_a × r_F grid search; the three candidates that act on its widths: bed_tilt, gear_eccentricity, flow_saturation).",
-    },
-    ParamSpec {
-        name: "r_step",
-        ty: ParamType::Float { min: 0.005, max: 0.1 },
-        default: ParamDefault::Float(0.02),
-        doc: "With the piecewise baseline: step of its r_a, r_F grid over [0.9, 1.1] (paper 000: 0.01; every fold and candidate fits it again, so the default is coarser).",
-    },
-    ALPHA,
-    ParamSpec {
-        name: "max_rounds",
-        ty: ParamType::Int { min: 0, max: 7 },
-        default: ParamDefault::Int(3),
-        doc: "Most causes named: after each, the extended model is the baseline and the search repeats.",
-    },
-    BINS,
-    SMOOTHING,
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(2000),
-        doc: "Bootstrap draws over lines of every gain interval.",
-    },
-];
+pipeline::choice! {
+    /// The model whose errors the engine searches.
+    pub enum Baseline {
+        /// The lag model (DESIGN §5.1).
+        LagModel = "lag_model",
+        /// Paper 000's piecewise model (eqs 1-3 with the r_a × r_F grid search).
+        PiecewiseModel = "piecewise_model",
+    }
+}
 
-/// Which printers' lines start with a blob.
-pub(crate) const START_BLOB: ParamSpec = ParamSpec {
-    name: "start_blob",
-    ty: ParamType::Text,
-    default: ParamDefault::Str("all"),
-    doc: "Printers whose lines start with a blob (the lag's initial flow excess is fitted): `all`, `none` or a comma-separated list of printer names (paper 000: `taz5`; the Taz 6 has none, Fig. 8).",
-};
+pipeline::params! {
+    /// The lag model as the FDM discrepancy stages fit it: which printers' lines start
+    /// with a blob, and the smoothing along the path.
+    pub struct LagBaseline {
+        /// Printers whose lines start with a blob (the lag's initial flow excess is fitted): `all`, `none` or a comma-separated list of printer names (paper 000: `taz5`; the Taz 6 has none, Fig. 8).
+        pub start_blob: String = "all",
+        /// Width smoothing along the path: about one nozzle diameter (0.5 mm, paper 000 Table I), as fdm.lag_model.
+        pub smoothing_mm: f64 [0.0, 10.0] = 0.5,
+    }
+}
 
-/// The along-path smoothing of the lag model.
-pub(crate) const SMOOTHING: ParamSpec = ParamSpec {
-    name: "smoothing_mm",
-    ty: ParamType::Float { min: 0.0, max: 10.0 },
-    default: ParamDefault::Float(0.5),
-    doc: "Width smoothing along the path: about one nozzle diameter (0.5 mm, paper 000 Table I), as fdm.lag_model.",
-};
+pipeline::params! {
+    /// The parameters of `fdm.discrepancy`.
+    pub struct DiscrepancyParams {
+        /// The model whose errors are searched: the lag model (DESIGN §5.1; seven candidates) or paper 000's piecewise model (eqs 1-3 with the r_a × r_F grid search; the three candidates that act on its widths: bed_tilt, gear_eccentricity, flow_saturation).
+        pub baseline: Baseline = Baseline::LagModel,
+        /// With the piecewise baseline: step of its r_a, r_F grid over [0.9, 1.1] (paper 000: 0.01; every fold and candidate fits it again, so the default is coarser).
+        pub r_step: f64 [0.005, 0.1] = 0.02,
+        /// Most causes named: after each, the extended model is the baseline and the search repeats.
+        pub max_rounds: i64 [0, 7] = 3,
+    }
+    groups { pub lag: LagBaseline, pub engine: EngineParams }
+}
 
-impl StageKind for DiscrepancyStage {
-    fn name(&self) -> &'static str {
-        "fdm.discrepancy"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 000's lines (the lag model of DESIGN §5.1, or paper 000's piecewise model eqs 1-3, as the baseline)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
+impl Stage for DiscrepancyStage {
+    type Params = DiscrepancyParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.discrepancy",
+        version: 2,
+        summary: "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)",
+        implements: "DESIGN §7 on paper 000's lines (the lag model of DESIGN §5.1, or paper 000's piecewise model eqs 1-3, as the baseline)",
+        inputs: &[roles::FDM_WIDTHS_MANY],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
+        p.engine.settings(p.max_rounds, 0)?;
+        piecewise_params(p.r_step, true).map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printers = read_printers(ctx)?;
-        let blob = StartBlob::parse(ctx, &printers)?;
-        let settings = engine_settings(ctx)?;
-        let smoothing = ctx.params.f64("smoothing_mm");
+    fn run(&self, ctx: &mut StageContext, p: &DiscrepancyParams) -> Result<(), StageError> {
+        let printers = read_printers(ctx.inputs_of(&roles::FDM_WIDTHS_MANY))?;
+        let blob = StartBlob::parse(&p.lag.start_blob, &printers).map_err(|e| StageError::params(ctx, e))?;
+        let settings = p.engine.settings(p.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let mut tables = Tables::new(settings.alpha);
         let progress = StageProgress::with_steps(ctx, printers.len() as u64);
         for (printer, lines) in &printers {
-            let lag = FdmModel::new(lines, blob.has(printer), smoothing);
-            if ctx.params.str("baseline") == "piecewise_model" {
-                let model = PiecewiseModel { params: piecewise_params(ctx, blob.has(printer))?, lag };
-                let found = discover(&model, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
-                tables.add(printer, &model, lines, &found);
-            } else {
-                let found = discover(&lag, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
-                tables.add(printer, &lag, lines, &found);
+            let lag = FdmModel::new(lines, blob.has(printer), p.lag.smoothing_mm);
+            match p.baseline {
+                Baseline::PiecewiseModel => {
+                    let params =
+                        piecewise_params(p.r_step, blob.has(printer)).map_err(|e| StageError::params(ctx, e))?;
+                    let model = PiecewiseModel { params, lag };
+                    let found = discover(&model, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
+                    tables.add(printer, &model, lines, &found);
+                }
+                Baseline::LagModel => {
+                    let found = discover(&lag, lines, &[], &settings).map_err(|e| engine_failed(printer, e))?;
+                    tables.add(printer, &lag, lines, &found);
+                }
             }
             progress.done(1);
         }
@@ -118,19 +106,17 @@ impl StageKind for DiscrepancyStage {
     }
 }
 
-/// The piecewise fit's settings: paper 000's, with the `r_step` of the stage.
-fn piecewise_params(ctx: &StageContext, start_blob: bool) -> Result<models::fdm::PiecewiseValidParams, StageError> {
+/// The piecewise fit's settings: paper 000's, with the stage's `r_step`.
+fn piecewise_params(r_step: f64, start_blob: bool) -> Result<models::fdm::PiecewiseValidParams, ParamError> {
     let defaults =
         if start_blob { PiecewiseParams::paper_defaults() } else { PiecewiseParams::paper_defaults_without_blob() };
-    PiecewiseParams { r_step: ctx.params.f64("r_step"), ..defaults }
-        .check()
-        .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })
+    PiecewiseParams { r_step, ..defaults }.check().map_err(model_param_error)
 }
 
 /// Every input's lines as groups, pooled by printer in the order first seen.
-pub(crate) fn read_printers(ctx: &StageContext) -> Result<Vec<(String, Vec<FdmLine>)>, StageError> {
+pub(crate) fn read_printers(inputs: Vec<&InputArtifact>) -> Result<Vec<(String, Vec<FdmLine>)>, StageError> {
     let mut printers: Vec<(String, Vec<FdmLine>)> = Vec::new();
-    for input in &ctx.inputs {
+    for input in inputs {
         let read = PrinterLines::read(&input.dir)?;
         let groups = read.lines.into_iter().zip(read.conditions).map(|(l, c)| FdmLine::new(c, l));
         match printers.iter_mut().find(|(p, _)| *p == read.printer) {
@@ -154,8 +140,8 @@ pub(crate) enum StartBlob {
 }
 
 impl StartBlob {
-    pub(crate) fn parse(ctx: &StageContext, printers: &[(String, Vec<FdmLine>)]) -> Result<Self, StageError> {
-        let raw = ctx.params.str("start_blob").trim();
+    pub(crate) fn parse(raw: &str, printers: &[(String, Vec<FdmLine>)]) -> Result<Self, ParamError> {
+        let raw = raw.trim();
         let parsed = match raw {
             "all" => Self::All,
             "none" => Self::None,
@@ -164,13 +150,13 @@ impl StartBlob {
         if let Self::Only(names) = &parsed {
             if let Some(unknown) = names.iter().find(|n| !printers.iter().any(|(p, _)| p == *n)) {
                 let known: Vec<&str> = printers.iter().map(|(p, _)| p.as_str()).collect();
-                return Err(StageError::Params {
-                    stage: ctx.stage.clone(),
-                    message: format!(
-                        "start_blob names printer `{unknown}`, which no input has (inputs: {}); use `all`, `none` or a list of these",
+                return Err(ParamError::new(
+                    "start_blob",
+                    format!(
+                        "names printer `{unknown}`, which no input has (inputs: {}); use `all`, `none` or a list of these",
                         known.join(", ")
                     ),
-                });
+                ));
             }
         }
         Ok(parsed)

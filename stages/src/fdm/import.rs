@@ -5,62 +5,69 @@
 //! Table II (see `datasets::fsu`), each file verified against its published SHA-256.
 
 use datasets::fsu::{self, FsuPrinter, ImportOptions};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Table;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::widths;
 
 use crate::table::{f64_col, frame, str_col};
 
 /// The `fdm.import` stage kind.
 pub struct ImportStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "source_format",
-        ty: ParamType::Choice(&["fsu-linewidth"]),
-        default: ParamDefault::Str("fsu-linewidth"),
-        doc: "Layout of the raw data: `fsu-linewidth` = S{a}F{F mm/min}_{tag}120.csv files per printer folder.",
-    },
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Choice(&["taz5", "taz6"]),
-        default: ParamDefault::Required,
-        doc: "Which printer folder to import.",
-    },
-    ParamSpec {
-        name: "verify_sha256",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(true),
-        doc:
-            "Check every file against the published release's SHA-256 (off only for your own data in the same layout).",
-    },
-];
-
-impl StageKind for ImportStage {
-    fn name(&self) -> &'static str {
-        "fdm.import"
+pipeline::choice! {
+    /// Layouts of raw measured line widths the importer reads.
+    pub enum SourceFormat {
+        /// The FSU release: S{a}F{F mm/min}_{tag}120.csv files per printer folder.
+        FsuLinewidth = "fsu-linewidth",
     }
-    fn version(&self) -> u32 {
+}
+
+pipeline::choice! {
+    /// The printer folders of the FSU release.
+    pub enum FsuPrinterName {
+        /// The Lulzbot Taz 5.
+        Taz5 = "taz5",
+        /// The Lulzbot Taz 6.
+        Taz6 = "taz6",
+    }
+}
+
+pipeline::params! {
+    /// The parameters of `fdm.import`.
+    pub struct ImportParams {
+        /// Layout of the raw data: `fsu-linewidth` = S{a}F{F mm/min}_{tag}120.csv files per printer folder.
+        pub source_format: SourceFormat = SourceFormat::FsuLinewidth,
+        /// Which printer folder to import.
+        pub printer: FsuPrinterName,
+        /// Check every file against the published release's SHA-256 (off only for your own data in the same layout).
+        pub verify_sha256: bool = true,
+    }
+}
+
+/// The raw data.
+const RAW: Input = Input::one("raw", &[Source::RawFolder], "the raw release: one folder per printer");
+
+impl Stage for ImportStage {
+    type Params = ImportParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.import",
         // 2: every raw row is checked at import (an invalid dataset was written before).
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "Raw measured line widths → an fdm-widths dataset (dataset.toml, lines.csv, widths/*.csv) plus widths.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III (measured widths), Table I (conditions); DESIGN §4 fdm-widths"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+        version: 2,
+        summary: "Raw measured line widths → an fdm-widths dataset (dataset.toml, lines.csv, widths/*.csv) plus widths.parquet",
+        implements: "paper 000 Sec. III (measured widths), Table I (conditions); DESIGN §4 fdm-widths",
+        inputs: &[RAW],
+        output: Output::Dataset("fdm-widths"),
+    };
+    const WRITES: &'static [&'static Table] = &[&widths::TABLE];
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printer = FsuPrinter::parse(ctx.params.str("printer")).expect("checked choice");
-        let opts = ImportOptions { verify_sha256: ctx.params.bool("verify_sha256") };
-        let dataset = fsu::read_printer(&ctx.inputs[0].dir, printer, opts).map_err(StageError::domain)?;
+    fn run(&self, ctx: &mut StageContext, p: &ImportParams) -> Result<(), StageError> {
+        let printer = match p.printer {
+            FsuPrinterName::Taz5 => FsuPrinter::Taz5,
+            FsuPrinterName::Taz6 => FsuPrinter::Taz6,
+        };
+        let opts = ImportOptions { verify_sha256: p.verify_sha256 };
+        let dataset = fsu::read_printer(&ctx.input(&RAW).dir, printer, opts).map_err(StageError::domain)?;
         dataset.write(ctx.output_dir()).map_err(StageError::domain)?;
         let mut long = widths_table(&dataset)?;
         ctx.write_table("widths", &mut long)?;
@@ -85,11 +92,11 @@ fn widths_table(dataset: &datasets::fdm_widths::FdmWidthsDataset) -> Result<pola
         }
     }
     frame(vec![
-        str_col("printer", printer),
-        str_col("condition", condition),
-        f64_col("accel_mm_s2", accel),
-        f64_col("feed_mm_s", feed),
-        f64_col("position_mm", pos),
-        f64_col("width_mm", width),
+        str_col(widths::printer, printer),
+        str_col(widths::condition, condition),
+        f64_col(widths::accel_mm_s2, accel),
+        f64_col(widths::feed_mm_s, feed),
+        f64_col(widths::position_mm, pos),
+        f64_col(widths::width_mm, width),
     ])
 }

@@ -11,69 +11,40 @@
 //! condition, hatch_mm, x_mm, y_mm, coverage) near both line ends for `map_condition`.
 
 use models::fdm::{FittedPiecewise, LineKinematics, PiecewiseParams};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Table;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
+use tables::fdm::{infill, infill_map};
 
-use crate::fdm::lines::{fit_failed, PrinterLines};
+use crate::fdm::lines::{fit_failed, model_param_error, PrinterLines};
+use crate::roles;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `fdm.infill` stage kind.
 pub struct InfillStage;
 
-const FACTOR: ParamType = ParamType::Float { min: 0.3, max: 2.0 };
-
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "start_blob",
-        ty: ParamType::Bool,
-        default: ParamDefault::Required,
-        doc: "Fit the model with phase p1 (Taz 5) or without (Taz 6).",
-    },
-    ParamSpec {
-        name: "lines",
-        ty: ParamType::Int { min: 2, max: 50 },
-        default: ParamDefault::Int(6),
-        doc: "Lines laid side by side.",
-    },
-    ParamSpec {
-        name: "hatch_factor",
-        ty: FACTOR,
-        default: ParamDefault::Float(1.0),
-        doc: "Hatch spacing / fitted nominal width c: 1.0 = lines just touch at steady state.",
-    },
-    ParamSpec {
-        name: "tight_hatch_factor",
-        ty: FACTOR,
-        default: ParamDefault::Float(0.85),
-        doc: "A second, overlapping hatch (slicers' usual 10-20 % overlap).",
-    },
-    ParamSpec {
-        name: "end_region_mm",
-        ty: ParamType::Float { min: 1.0, max: 50.0 },
-        default: ParamDefault::Float(10.0),
-        doc: "Length of the start and end regions (mm).",
-    },
-    ParamSpec {
-        name: "map_condition",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("S800F9000"),
-        doc: "Condition whose coverage map is written.",
-    },
-    ParamSpec {
-        name: "dx_mm",
-        ty: ParamType::Float { min: 0.01, max: 1.0 },
-        default: ParamDefault::Float(0.1),
-        doc: "Raster step along the lines (mm).",
-    },
-    ParamSpec {
-        name: "dy_mm",
-        ty: ParamType::Float { min: 0.002, max: 0.2 },
-        default: ParamDefault::Float(0.02),
-        doc: "Raster step across the lines (mm).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `fdm.infill`.
+    pub struct InfillParams {
+        /// Fit the model with phase p1 (Taz 5) or without (Taz 6).
+        pub start_blob: bool,
+        /// Lines laid side by side.
+        pub lines: i64 [2, 50] = 6,
+        /// Hatch spacing / fitted nominal width c: 1.0 = lines just touch at steady state.
+        pub hatch_factor: f64 [0.3, 2.0] = 1.0,
+        /// A second, overlapping hatch (slicers' usual 10-20 % overlap).
+        pub tight_hatch_factor: f64 [0.3, 2.0] = 0.85,
+        /// Length of the start and end regions (mm).
+        pub end_region_mm: f64 [1.0, 50.0] = 10.0,
+        /// Condition whose coverage map is written.
+        pub map_condition: String = "S800F9000",
+        /// Raster step along the lines (mm).
+        pub dx_mm: f64 [0.01, 1.0] = 0.1,
+        /// Raster step across the lines (mm).
+        pub dy_mm: f64 [0.002, 0.2] = 0.02,
+    }
+}
 
 /// Raster settings, checked.
 #[derive(Debug, Clone, Copy)]
@@ -94,47 +65,38 @@ pub struct RegionStats {
     pub overlap_fraction: f64,
 }
 
-impl StageKind for InfillStage {
-    fn name(&self) -> &'static str {
-        "fdm.infill"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Lines side by side from the fitted width model: coverage raster, void and overlap fractions at the line ends → infill.parquet, infill_map.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III, Fig. 7 (infill nonuniformity)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for InfillStage {
+    type Params = InfillParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.infill",
+        version: 1,
+        summary: "Lines side by side from the fitted width model: coverage raster, void and overlap fractions at the line ends → infill.parquet, infill_map.parquet",
+        implements: "paper 000 Sec. III, Fig. 7 (infill nonuniformity)",
+        inputs: &[roles::FDM_WIDTHS],
+        output: Output::Tables,
+    };
+    const WRITES: &'static [&'static Table] = &[&infill::TABLE, &infill_map::TABLE];
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let p = &ctx.params;
-        let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
-        let params = PiecewiseParams { has_start_blob: p.bool("start_blob"), ..PiecewiseParams::paper_defaults() }
+    fn run(&self, ctx: &mut StageContext, p: &InfillParams) -> Result<(), StageError> {
+        let printer = PrinterLines::read(&ctx.input(&roles::FDM_WIDTHS).dir)?;
+        let params = PiecewiseParams { has_start_blob: p.start_blob, ..PiecewiseParams::paper_defaults() }
             .check()
-            .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
+            .map_err(|e| StageError::params(ctx, model_param_error(e)))?;
         let model = models::fdm::fit(&printer.lines, &params).map_err(|e| fit_failed("piecewise fit", e))?;
         let mut stats = StatsRows::default();
         let mut map = MapRows::default();
-        for factor in [p.f64("hatch_factor"), p.f64("tight_hatch_factor")] {
+        for factor in [p.hatch_factor, p.tight_hatch_factor] {
             let layout = Layout {
-                lines: p.i64("lines") as usize,
+                lines: p.lines as usize,
                 hatch_mm: factor * model.coefficients.c_mm,
-                end_region_mm: p.f64("end_region_mm"),
-                dx_mm: p.f64("dx_mm"),
-                dy_mm: p.f64("dy_mm"),
+                end_region_mm: p.end_region_mm,
+                dx_mm: p.dx_mm,
+                dy_mm: p.dy_mm,
             };
             for (line, condition) in printer.lines.iter().zip(&printer.conditions) {
                 let raster = Raster::build(&model, &line.nominal, layout).map_err(|e| fit_failed(condition, e))?;
                 stats.push(&printer.printer, condition, layout.hatch_mm, &raster);
-                if condition == p.str("map_condition") {
+                if *condition == p.map_condition {
                     map.push(&printer.printer, condition, layout.hatch_mm, &raster);
                 }
             }
@@ -231,12 +193,12 @@ impl StatsRows {
 
     fn into_frame(self) -> Result<DataFrame, StageError> {
         frame(vec![
-            str_col("printer", self.printer),
-            str_col("condition", self.condition),
-            f64_col("hatch_mm", self.hatch),
-            str_col("region", self.region),
-            f64_col("void_fraction", self.void),
-            f64_col("overlap_fraction", self.overlap),
+            str_col(infill::printer, self.printer),
+            str_col(infill::condition, self.condition),
+            f64_col(infill::hatch_mm, self.hatch),
+            str_col(infill::region, self.region),
+            f64_col(infill::void_fraction, self.void),
+            f64_col(infill::overlap_fraction, self.overlap),
         ])
     }
 }
@@ -270,12 +232,12 @@ impl MapRows {
 
     fn into_frame(self) -> Result<DataFrame, StageError> {
         frame(vec![
-            str_col("printer", self.printer),
-            str_col("condition", self.condition),
-            f64_col("hatch_mm", self.hatch),
-            f64_col("x_mm", self.x),
-            f64_col("y_mm", self.y),
-            i64_col("coverage", self.coverage),
+            str_col(infill_map::printer, self.printer),
+            str_col(infill_map::condition, self.condition),
+            f64_col(infill_map::hatch_mm, self.hatch),
+            f64_col(infill_map::x_mm, self.x),
+            f64_col(infill_map::y_mm, self.y),
+            i64_col(infill_map::coverage, self.coverage),
         ])
     }
 }

@@ -4,55 +4,47 @@
 //! speed at the line's end (no cruise when the line is too short).
 
 use models::fdm::MotionPhase;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Table;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::kinematics;
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
+use crate::roles;
 use crate::table::{f64_col, frame, str_col};
 
 /// The `fdm.kinematics` stage kind.
 pub struct KinematicsStage;
 
-const R: ParamType = ParamType::Float { min: 0.5, max: 1.5 };
+pipeline::params! {
+    /// The parameters of `fdm.kinematics`.
+    pub struct KinematicsParams {
+        /// Actual / commanded acceleration (eq. 1).
+        pub r_a: f64 [0.5, 1.5] = 1.0,
+        /// Actual / commanded feed (eq. 1).
+        pub r_f: f64 [0.5, 1.5] = 1.0,
+    }
+}
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "r_a",
-        ty: R,
-        default: ParamDefault::Float(1.0),
-        doc: "Actual / commanded acceleration (eq. 1).",
-    },
-    ParamSpec { name: "r_f", ty: R, default: ParamDefault::Float(1.0), doc: "Actual / commanded feed (eq. 1)." },
-];
+impl Stage for KinematicsStage {
+    type Params = KinematicsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.kinematics",
+        version: 1,
+        summary:
+            "Per measured sample: nominal time, speed, acceleration and motion phase of the nozzle → kinematics.parquet",
+        implements: "paper 000 Sec. II-A, eq. 1 (trapezoidal motion, r_a, r_F)",
+        inputs: &[roles::FDM_WIDTHS_MANY],
+        output: Output::Tables,
+    };
+    const WRITES: &'static [&'static Table] = &[&kinematics::TABLE];
 
-impl StageKind for KinematicsStage {
-    fn name(&self) -> &'static str {
-        "fdm.kinematics"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Per measured sample: nominal time, speed, acceleration and motion phase of the nozzle → kinematics.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. II-A, eq. 1 (trapezoidal motion, r_a, r_F)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
-    }
-
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let (r_a, r_f) = (ctx.params.f64("r_a"), ctx.params.f64("r_f"));
+    fn run(&self, ctx: &mut StageContext, p: &KinematicsParams) -> Result<(), StageError> {
         let mut rows = KinematicRows::default();
-        for input in &ctx.inputs {
+        for input in ctx.inputs_of(&roles::FDM_WIDTHS_MANY) {
             let printer = PrinterLines::read(&input.dir)?;
             for (line, condition) in printer.lines.iter().zip(&printer.conditions) {
-                let actual = line.nominal.scaled(r_a, r_f).map_err(|e| fit_failed(condition, e))?;
+                let actual = line.nominal.scaled(p.r_a, p.r_f).map_err(|e| fit_failed(condition, e))?;
                 rows.push(&printer.printer, condition, &actual.sample(&line.positions_mm));
             }
         }
@@ -87,13 +79,13 @@ impl KinematicRows {
 
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            str_col("printer", self.printer),
-            str_col("condition", self.condition),
-            f64_col("position_mm", self.position),
-            f64_col("time_s", self.time),
-            f64_col("speed_mm_s", self.speed),
-            f64_col("accel_mm_s2", self.accel),
-            str_col("phase", self.phase),
+            str_col(kinematics::printer, self.printer),
+            str_col(kinematics::condition, self.condition),
+            f64_col(kinematics::position_mm, self.position),
+            f64_col(kinematics::time_s, self.time),
+            f64_col(kinematics::speed_mm_s, self.speed),
+            f64_col(kinematics::accel_mm_s2, self.accel),
+            str_col(kinematics::phase, self.phase),
         ])
     }
 }

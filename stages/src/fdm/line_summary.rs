@@ -4,56 +4,37 @@
 //! largest width.
 
 use datasets::fdm_widths::{FdmWidthsDataset, WidthLine};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::line_summary;
 
+use crate::roles;
 use crate::table::{f64_col, frame, read_fdm_widths, str_col};
 
 /// The `fdm.line_summary` stage kind.
 pub struct LineSummaryStage;
 
-const LENGTH: ParamType = ParamType::Float { min: 0.0, max: 10_000.0 };
-
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "steady_from_mm",
-        ty: LENGTH,
-        default: ParamDefault::Float(50.0),
-        doc: "Start of the steady window (mm); 50-80 mm is past the acceleration of every Table I condition.",
-    },
-    ParamSpec { name: "steady_to_mm", ty: LENGTH, default: ParamDefault::Float(80.0), doc: "End of the steady window (mm)." },
-    ParamSpec {
-        name: "start_window_mm",
-        ty: LENGTH,
-        default: ParamDefault::Float(40.0),
-        doc: "The start dip is the minimum over [0, this] mm; 40 mm covers the longest acceleration of Table I (28 mm at 150 mm/s, 400 mm/s²).",
-    },
-    ParamSpec {
-        name: "end_window_mm",
-        ty: LENGTH,
-        default: ParamDefault::Float(20.0),
-        doc: "The end bulge is the maximum over the last this many mm of the line.",
-    },
-];
-
-/// Windows of the summary, checked (`steady_from < steady_to`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SummaryWindows {
-    /// Steady window start (mm).
-    pub steady_from_mm: f64,
-    /// Steady window end (mm).
-    pub steady_to_mm: f64,
-    /// Start dip window length (mm).
-    pub start_window_mm: f64,
-    /// End bulge window length (mm).
-    pub end_window_mm: f64,
+pipeline::params! {
+    /// Windows of the summary: the parameters of `fdm.line_summary`.
+    #[derive(Copy)]
+    pub struct SummaryWindows {
+        /// Start of the steady window (mm); 50-80 mm is past the acceleration of every Table I condition.
+        pub steady_from_mm: f64 [0.0, 10_000.0] = 50.0,
+        /// End of the steady window (mm).
+        pub steady_to_mm: f64 [0.0, 10_000.0] = 80.0,
+        /// The start dip is the minimum over [0, this] mm; 40 mm covers the longest acceleration of Table I (28 mm at 150 mm/s, 400 mm/s²).
+        pub start_window_mm: f64 [0.0, 10_000.0] = 40.0,
+        /// The end bulge is the maximum over the last this many mm of the line.
+        pub end_window_mm: f64 [0.0, 10_000.0] = 20.0,
+    }
 }
 
 impl SummaryWindows {
-    /// The defaults above.
+    /// The declared defaults.
     pub fn paper_defaults() -> Self {
-        Self { steady_from_mm: 50.0, steady_to_mm: 80.0, start_window_mm: 40.0, end_window_mm: 20.0 }
+        Self::defaults().expect("every window has a default")
     }
 }
 
@@ -113,54 +94,39 @@ fn extreme(points: impl Iterator<Item = (f64, f64)>, better: impl Fn(f64, f64) -
     })
 }
 
-impl StageKind for LineSummaryStage {
-    fn name(&self) -> &'static str {
-        "fdm.line_summary"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Per line: steady width, start dip (minimum and position), end bulge, maximum width → line_summary.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. II, Figs 3-4 (phases p1-p5 of a printed line)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
+impl Stage for LineSummaryStage {
+    type Params = SummaryWindows;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.line_summary",
+        version: 1,
+        summary:
+            "Per line: steady width, start dip (minimum and position), end bulge, maximum width → line_summary.parquet",
+        implements: "paper 000 Sec. II, Figs 3-4 (phases p1-p5 of a printed line)",
+        inputs: &[roles::FDM_WIDTHS_MANY],
+        output: Output::Tables,
+    };
+    const WRITES: &'static [&'static Table] = &[&line_summary::TABLE];
+
+    fn check(w: &SummaryWindows) -> Result<(), ParamError> {
+        if w.steady_from_mm >= w.steady_to_mm {
+            return Err(ParamError::new(
+                "steady_to_mm",
+                format!("expected steady_from_mm < steady_to_mm, got {} and {}", w.steady_from_mm, w.steady_to_mm),
+            ));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let windows = check_windows(ctx)?;
+    fn run(&self, ctx: &mut StageContext, windows: &SummaryWindows) -> Result<(), StageError> {
         let mut rows = SummaryRows::default();
-        for input in &ctx.inputs {
+        for input in ctx.inputs_of(&roles::FDM_WIDTHS_MANY) {
             let dataset = read_fdm_widths(&input.dir)?;
-            rows.push_dataset(&dataset, windows, &input.dir)?;
+            rows.push_dataset(&dataset, *windows, &input.dir)?;
         }
         let mut table = rows.into_frame()?;
         ctx.write_table("line_summary", &mut table)?;
         Ok(())
     }
-}
-
-fn check_windows(ctx: &StageContext) -> Result<SummaryWindows, StageError> {
-    let p = &ctx.params;
-    let w = SummaryWindows {
-        steady_from_mm: p.f64("steady_from_mm"),
-        steady_to_mm: p.f64("steady_to_mm"),
-        start_window_mm: p.f64("start_window_mm"),
-        end_window_mm: p.f64("end_window_mm"),
-    };
-    if w.steady_from_mm >= w.steady_to_mm {
-        return Err(StageError::Params {
-            stage: ctx.stage.clone(),
-            message: format!("expected steady_from_mm < steady_to_mm, got {} and {}", w.steady_from_mm, w.steady_to_mm),
-        });
-    }
-    Ok(w)
 }
 
 #[derive(Default)]
@@ -197,17 +163,17 @@ impl SummaryRows {
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         let col = |name: &str, f: fn(&LineSummary) -> f64| f64_col(name, self.summaries.iter().map(f).collect());
         frame(vec![
-            str_col("printer", self.printer.clone()),
-            str_col("condition", self.condition.clone()),
-            f64_col("accel_mm_s2", self.accel.clone()),
-            f64_col("feed_mm_s", self.feed.clone()),
-            col("steady_width_mm", |s| s.steady_width_mm),
-            col("start_min_width_mm", |s| s.start_min_width_mm),
-            col("start_min_position_mm", |s| s.start_min_position_mm),
-            col("start_dip_pct", |s| s.start_dip_pct),
-            col("end_bulge_pct", |s| s.end_bulge_pct),
-            col("max_width_mm", |s| s.max_width_mm),
-            col("max_width_position_mm", |s| s.max_width_position_mm),
+            str_col(line_summary::printer, self.printer.clone()),
+            str_col(line_summary::condition, self.condition.clone()),
+            f64_col(line_summary::accel_mm_s2, self.accel.clone()),
+            f64_col(line_summary::feed_mm_s, self.feed.clone()),
+            col(line_summary::steady_width_mm, |s| s.steady_width_mm),
+            col(line_summary::start_min_width_mm, |s| s.start_min_width_mm),
+            col(line_summary::start_min_position_mm, |s| s.start_min_position_mm),
+            col(line_summary::start_dip_pct, |s| s.start_dip_pct),
+            col(line_summary::end_bulge_pct, |s| s.end_bulge_pct),
+            col(line_summary::max_width_mm, |s| s.max_width_mm),
+            col(line_summary::max_width_position_mm, |s| s.max_width_position_mm),
         ])
     }
 }

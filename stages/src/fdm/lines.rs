@@ -54,3 +54,11 @@ impl PrinterLines {
 pub fn fit_failed(what: &str, err: impl std::fmt::Display) -> StageError {
     StageError::Domain(format!("{what}: {err}").into())
 }
+
+/// A paper-000 model's hyper-parameter error as the planner's error on the stage
+/// parameter of the same name.
+pub fn model_param_error(err: models::fdm::ParamError) -> pipeline::params::ParamError {
+    match &err {
+        models::fdm::ParamError::OutOfRange { name, .. } => pipeline::params::ParamError::new(name, err.to_string()),
+    }
+}

@@ -14,16 +14,21 @@
 //! position_mm, measured_width_mm, predicted_width_mm).
 
 use models::fdm::loo::run_folds;
-use models::fdm::{fit_at, fit_lag, rmse, LagParams, MeasuredLine, PiecewiseParams, PiecewiseValidParams};
+use models::fdm::{
+    fit_at, fit_lag, rmse, LagParams, LagValidParams, MeasuredLine, PiecewiseParams, PiecewiseValidParams,
+};
 use models::progress::Progress;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::schema::Table;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::{Column, IntoColumn, NamedFrom, Series};
 use rayon::prelude::*;
+use tables::fdm::{loo, loo_predictions, r_surface};
 
-use crate::fdm::lines::{fit_failed, PrinterLines};
+use crate::fdm::lines::{fit_failed, model_param_error, PrinterLines};
 use crate::progress::StageProgress;
+use crate::roles;
 use crate::table::{f64_col, frame, str_col};
 
 /// One held-out line's result.
@@ -41,81 +46,86 @@ pub struct PiecewiseLooStage;
 /// The `fdm.lag_model` stage kind.
 pub struct LagLooStage;
 
-const R: ParamType = ParamType::Float { min: 0.5, max: 1.5 };
+pipeline::params! {
+    /// The parameters of `fdm.piecewise_loo`.
+    pub struct PiecewiseLooParams {
+        /// Lines start with a blob (phase p1): true for the Taz 5, false for the Taz 6 (paper Fig. 8).
+        pub start_blob: bool,
+        /// Lower end of the r_a, r_F grid (eq. 1).
+        pub r_min: f64 [0.5, 1.5] = 0.9,
+        /// Upper end of the r_a, r_F grid (eq. 1).
+        pub r_max: f64 [0.5, 1.5] = 1.1,
+        /// Grid step: 0.01 gives the paper's 21 × 21 = 441 pairs.
+        pub r_step: f64 [0.001, 0.2] = 0.01,
+        /// Moving average before locating the width minimum (bp1) and the first reach of c (bp3); ours, the paper does not say.
+        pub smoothing_mm: f64 [0.0, 10.0] = 1.0,
+    }
+}
 
-const PIECEWISE_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "start_blob",
-        ty: ParamType::Bool,
-        default: ParamDefault::Required,
-        doc: "Lines start with a blob (phase p1): true for the Taz 5, false for the Taz 6 (paper Fig. 8).",
-    },
-    ParamSpec { name: "r_min", ty: R, default: ParamDefault::Float(0.9), doc: "Lower end of the r_a, r_F grid (eq. 1)." },
-    ParamSpec { name: "r_max", ty: R, default: ParamDefault::Float(1.1), doc: "Upper end of the r_a, r_F grid (eq. 1)." },
-    ParamSpec {
-        name: "r_step",
-        ty: ParamType::Float { min: 0.001, max: 0.2 },
-        default: ParamDefault::Float(0.01),
-        doc: "Grid step: 0.01 gives the paper's 21 × 21 = 441 pairs.",
-    },
-    ParamSpec {
-        name: "smoothing_mm",
-        ty: ParamType::Float { min: 0.0, max: 10.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Moving average before locating the width minimum (bp1) and the first reach of c (bp3); ours, the paper does not say.",
-    },
-];
+pipeline::params! {
+    /// The parameters of `fdm.lag_model`.
+    pub struct LagLooParams {
+        /// Fit an initial flow excess from dwell pressure (the start blob).
+        pub start_blob: bool,
+        /// Smallest extrusion time constant searched (s).
+        pub tau_min_s: f64 [1e-4, 10.0] = 0.005,
+        /// Largest time constant searched (s); Bowden extruders reach ≈ 1 s (DESIGN §5.1).
+        pub tau_max_s: f64 [1e-3, 30.0] = 3.0,
+        /// Width smoothing along the path: about one nozzle diameter (0.5 mm, Table I).
+        pub smoothing_mm: f64 [0.0, 10.0] = 0.5,
+    }
+}
 
-const LAG_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "start_blob",
-        ty: ParamType::Bool,
-        default: ParamDefault::Required,
-        doc: "Fit an initial flow excess from dwell pressure (the start blob).",
-    },
-    ParamSpec {
-        name: "tau_min_s",
-        ty: ParamType::Float { min: 1e-4, max: 10.0 },
-        default: ParamDefault::Float(0.005),
-        doc: "Smallest extrusion time constant searched (s).",
-    },
-    ParamSpec {
-        name: "tau_max_s",
-        ty: ParamType::Float { min: 1e-3, max: 30.0 },
-        default: ParamDefault::Float(3.0),
-        doc: "Largest time constant searched (s); Bowden extruders reach ≈ 1 s (DESIGN §5.1).",
-    },
-    ParamSpec {
-        name: "smoothing_mm",
-        ty: ParamType::Float { min: 0.0, max: 10.0 },
-        default: ParamDefault::Float(0.5),
-        doc: "Width smoothing along the path: about one nozzle diameter (0.5 mm, Table I).",
-    },
-];
+impl PiecewiseLooParams {
+    /// The model's checked hyper-parameters.
+    fn checked(&self) -> Result<PiecewiseValidParams, ParamError> {
+        PiecewiseParams {
+            r_min: self.r_min,
+            r_max: self.r_max,
+            r_step: self.r_step,
+            has_start_blob: self.start_blob,
+            smoothing_mm: self.smoothing_mm,
+            ..PiecewiseParams::paper_defaults()
+        }
+        .check()
+        .map_err(model_param_error)
+    }
+}
 
-impl StageKind for PiecewiseLooStage {
-    fn name(&self) -> &'static str {
-        "fdm.piecewise_loo"
+impl LagLooParams {
+    /// The model's checked hyper-parameters.
+    fn checked(&self) -> Result<LagValidParams, ParamError> {
+        LagParams {
+            tau_min_s: self.tau_min_s,
+            tau_max_s: self.tau_max_s,
+            smoothing_mm: self.smoothing_mm,
+            has_start_blob: self.start_blob,
+            ..LagParams::paper_defaults()
+        }
+        .check()
+        .map_err(model_param_error)
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Leave-one-out of the piecewise width model with r_a × r_F grid search → loo.parquet, loo_predictions.parquet, r_surface.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 eqs 1-3, 8-step procedure, Case A (Table II, Fig. 6)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PIECEWISE_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
+}
+
+impl Stage for PiecewiseLooStage {
+    type Params = PiecewiseLooParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.piecewise_loo",
+        version: 1,
+        summary: "Leave-one-out of the piecewise width model with r_a × r_F grid search → loo.parquet, loo_predictions.parquet, r_surface.parquet",
+        implements: "paper 000 eqs 1-3, 8-step procedure, Case A (Table II, Fig. 6)",
+        inputs: &[roles::FDM_WIDTHS],
+        output: Output::Tables,
+    };
+    const WRITES: &'static [&'static Table] = &[&loo::TABLE, &loo_predictions::TABLE, &r_surface::TABLE];
+
+    fn check(p: &PiecewiseLooParams) -> Result<(), ParamError> {
+        p.checked().map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let params = piecewise_params(ctx)?;
-        let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
+    fn run(&self, ctx: &mut StageContext, p: &PiecewiseLooParams) -> Result<(), StageError> {
+        let params = p.checked().map_err(|e| StageError::params(ctx, e))?;
+        let printer = PrinterLines::read(&ctx.input(&roles::FDM_WIDTHS).dir)?;
         let progress = StageProgress::with_steps(ctx, printer.lines.len() as u64);
         let folds = run_folds(&printer.lines, |train, test, _| {
             let model = models::fdm::fit(train, &params)?;
@@ -132,38 +142,25 @@ impl StageKind for PiecewiseLooStage {
     }
 }
 
-impl StageKind for LagLooStage {
-    fn name(&self) -> &'static str {
-        "fdm.lag_model"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Leave-one-out of the physics baseline: mass conservation + first-order extrusion lag + start blob → loo.parquet, loo_predictions.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §5.1 (w = Q/(h·v), τ·dQ/dt = Q_cmd − Q); compared with paper 000 Table II"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        LAG_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
+impl Stage for LagLooStage {
+    type Params = LagLooParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.lag_model",
+        version: 1,
+        summary: "Leave-one-out of the physics baseline: mass conservation + first-order extrusion lag + start blob → loo.parquet, loo_predictions.parquet",
+        implements: "DESIGN §5.1 (w = Q/(h·v), τ·dQ/dt = Q_cmd − Q); compared with paper 000 Table II",
+        inputs: &[roles::FDM_WIDTHS],
+        output: Output::Tables,
+    };
+    const WRITES: &'static [&'static Table] = &[&loo::TABLE, &loo_predictions::TABLE];
+
+    fn check(p: &LagLooParams) -> Result<(), ParamError> {
+        p.checked().map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let p = &ctx.params;
-        let params = LagParams {
-            tau_min_s: p.f64("tau_min_s"),
-            tau_max_s: p.f64("tau_max_s"),
-            smoothing_mm: p.f64("smoothing_mm"),
-            has_start_blob: p.bool("start_blob"),
-            ..LagParams::paper_defaults()
-        }
-        .check()
-        .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })?;
-        let printer = PrinterLines::read(&ctx.inputs[0].dir)?;
+    fn run(&self, ctx: &mut StageContext, p: &LagLooParams) -> Result<(), StageError> {
+        let params = p.checked().map_err(|e| StageError::params(ctx, e))?;
+        let printer = PrinterLines::read(&ctx.input(&roles::FDM_WIDTHS).dir)?;
         let progress = StageProgress::with_steps(ctx, printer.lines.len() as u64);
         let folds = run_folds(&printer.lines, |train, test, _| {
             let model = fit_lag(train, &params)?;
@@ -177,33 +174,19 @@ impl StageKind for LagLooStage {
     }
 }
 
-fn piecewise_params(ctx: &StageContext) -> Result<PiecewiseValidParams, StageError> {
-    let p = &ctx.params;
-    PiecewiseParams {
-        r_min: p.f64("r_min"),
-        r_max: p.f64("r_max"),
-        r_step: p.f64("r_step"),
-        has_start_blob: p.bool("start_blob"),
-        smoothing_mm: p.f64("smoothing_mm"),
-        ..PiecewiseParams::paper_defaults()
-    }
-    .check()
-    .map_err(|e| StageError::Params { stage: ctx.stage.clone(), message: e.to_string() })
-}
-
 fn write_loo(ctx: &mut StageContext, printer: &PrinterLines, model: &str, folds: &[Fold]) -> Result<(), StageError> {
     let n = folds.len();
     let lines = &printer.lines;
     let mut summary = frame(vec![
-        str_col("printer", vec![printer.printer.clone(); n]),
-        str_col("condition", printer.conditions.clone()),
-        f64_col("accel_mm_s2", lines.iter().map(|l| l.nominal.accel_mm_s2).collect()),
-        f64_col("feed_mm_s", lines.iter().map(|l| l.nominal.feed_mm_s).collect()),
-        str_col("model", vec![model.to_string(); n]),
-        f64_col("rmse_mm", folds.iter().map(|f| f.rmse_mm).collect()),
-        f64_col("r_a", folds.iter().map(|f| f.r_a).collect()),
-        f64_col("r_f", folds.iter().map(|f| f.r_f).collect()),
-        optional_col("tau_s", folds.iter().map(|f| f.tau_s).collect()),
+        str_col(loo::printer, vec![printer.printer.clone(); n]),
+        str_col(loo::condition, printer.conditions.clone()),
+        f64_col(loo::accel_mm_s2, lines.iter().map(|l| l.nominal.accel_mm_s2).collect()),
+        f64_col(loo::feed_mm_s, lines.iter().map(|l| l.nominal.feed_mm_s).collect()),
+        str_col(loo::model, vec![model.to_string(); n]),
+        f64_col(loo::rmse_mm, folds.iter().map(|f| f.rmse_mm).collect()),
+        f64_col(loo::r_a, folds.iter().map(|f| f.r_a).collect()),
+        f64_col(loo::r_f, folds.iter().map(|f| f.r_f).collect()),
+        optional_col(loo::tau_s, folds.iter().map(|f| f.tau_s).collect()),
     ])?;
     ctx.write_table("loo", &mut summary)?;
     let mut predictions = predictions_frame(printer, model, folds)?;
@@ -227,12 +210,12 @@ fn predictions_frame(
         predicted.extend_from_slice(&fold.predicted_mm);
     }
     frame(vec![
-        str_col("printer", vec![printer.printer.clone(); total]),
-        str_col("condition", condition),
-        str_col("model", vec![model.to_string(); total]),
-        f64_col("position_mm", position),
-        f64_col("measured_width_mm", measured),
-        f64_col("predicted_width_mm", predicted),
+        str_col(loo_predictions::printer, vec![printer.printer.clone(); total]),
+        str_col(loo_predictions::condition, condition),
+        str_col(loo_predictions::model, vec![model.to_string(); total]),
+        f64_col(loo_predictions::position_mm, position),
+        f64_col(loo_predictions::measured_width_mm, measured),
+        f64_col(loo_predictions::predicted_width_mm, predicted),
     ])
 }
 
@@ -246,10 +229,10 @@ fn r_surface(printer: &PrinterLines, params: &PiecewiseValidParams) -> Result<po
         .collect::<Result<_, _>>()
         .map_err(|e| fit_failed("r_a × r_F surface", e))?;
     frame(vec![
-        str_col("printer", vec![printer.printer.clone(); grid.len()]),
-        f64_col("r_a", grid.iter().map(|g| g.0).collect()),
-        f64_col("r_f", grid.iter().map(|g| g.1).collect()),
-        f64_col("training_rmse_mm", rmse_mm),
+        str_col(r_surface::printer, vec![printer.printer.clone(); grid.len()]),
+        f64_col(r_surface::r_a, grid.iter().map(|g| g.0).collect()),
+        f64_col(r_surface::r_f, grid.iter().map(|g| g.1).collect()),
+        f64_col(r_surface::training_rmse_mm, rmse_mm),
     ])
 }
 

@@ -7,61 +7,51 @@
 
 use datasets::fdm_widths::FdmWidthsDataset;
 use models::fdm::other_family_widths;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
+use crate::roles;
 use crate::table::read_fdm_widths;
 
 /// The `fdm.other_family` stage kind.
 pub struct OtherFamilyStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Text,
-        default: ParamDefault::Required,
-        doc: "Name of the derived printer (its dataset.toml `printer`).",
-    },
-    ParamSpec {
-        name: "width_scale",
-        ty: ParamType::Float { min: 0.2, max: 5.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Every width times this (a nozzle this many times wider at the same kinematics).",
-    },
-    ParamSpec {
-        name: "lag_mm",
-        ty: ParamType::Float { min: 0.0, max: 60.0 },
-        default: ParamDefault::Float(0.0),
-        doc: "First-order lag of the widths along the path (mm): a slower melt response; 0 keeps the shape.",
-    },
-];
+pipeline::params! {
+    /// The parameters of `fdm.other_family`.
+    pub struct OtherFamilyParams {
+        /// Name of the derived printer (its dataset.toml `printer`).
+        pub printer: String,
+        /// Every width times this (a nozzle this many times wider at the same kinematics).
+        pub width_scale: f64 [0.2, 5.0] = 1.0,
+        /// First-order lag of the widths along the path (mm): a slower melt response; 0 keeps the shape.
+        pub lag_mm: f64 [0.0, 60.0] = 0.0,
+    }
+}
 
-impl StageKind for OtherFamilyStage {
-    fn name(&self) -> &'static str {
-        "fdm.other_family"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "A printer of another family from measured lines: widths scaled (wider nozzle) and lagged along the path (slower melt) → an fdm-widths dataset (the output folder)"
-    }
-    fn implements(&self) -> &'static str {
-        "test printers for paper 000's transfer (Sec. III-B) beyond the Taz 5 / Taz 6"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
+impl Stage for OtherFamilyStage {
+    type Params = OtherFamilyParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.other_family",
+        version: 1,
+        summary: "A printer of another family from measured lines: widths scaled (wider nozzle) and lagged along the path (slower melt) → an fdm-widths dataset (the output folder)",
+        implements: "test printers for paper 000's transfer (Sec. III-B) beyond the Taz 5 / Taz 6",
+        inputs: &[roles::FDM_WIDTHS],
+        output: Output::Dataset("fdm-widths"),
+    };
+
+    fn check(p: &OtherFamilyParams) -> Result<(), ParamError> {
+        if p.printer.trim().is_empty() {
+            return Err(ParamError::new("printer", "must name a new printer (got an empty name)"));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let mut dataset: FdmWidthsDataset = read_fdm_widths(&ctx.inputs[0].dir)?;
-        let (scale, lag_mm) = (ctx.params.f64("width_scale"), ctx.params.f64("lag_mm"));
-        let name = ctx.params.str("printer").trim().to_string();
-        if name.is_empty() || name == dataset.manifest.printer {
+    fn run(&self, ctx: &mut StageContext, p: &OtherFamilyParams) -> Result<(), StageError> {
+        let mut dataset: FdmWidthsDataset = read_fdm_widths(&ctx.input(&roles::FDM_WIDTHS).dir)?;
+        let (scale, lag_mm) = (p.width_scale, p.lag_mm);
+        let name = p.printer.trim().to_string();
+        if name == dataset.manifest.printer {
             return Err(StageError::Params {
                 stage: ctx.stage.clone(),
                 message: format!("printer must name a new printer (got `{name}`)"),

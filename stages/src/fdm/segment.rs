@@ -19,23 +19,30 @@ use datasets::fdm_lines::{FdmLinesDataset, PhotoLine};
 use datasets::fdm_widths::{FdmWidthsDataset, WidthLine};
 use datasets::limits::LINE_IMAGE_PIXELS;
 use datasets::manifest::{DatasetManifest, Provenance};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use rayon::prelude::*;
 use vision::lines::{segment_edge_fit, segment_threshold_columns, GrayImage, LineGeometry, Segmentation};
 
 use crate::table::{f64_col, frame, i64_col, str_col};
 
-/// The segmentation methods, by name.
-pub const METHODS: [&str; 2] = ["edge_fit", "threshold"];
+pipeline::choice! {
+    /// The segmentation methods.
+    pub enum Method {
+        /// The sub-pixel blurred-edge fit along a refined axis.
+        EdgeFit = "edge_fit",
+        /// The Otsu threshold and pixel count per column (the plain baseline).
+        Threshold = "threshold",
+    }
+}
 
-const STEP: ParamSpec = ParamSpec {
-    name: "step_mm",
-    ty: ParamType::Float { min: 0.01, max: 5.0 },
-    default: ParamDefault::Float(0.05),
-    doc: "Spacing of the widths along the line (mm); the real data's is 0.048 mm.",
-};
+pipeline::params! {
+    /// Where along a line widths are read, as both photo stages declare it.
+    pub struct Step {
+        /// Spacing of the widths along the line (mm); the real data's is 0.048 mm.
+        pub step_mm: f64 [0.01, 5.0] = 0.05,
+    }
+}
 
 /// One photo segmented, or why it could not be.
 struct Measured<'a> {
@@ -44,11 +51,11 @@ struct Measured<'a> {
 }
 
 /// Segments every photo of `data` with `method` (in parallel over photos).
-fn segment_all<'a>(data: &'a FdmLinesDataset, method: &str, step_mm: f64) -> Vec<Measured<'a>> {
+fn segment_all<'a>(data: &'a FdmLinesDataset, method: Method, step_mm: f64) -> Vec<Measured<'a>> {
     data.lines.par_iter().map(|line| Measured { line, result: segment_one(line, method, step_mm) }).collect()
 }
 
-fn segment_one(line: &PhotoLine, method: &str, step_mm: f64) -> Result<Segmentation, String> {
+fn segment_one(line: &PhotoLine, method: Method, step_mm: f64) -> Result<Segmentation, String> {
     let name = line.image.display();
     line.image_size_px.as_ref().map_err(|e| e.clone())?;
     let bytes = std::fs::read(&line.image).map_err(|e| format!("{name}: {e}"))?;
@@ -61,10 +68,9 @@ fn segment_one(line: &PhotoLine, method: &str, step_mm: f64) -> Result<Segmentat
         px_per_mm: p.px_per_mm,
         nominal_width_mm: line.nominal_width_mm,
     };
-    let segmented = if method == "threshold" {
-        segment_threshold_columns(&image, &geometry, step_mm)
-    } else {
-        segment_edge_fit(&image, &geometry, step_mm)
+    let segmented = match method {
+        Method::Threshold => segment_threshold_columns(&image, &geometry, step_mm),
+        Method::EdgeFit => segment_edge_fit(&image, &geometry, step_mm),
     };
     segmented.map_err(|e| format!("{name}: {e}"))
 }
@@ -104,41 +110,34 @@ fn read_lines(dir: &Path) -> Result<FdmLinesDataset, StageError> {
 /// The `fdm.segment_widths` stage kind.
 pub struct SegmentWidthsStage;
 
-const SEGMENT_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "method",
-        ty: ParamType::Choice(&METHODS),
-        default: ParamDefault::Str("edge_fit"),
-        doc: "edge_fit: blurred-edge model fitted across the line at each position (sub-pixel); threshold: Otsu threshold and pixel count per column (the plain baseline).",
-    },
-    STEP,
-];
+pipeline::params! {
+    /// The parameters of `fdm.segment_widths`.
+    pub struct SegmentParams {
+        /// edge_fit: blurred-edge model fitted across the line at each position (sub-pixel); threshold: Otsu threshold and pixel count per column (the plain baseline).
+        pub method: Method = Method::EdgeFit,
+    }
+    groups { pub step: Step }
+}
 
-impl StageKind for SegmentWidthsStage {
-    fn name(&self) -> &'static str {
-        "fdm.segment_widths"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Photos of lines (fdm-lines) → widths along each line (an fdm-widths dataset, the output folder) + segment_diagnostics.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III (widths measured from camera images); DESIGN §4"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        SEGMENT_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+/// The photos segmented.
+const PHOTOS: Input = Input::one("photos", &[Source::Dataset("fdm-lines")], "photos of printed lines (`fdm-lines`)");
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = ctx.inputs[0].dir.clone();
+impl Stage for SegmentWidthsStage {
+    type Params = SegmentParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.segment_widths",
+        version: 1,
+        summary: "Photos of lines (fdm-lines) → widths along each line (an fdm-widths dataset, the output folder) + segment_diagnostics.parquet",
+        implements: "paper 000 Sec. III (widths measured from camera images); DESIGN §4",
+        inputs: &[PHOTOS],
+        output: Output::Dataset("fdm-widths"),
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &SegmentParams) -> Result<(), StageError> {
+        let dir = ctx.input(&PHOTOS).dir.clone();
         let data = read_lines(&dir)?;
-        let method = ctx.params.str("method").to_string();
-        let measured = segment_all(&data, &method, ctx.params.f64("step_mm"));
+        let method = p.method.name();
+        let measured = segment_all(&data, p.method, p.step.step_mm);
         let mut diagnostics = Diagnostics::default();
         let mut lines = Vec::new();
         for m in &measured {
@@ -156,9 +155,9 @@ impl StageKind for SegmentWidthsStage {
                 ),
             });
         }
-        let widths = FdmWidthsDataset { manifest: segmented_manifest(&data.manifest, &method), lines };
+        let widths = FdmWidthsDataset { manifest: segmented_manifest(&data.manifest, method), lines };
         widths.write(ctx.output_dir()).map_err(StageError::domain)?;
-        ctx.write_table("segment_diagnostics", &mut diagnostics.frame(&data.manifest.printer, &method)?)?;
+        ctx.write_table("segment_diagnostics", &mut diagnostics.frame(&data.manifest.printer, method)?)?;
         Ok(())
     }
 }
@@ -230,38 +229,34 @@ impl Diagnostics {
 /// The `fdm.segment_accuracy` stage kind.
 pub struct SegmentAccuracyStage;
 
-impl StageKind for SegmentAccuracyStage {
-    fn name(&self) -> &'static str {
-        "fdm.segment_accuracy"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Evaluation (reads truth/): per photo and method (edge_fit, threshold), width RMSE and bias against the true widths → segment_accuracy.parquet, photo_sets.parquet (each set's effects)"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III (widths from camera images), checked on virtual photos"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        std::slice::from_ref(&STEP)
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
-    }
+/// The photo sets scored, each with its `truth/`.
+const PHOTO_SETS: Input =
+    Input::many("photos", 1, &[Source::Dataset("fdm-lines")], "virtual photos with their truth (`fdm-lines`)");
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let step_mm = ctx.params.f64("step_mm");
+impl Stage for SegmentAccuracyStage {
+    type Params = Step;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.segment_accuracy",
+        version: 1,
+        summary: "Evaluation (reads truth/): per photo and method (edge_fit, threshold), width RMSE and bias against the true widths → segment_accuracy.parquet, photo_sets.parquet (each set's effects)",
+        implements: "paper 000 Sec. III (widths from camera images), checked on virtual photos",
+        inputs: &[PHOTO_SETS],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &Step) -> Result<(), StageError> {
+        let step_mm = p.step_mm;
         let mut rows = AccuracyRows::default();
         let mut sets = PhotoSets::default();
-        let bar = ctx.progress((ctx.inputs.len() * METHODS.len()) as u64);
-        for input in &ctx.inputs {
+        let inputs = ctx.inputs_of(&PHOTO_SETS);
+        let bar = ctx.progress((inputs.len() * Method::ALL.len()) as u64);
+        for input in inputs {
             let data = read_lines(&input.dir)?;
             let truth = read_truth(&input.dir).map_err(StageError::domain)?;
             sets.push(&input.name, &data);
-            for method in METHODS {
+            for &method in Method::ALL {
                 for m in segment_all(&data, method, step_mm) {
-                    rows.push(&data.manifest.printer, method, &m, truth.get(&m.line.line_id));
+                    rows.push(&data.manifest.printer, method.name(), &m, truth.get(&m.line.line_id));
                 }
                 bar.inc(1);
             }
@@ -397,7 +392,7 @@ mod tests {
         };
         generate_into(&config, tmp.path()).unwrap();
         let data = FdmLinesDataset::read(tmp.path()).unwrap();
-        let s = segment_one(&data.lines[0], "edge_fit", 0.05).unwrap();
+        let s = segment_one(&data.lines[0], Method::EdgeFit, 0.05).unwrap();
         (s.positions_mm, s.widths_mm)
     }
 
@@ -479,7 +474,7 @@ mod tests {
         let config = GenerateConfig { conditions: vec![(400.0, 100.0)], camera, ..GenerateConfig::new("taz6", 5) };
         generate_into(&config, tmp.path()).unwrap();
         let data = FdmLinesDataset::read(tmp.path()).unwrap();
-        let s = segment_one(&data.lines[0], "edge_fit", 0.05).unwrap();
+        let s = segment_one(&data.lines[0], Method::EdgeFit, 0.05).unwrap();
         assert!(s.widths_mm.len() > 2300, "{} widths", s.widths_mm.len());
         let truth = &read_truth(tmp.path()).unwrap()["S400F6000"];
         let errors: Vec<f64> =

@@ -27,9 +27,10 @@ use models::fdm::{
     PiecewiseValidParams, TransferParams, TransferValidParams,
 };
 use pipeline::artifact::read_parquet;
-use pipeline::stage::Arity;
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::DataFrame;
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
@@ -42,27 +43,24 @@ const PART_ERRORS: &str = "part_errors";
 /// The `fdm.transfer_cv` stage kind.
 pub struct TransferCvStage;
 
-impl StageKind for TransferCvStage {
-    fn name(&self) -> &'static str {
-        "fdm.transfer_cv"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Transfer CV: every subset of n = 1..N−1 target lines × {single, transfer_zero_mean, transfer_source_mean}, tested on the rest → transfer_cv.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Case B: Algorithm 1, eqs 4-6, Fig. 9"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+/// The printer whose lines give the prior.
+const SOURCE: Input = Input::one("source", &[Source::Dataset("fdm-widths")], "the source printer's lines (the prior)");
+/// The printer learnt with few lines.
+const TARGET: Input =
+    Input::one("target", &[Source::Dataset("fdm-widths")], "the target printer's lines (trained and tested)");
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+impl Stage for TransferCvStage {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.transfer_cv",
+        version: 1,
+        summary: "Transfer CV: every subset of n = 1..N−1 target lines × {single, transfer_zero_mean, transfer_source_mean}, tested on the rest → transfer_cv.parquet",
+        implements: "paper 000 Case B: Algorithm 1, eqs 4-6, Fig. 9",
+        inputs: &[SOURCE, TARGET],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -138,8 +136,8 @@ struct Study {
 impl Study {
     fn read(ctx: &StageContext) -> Result<Self, StageError> {
         Ok(Self {
-            source: PrinterLines::read(&ctx.inputs[0].dir)?,
-            target: PrinterLines::read(&ctx.inputs[1].dir)?,
+            source: PrinterLines::read(&ctx.input(&SOURCE).dir)?,
+            target: PrinterLines::read(&ctx.input(&TARGET).dir)?,
             source_params: PiecewiseParams::paper_defaults()
                 .check()
                 .map_err(|e| fit_failed("piecewise parameters", e))?,

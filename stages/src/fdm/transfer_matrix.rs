@@ -25,10 +25,10 @@ use models::fdm::{
     default_tasks, summarise, transfer_matrix_for_target, MatrixMethod, MatrixRow, PiecewiseParams,
     PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
 use crate::parts::{read_parts, PART_TABLE};
@@ -37,54 +37,43 @@ use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 /// The `fdm.transfer_matrix` stage kind.
 pub struct TransferMatrixStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "blob_printers",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Comma-separated printer names (dataset.toml `printer`) whose lines start with a dwell blob (phase p1 of eq. 3); the others are fitted without it.",
-    },
-    ParamSpec {
-        name: "co_learning",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(true),
-        doc: "Also learn each printer from all the others together (needs three or more printers).",
-    },
-    ParamSpec {
-        name: "lambda_step_decades",
-        ty: ParamType::Float { min: 0.1, max: 2.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Spacing of the λ grid from 1e-6 to 1e4 (decades; fdm.transfer_cv uses 0.5). Every method's λ is chosen on this grid.",
-    },
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(2000),
-        doc: "Bootstrap resamples of the target's held-out lines for each improvement's 95 % interval.",
-    },
-];
+pipeline::params! {
+    /// The parameters of `fdm.transfer_matrix`.
+    pub struct TransferMatrixParams {
+        /// Comma-separated printer names (dataset.toml `printer`) whose lines start with a dwell blob (phase p1 of eq. 3); the others are fitted without it.
+        pub blob_printers: String = "",
+        /// Also learn each printer from all the others together (needs three or more printers).
+        pub co_learning: bool = true,
+        /// Spacing of the λ grid from 1e-6 to 1e4 (decades; fdm.transfer_cv uses 0.5). Every method's λ is chosen on this grid.
+        pub lambda_step_decades: f64 [0.1, 2.0] = 1.0,
+        /// Bootstrap resamples of the target's held-out lines for each improvement's 95 % interval.
+        pub bootstrap_draws: i64 [100, 100_000] = 2000,
+    }
+}
 
-impl StageKind for TransferMatrixStage {
-    fn name(&self) -> &'static str {
-        "fdm.transfer_matrix"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning} → transfer_matrix.parquet, transfer_matrix_rows.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(2)
+/// Every printer of the study, each learnt from the others.
+const PRINTERS: Input =
+    Input::many("printers", 2, &[Source::Dataset("fdm-widths")], "each printer's lines (`fdm-widths`), two or more");
+
+impl Stage for TransferMatrixStage {
+    type Params = TransferMatrixParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.transfer_matrix",
+        version: 1,
+        summary: "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning} → transfer_matrix.parquet, transfer_matrix_rows.parquet",
+        implements: "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard",
+        inputs: &[PRINTERS],
+        output: Output::Tables,
+    };
+
+    fn check(p: &TransferMatrixParams) -> Result<(), ParamError> {
+        lambda_grid(p.lambda_step_decades)
+            .check()
+            .map(|_| ())
+            .map_err(|e| ParamError::new("lambda_step_decades", e.to_string()))
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &TransferMatrixParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -119,7 +108,7 @@ impl Split for TransferMatrixStage {
 
 /// `transfer_matrix.parquet` (the rows summarised) and `transfer_matrix_rows.parquet`.
 fn write_tables(ctx: &mut StageContext, study: &Study, rows: &[MatrixRow]) -> Result<(), StageError> {
-    let draws = ctx.params.i64("bootstrap_draws") as usize;
+    let draws = TransferMatrixParams::from_params(&ctx.params).bootstrap_draws as usize;
     let summary = summarise(rows, draws, ctx.seed);
     let names = task_names(&study.tasks, &study.lines);
     let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names[s.task].clone()).unzip();
@@ -150,13 +139,13 @@ struct Study {
 
 impl Study {
     fn read(ctx: &StageContext) -> Result<Self, StageError> {
-        let lines = ctx.inputs.iter().map(|i| PrinterLines::read(&i.dir)).collect::<Result<Vec<PrinterLines>, _>>()?;
-        let params = model_params(&lines, ctx.params.str("blob_printers"))
+        let p = TransferMatrixParams::from_params(&ctx.params);
+        let lines = (ctx.inputs_of(&PRINTERS).iter().map(|i| PrinterLines::read(&i.dir)))
+            .collect::<Result<Vec<PrinterLines>, _>>()?;
+        let params = model_params(&lines, &p.blob_printers)
             .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
-        let transfer = lambda_grid(ctx.params.f64("lambda_step_decades"))
-            .check()
-            .map_err(|e| fit_failed("transfer parameters", e))?;
-        let tasks = default_tasks(lines.len(), ctx.params.bool("co_learning"));
+        let transfer = lambda_grid(p.lambda_step_decades).check().map_err(|e| fit_failed("transfer parameters", e))?;
+        let tasks = default_tasks(lines.len(), p.co_learning);
         Ok(Self { lines, params, transfer, tasks })
     }
 

@@ -10,96 +10,102 @@
 use datasets::fdm_lines::camera::CameraSettings;
 use datasets::fdm_lines::generate::{conditions_named, generate_into_observed, GenerateConfig};
 use models::fdm::printer::{held_out_agreement, Effects, PrinterProfile, PRINTERS};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::{Names, OneOf, ParamError};
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use super::lines::PrinterLines;
 use crate::progress::StageProgress;
+use crate::roles;
 use crate::table::{f64_col, frame, str_col};
 
 /// The `fdm.generate_lines` stage kind.
 pub struct GenerateLinesStage;
 
-const GENERATE_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Choice(&PRINTERS),
-        default: ParamDefault::Str("taz5"),
-        doc: "Printer profile, calibrated to its real lines in data/fsu-linewidth.",
-    },
-    ParamSpec {
-        name: "conditions",
-        ty: ParamType::Choice(&["ren2021"]),
-        default: ParamDefault::Str("ren2021"),
-        doc: "(acceleration, feed) conditions: paper 000 Table I.",
-    },
-    ParamSpec {
-        name: "lines_per_condition",
-        ty: ParamType::Int { min: 1, max: 100 },
-        default: ParamDefault::Int(1),
-        doc: "Lines printed per condition.",
-    },
-    ParamSpec {
-        name: "effects",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Extra physical effects as `name=strength` pairs separated by commas (bed_tilt, gear_eccentricity, flow_saturation, camera_scale_error); empty: none.",
-    },
-    ParamSpec {
-        name: "gear_period_mm",
-        ty: ParamType::Float { min: 2.0, max: 60.0 },
-        default: ParamDefault::Float(12.0),
-        doc: "The gear ripple's period in path length (mm), with gear_eccentricity.",
-    },
-    ParamSpec {
-        name: "px_per_mm",
-        ty: ParamType::Float { min: 2.0, max: 200.0 },
-        default: ParamDefault::Float(40.0),
-        doc: "The camera's scale (px/mm); the real data's 0.048 mm width steps suggest about 20.",
-    },
-    ParamSpec {
-        name: "bit_depth",
-        ty: ParamType::Choice(&["8", "16"]),
-        default: ParamDefault::Str("8"),
-        doc: "Bits per pixel of the photos.",
-    },
-];
+/// The virtual printer's calibrated profiles.
+pub struct VirtualPrinters;
 
-impl StageKind for GenerateLinesStage {
-    fn name(&self) -> &'static str {
-        "fdm.generate_lines"
+impl Names for VirtualPrinters {
+    const NAMES: &'static [&'static str] = &PRINTERS;
+}
+
+pipeline::choice! {
+    /// Sets of (acceleration, feed) conditions.
+    pub enum Conditions {
+        /// Paper 000 Table I.
+        Ren2021 = "ren2021",
     }
-    fn version(&self) -> u32 {
-        1
+}
+
+pipeline::choice! {
+    /// Bits per pixel of the photos.
+    pub enum BitDepth {
+        /// 8-bit grey.
+        Eight = "8",
+        /// 16-bit grey.
+        Sixteen = "16",
     }
-    fn summary(&self) -> &'static str {
-        "Virtual FDM printer + top-view camera → an fdm-lines dataset of paper 000's lines (the output folder)"
+}
+
+pipeline::params! {
+    /// The parameters of `fdm.generate_lines`.
+    pub struct GenerateLinesParams {
+        /// Printer profile, calibrated to its real lines in data/fsu-linewidth.
+        pub printer: OneOf<VirtualPrinters> = "taz5",
+        /// (acceleration, feed) conditions: paper 000 Table I.
+        pub conditions: Conditions = Conditions::Ren2021,
+        /// Lines printed per condition.
+        pub lines_per_condition: i64 [1, 100] = 1,
+        /// Extra physical effects as `name=strength` pairs separated by commas (bed_tilt, gear_eccentricity, flow_saturation, camera_scale_error); empty: none.
+        pub effects: String = "",
+        /// The gear ripple's period in path length (mm), with gear_eccentricity.
+        pub gear_period_mm: f64 [2.0, 60.0] = 12.0,
+        /// The camera's scale (px/mm); the real data's 0.048 mm width steps suggest about 20.
+        pub px_per_mm: f64 [2.0, 200.0] = 40.0,
+        /// Bits per pixel of the photos.
+        pub bit_depth: BitDepth = BitDepth::Eight,
     }
-    fn implements(&self) -> &'static str {
-        "DESIGN §5.1; paper 000 Table I (conditions), Sec. III (camera-measured widths)"
+}
+
+impl GenerateLinesParams {
+    /// The effects, parsed and checked.
+    fn effects(&self) -> Result<Effects, ParamError> {
+        let pairs = crate::effects::pairs(&self.effects).map_err(|m| ParamError::new("effects", m))?;
+        let effects = Effects::from_pairs(pairs).map_err(|e| ParamError::new("effects", e.to_string()))?;
+        Ok(Effects { gear_period_mm: self.gear_period_mm, ..effects })
     }
-    fn params(&self) -> &'static [ParamSpec] {
-        GENERATE_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+}
+
+impl Stage for GenerateLinesStage {
+    type Params = GenerateLinesParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.generate_lines",
+        version: 1,
+        summary:
+            "Virtual FDM printer + top-view camera → an fdm-lines dataset of paper 000's lines (the output folder)",
+        implements: "DESIGN §5.1; paper 000 Table I (conditions), Sec. III (camera-measured widths)",
+        inputs: &[],
+        output: Output::Dataset("fdm-lines"),
+    };
+
+    fn check(p: &GenerateLinesParams) -> Result<(), ParamError> {
+        p.effects().map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let params_error = |message: String| StageError::Params { stage: ctx.stage.clone(), message };
-        let pairs = crate::effects::pairs(ctx.params.str("effects")).map_err(params_error)?;
-        let effects = Effects::from_pairs(pairs).map_err(|e| params_error(format!("effects: {e}")))?;
+    fn run(&self, ctx: &mut StageContext, p: &GenerateLinesParams) -> Result<(), StageError> {
         let config = GenerateConfig {
-            conditions: conditions_named(ctx.params.str("conditions")).unwrap_or_default(),
-            lines_per_condition: ctx.params.i64("lines_per_condition") as usize,
-            effects: Effects { gear_period_mm: ctx.params.f64("gear_period_mm"), ..effects },
+            conditions: conditions_named(p.conditions.name()).unwrap_or_default(),
+            lines_per_condition: p.lines_per_condition as usize,
+            effects: p.effects().map_err(|e| StageError::params(ctx, e))?,
             camera: CameraSettings {
-                px_per_mm: ctx.params.f64("px_per_mm"),
-                bit_depth: if ctx.params.str("bit_depth") == "16" { 16 } else { 8 },
+                px_per_mm: p.px_per_mm,
+                bit_depth: match p.bit_depth {
+                    BitDepth::Eight => 8,
+                    BitDepth::Sixteen => 16,
+                },
                 ..CameraSettings::default()
             },
-            ..GenerateConfig::new(ctx.params.str("printer"), ctx.seed)
+            ..GenerateConfig::new(p.printer.as_str(), ctx.seed)
         };
         generate_into_observed(&config, ctx.output_dir(), &StageProgress::new(ctx)).map_err(StageError::domain)?;
         Ok(())
@@ -109,46 +115,31 @@ impl StageKind for GenerateLinesStage {
 /// The `fdm.virtual_agreement` stage kind.
 pub struct VirtualAgreementStage;
 
-const AGREEMENT_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "draws",
-        ty: ParamType::Int { min: 2, max: 1000 },
-        default: ParamDefault::Int(40),
-        doc: "Virtual lines printed per held-out real line for the scatter and the 95 % band.",
-    },
-    ParamSpec {
-        name: "profile_step_mm",
-        ty: ParamType::Float { min: 0.05, max: 10.0 },
-        default: ParamDefault::Float(0.5),
-        doc: "Spacing of the rows of agreement_profiles.parquet along the line (mm).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `fdm.virtual_agreement`.
+    pub struct VirtualAgreementParams {
+        /// Virtual lines printed per held-out real line for the scatter and the 95 % band.
+        pub draws: i64 [2, 1000] = 40,
+        /// Spacing of the rows of agreement_profiles.parquet along the line (mm).
+        pub profile_step_mm: f64 [0.05, 10.0] = 0.5,
+    }
+}
 
-impl StageKind for VirtualAgreementStage {
-    fn name(&self) -> &'static str {
-        "fdm.virtual_agreement"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Per real line: the virtual printer calibrated on the other lines vs the measured widths (held-out RMSE, the virtual scatter) → agreement.parquet, agreement_profiles.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §5.1 (virtual printers calibrated to the real data)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        AGREEMENT_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
-    }
+impl Stage for VirtualAgreementStage {
+    type Params = VirtualAgreementParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "fdm.virtual_agreement",
+        version: 1,
+        summary: "Per real line: the virtual printer calibrated on the other lines vs the measured widths (held-out RMSE, the virtual scatter) → agreement.parquet, agreement_profiles.parquet",
+        implements: "DESIGN §5.1 (virtual printers calibrated to the real data)",
+        inputs: &[roles::FDM_WIDTHS_MANY],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let draws = ctx.params.i64("draws") as usize;
-        let step_mm = ctx.params.f64("profile_step_mm");
+    fn run(&self, ctx: &mut StageContext, p: &VirtualAgreementParams) -> Result<(), StageError> {
+        let (draws, step_mm) = (p.draws as usize, p.profile_step_mm);
         let mut rows = AgreementRows::default();
-        for input in &ctx.inputs {
+        for input in ctx.inputs_of(&roles::FDM_WIDTHS_MANY) {
             let printer = PrinterLines::read(&input.dir)?;
             let profile = PrinterProfile::named(&printer.printer).ok_or_else(|| StageError::BadInput {
                 file: input.dir.join("dataset.toml"),

@@ -16,12 +16,12 @@ use crate::progress::StageProgress;
 use models::inkjet::discrepancy::control::{run_trials_observed, summarize, ControlDesign, ControlRow, ControlSummary};
 use models::inkjet::discrepancy::power::PrintDesign;
 use models::inkjet::printer::Effect;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
-use super::discrepancy::{strengths, LAYERS_PER_GROUP, MAX_ROUNDS};
-use crate::discrepancy_tables::{study_settings, ALPHA};
+use super::discrepancy::{LayerSearch, StrengthLists};
+use crate::discrepancy_tables::{study_settings, FalseAlarm};
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.control_gain` stage kind.
@@ -30,76 +30,55 @@ pub struct ControlGainStage;
 /// The effects whose fitted extension eq. 8's predictor can use.
 const STUDIED: [Effect; 3] = [Effect::CuringShrinkage, Effect::VolumeDrift, Effect::NozzleBias];
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "curing_shrinkage",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.05"),
-        doc: "Strengths of curing_shrinkage (fraction of each fresh layer lost), comma-separated; empty for none.",
-    },
-    ParamSpec {
-        name: "volume_drift",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.002"),
-        doc: "Strengths of volume_drift (relative droplet-volume change per layer, sign drawn per printer), comma-separated.",
-    },
-    ParamSpec {
-        name: "nozzle_bias",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.05"),
-        doc: "Strengths of nozzle_bias (std of the per-nozzle volume factor), comma-separated.",
-    },
-    ParamSpec {
-        name: "printers",
-        ty: ParamType::Int { min: 2, max: 10_000 },
-        default: ParamDefault::Int(8),
-        doc: "Printers (seeds) per effect and strength; each prints one calibration part and three production parts.",
-    },
-    ParamSpec {
-        name: "radius_cells",
-        ty: ParamType::Int { min: 3, max: 40 },
-        default: ParamDefault::Int(10),
-        doc: "Cylinder radius in droplet spacings, calibration and production alike.",
-    },
-    ParamSpec {
-        name: "calibration_layers",
-        ty: ParamType::Int { min: 3, max: 1000 },
-        default: ParamDefault::Int(40),
-        doc: "Open-loop layers of the calibration print the engine reads.",
-    },
-    ParamSpec {
-        name: "variation_pct",
-        ty: ParamType::Float { min: 0.0, max: 100.0 },
-        default: ParamDefault::Float(20.0),
-        doc: "Largest droplet-volume shortfall p in percent (the paper's [0 20%]).",
-    },
-    LAYERS_PER_GROUP,
-    ALPHA,
-    MAX_ROUNDS,
-];
+pipeline::params! {
+    /// The parameters of `inkjet.control_gain`.
+    pub struct ControlGainParams {
+        /// Strengths of curing_shrinkage (fraction of each fresh layer lost), comma-separated; empty for none.
+        pub curing_shrinkage: String = "0.05",
+        /// Strengths of volume_drift (relative droplet-volume change per layer, sign drawn per printer), comma-separated.
+        pub volume_drift: String = "0.002",
+        /// Strengths of nozzle_bias (std of the per-nozzle volume factor), comma-separated.
+        pub nozzle_bias: String = "0.05",
+        /// Printers (seeds) per effect and strength; each prints one calibration part and three production parts.
+        pub printers: i64 [2, 10_000] = 8,
+        /// Cylinder radius in droplet spacings, calibration and production alike.
+        pub radius_cells: i64 [3, 40] = 10,
+        /// Open-loop layers of the calibration print the engine reads.
+        pub calibration_layers: i64 [3, 1000] = 40,
+        /// Largest droplet-volume shortfall p in percent (the paper's [0 20%]).
+        pub variation_pct: f64 [0.0, 100.0] = 20.0,
+    }
+    groups { pub search: LayerSearch, pub false_alarm: FalseAlarm }
+}
 
-impl StageKind for ControlGainStage {
-    fn name(&self) -> &'static str {
-        "inkjet.control_gain"
+impl StrengthLists for ControlGainParams {
+    fn list(&self, effect: Effect) -> &str {
+        match effect {
+            Effect::CuringShrinkage => &self.curing_shrinkage,
+            Effect::VolumeDrift => &self.volume_drift,
+            Effect::NozzleBias => &self.nozzle_bias,
+            Effect::LevellingFlow | Effect::SubstrateTilt => "",
+        }
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Closed-loop prints of paper 002's cylinder controlled with the paper's model, the engine's baseline and the extended model fitted on a calibration print of the same printer → control_gain.parquet, control_trials.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 eq. 8 (Sec. IV-A) with the discrepancy engine's extended model (DESIGN §7)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+}
+
+impl Stage for ControlGainStage {
+    type Params = ControlGainParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.control_gain",
+        version: 1,
+        summary: "Closed-loop prints of paper 002's cylinder controlled with the paper's model, the engine's baseline and the extended model fitted on a calibration print of the same printer → control_gain.parquet, control_trials.parquet",
+        implements: "paper 002 eq. 8 (Sec. IV-A) with the discrepancy engine's extended model (DESIGN §7)",
+        inputs: &[],
+        output: Output::Tables,
+    };
+
+    fn check(p: &ControlGainParams) -> Result<(), ParamError> {
+        p.cells(&STUDIED).map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let design = design(ctx)?;
+    fn run(&self, ctx: &mut StageContext, p: &ControlGainParams) -> Result<(), StageError> {
+        let design = design(p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let rows = run_trials_observed(&design, &StageProgress::new(ctx)).map_err(StageError::domain)?;
         let mut gain = gain_frame(&summarize(&rows))?;
         ctx.write_table("control_gain", &mut gain)?;
@@ -109,23 +88,18 @@ impl StageKind for ControlGainStage {
     }
 }
 
-fn design(ctx: &StageContext) -> Result<ControlDesign, StageError> {
-    let p = &ctx.params;
-    let mut cells = Vec::new();
-    for effect in STUDIED {
-        cells.extend(strengths(ctx, effect)?.into_iter().map(|s| (effect, s)));
-    }
+fn design(p: &ControlGainParams, seed: u64) -> Result<ControlDesign, ParamError> {
     Ok(ControlDesign {
         calibration: PrintDesign {
-            radius_cells: p.i64("radius_cells") as usize,
-            layers: p.i64("calibration_layers") as usize,
-            max_shortfall: p.f64("variation_pct") / 100.0,
-            layers_per_group: p.i64("layers_per_group") as usize,
+            radius_cells: p.radius_cells as usize,
+            layers: p.calibration_layers as usize,
+            max_shortfall: p.variation_pct / 100.0,
+            layers_per_group: p.search.layers_per_group as usize,
         },
-        cells,
-        seeds: p.i64("printers") as usize,
-        seed: ctx.seed,
-        engine: study_settings(ctx, 100),
+        cells: p.cells(&STUDIED)?,
+        seeds: p.printers as usize,
+        seed,
+        engine: study_settings(p.false_alarm.alpha, p.search.max_rounds, seed, 100),
     })
 }
 

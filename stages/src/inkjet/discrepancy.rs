@@ -24,58 +24,66 @@ use models::inkjet::discrepancy::power::{names, run_draw_range, DrawResult, Powe
 use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
 use models::inkjet::printer::Effect;
 use models::inkjet::{DropletCoeffs, Grid};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, engine_settings, max_rounds, study_settings, DiscrepancyTables, Domain, DrawRow,
-    ALPHA, BINS, BOOTSTRAP_DRAWS,
+    draws_frame as shared_draws_frame, study_settings, DiscrepancyTables, Domain, DrawRow, EngineParams, FalseAlarm,
 };
 use crate::effects::strength_list;
 use crate::parts::{
-    data_set_units, merge_study, merge_tables, study_unit_draws, study_units, write_study_part, DRAWS_PER_UNIT,
+    data_set_units, merge_study, merge_tables, study_unit_draws, study_units, write_study_part, StudySize, UnitSize,
 };
 
 /// The ink-jet tables' names: one discovery per dataset, heights in µm.
 const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
 
-pub(super) const LAYERS_PER_GROUP: ParamSpec = ParamSpec {
-    name: "layers_per_group",
-    ty: ParamType::Int { min: 1, max: 100 },
-    default: ParamDefault::Int(4),
-    doc: "Consecutive layers per group: blocks share only their boundary scan, so held-out blocks are close to independent (at least 3 groups are needed; 8 or more before anything can be named at α = 0.05 over 6 candidates).",
-};
-/// The most rounds over the six candidates.
-pub(super) const MAX_ROUNDS: ParamSpec = max_rounds(6, 3);
+pipeline::params! {
+    /// How the ink-jet discrepancy search groups a print's layers and how many causes it
+    /// names, as the discrepancy stage and both studies declare it.
+    pub struct LayerSearch {
+        /// Consecutive layers per group: blocks share only their boundary scan, so held-out blocks are close to independent (at least 3 groups are needed; 8 or more before anything can be named at α = 0.05 over 6 candidates).
+        pub layers_per_group: i64 [1, 100] = 4,
+        /// Most causes named: after each, the extended model is the baseline and the search repeats.
+        pub max_rounds: i64 [1, 6] = 3,
+    }
+}
+
+pipeline::params! {
+    /// The parameters of `inkjet.discrepancy`.
+    pub struct DiscrepancyParams {}
+    groups { pub search: LayerSearch, pub engine: EngineParams }
+}
+
+/// The prints searched, one discovery each.
+const SCANS: Input = Input::many(
+    "scans",
+    1,
+    &[Source::Dataset("inkjet-scans")],
+    "printed parts' layer scans (`inkjet-scans`), one discovery each",
+);
 
 /// The `inkjet.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-const PARAMS: &[ParamSpec] = &[LAYERS_PER_GROUP, ALPHA, MAX_ROUNDS, BINS, BOOTSTRAP_DRAWS];
+impl Stage for DiscrepancyStage {
+    type Params = DiscrepancyParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.discrepancy",
+        version: 1,
+        summary: "What the layer-to-layer model gets wrong on a print's scans, the cause named by grouped cross-validation among 6 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
+        implements: "DESIGN §7 on paper 002's layer-to-layer model (eqs 2-7) and the inkjet-scans format",
+        inputs: &[SCANS],
+        output: Output::Tables,
+    };
 
-impl StageKind for DiscrepancyStage {
-    fn name(&self) -> &'static str {
-        "inkjet.discrepancy"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "What the layer-to-layer model gets wrong on a print's scans, the cause named by grouped cross-validation among 6 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 002's layer-to-layer model (eqs 2-7) and the inkjet-scans format"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
+    fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
+        p.engine.settings(p.search.max_rounds, 0).map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &DiscrepancyParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -91,10 +99,11 @@ impl Split for DiscrepancyStage {
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        let settings = engine_settings(ctx)?;
-        let per_group = ctx.params.i64("layers_per_group") as usize;
+        let p = DiscrepancyParams::from_params(&ctx.params);
+        let settings = p.engine.settings(p.search.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
+        let per_group = p.search.layers_per_group as usize;
         let mut tables = DiscrepancyTables::new(INKJET, settings.alpha);
-        let input = &ctx.inputs[index];
+        let input = ctx.inputs_of(&SCANS)[index].clone();
         let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
         let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
         let blocks = model.print().blocks(per_group);
@@ -138,100 +147,63 @@ pub struct DiscoveryPowerStage;
 const STUDIED: [Effect; 5] =
     [Effect::CuringShrinkage, Effect::VolumeDrift, Effect::LevellingFlow, Effect::NozzleBias, Effect::SubstrateTilt];
 
-const POWER_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "curing_shrinkage",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.01, 0.02"),
-        doc: "Strengths of curing_shrinkage (fraction of each fresh layer lost), comma-separated; empty for none.",
-    },
-    ParamSpec {
-        name: "volume_drift",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.0005, 0.001"),
-        doc: "Strengths of volume_drift (relative droplet-volume change per layer, sign drawn per print), comma-separated.",
-    },
-    ParamSpec {
-        name: "levelling_flow",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.015, 0.03"),
-        doc: "Strengths of levelling_flow (diffusion number of the fresh layer), comma-separated.",
-    },
-    ParamSpec {
-        name: "nozzle_bias",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.01, 0.02"),
-        doc: "Strengths of nozzle_bias (std of the per-nozzle volume factor), comma-separated.",
-    },
-    ParamSpec {
-        name: "substrate_tilt",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("5"),
-        doc: "Strengths of substrate_tilt (µm per mm, sign drawn; invisible layer to layer, no candidate), comma-separated.",
-    },
-    ParamSpec {
-        name: "draws",
-        ty: ParamType::Int { min: 1, max: 100_000 },
-        default: ParamDefault::Int(10),
-        doc: "Prints per effect and strength.",
-    },
-    ParamSpec {
-        name: "null_draws",
-        ty: ParamType::Int { min: 0, max: 100_000 },
-        default: ParamDefault::Int(20),
-        doc: "Prints with no effect.",
-    },
-    ParamSpec {
-        name: "radius_cells",
-        ty: ParamType::Int { min: 3, max: 40 },
-        default: ParamDefault::Int(10),
-        doc: "Radius of each print's cylinder, droplet spacings (paper 002's Sec. V-A part, smaller: the paper gives no diameter).",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 3, max: 1000 },
-        default: ParamDefault::Int(40),
-        doc: "Open-loop layers of each print.",
-    },
-    ParamSpec {
-        name: "variation_pct",
-        ty: ParamType::Float { min: 0.0, max: 100.0 },
-        default: ParamDefault::Float(20.0),
-        doc: "Largest droplet-volume shortfall p in percent (the paper's [0 20%]).",
-    },
-    LAYERS_PER_GROUP,
-    ALPHA,
-    MAX_ROUNDS,
-    ParamSpec {
-        name: "bootstrap_draws",
-        ty: ParamType::Int { min: 100, max: 100_000 },
-        default: ParamDefault::Int(200),
-        doc: "Bootstrap draws of each gain interval inside a draw (the power table uses none of them).",
-    },
-    DRAWS_PER_UNIT,
-];
+pipeline::params! {
+    /// The parameters of `inkjet.discovery_power`.
+    pub struct DiscoveryPowerParams {
+        /// Strengths of curing_shrinkage (fraction of each fresh layer lost), comma-separated; empty for none.
+        pub curing_shrinkage: String = "0.01, 0.02",
+        /// Strengths of volume_drift (relative droplet-volume change per layer, sign drawn per print), comma-separated.
+        pub volume_drift: String = "0.0005, 0.001",
+        /// Strengths of levelling_flow (diffusion number of the fresh layer), comma-separated.
+        pub levelling_flow: String = "0.015, 0.03",
+        /// Strengths of nozzle_bias (std of the per-nozzle volume factor), comma-separated.
+        pub nozzle_bias: String = "0.01, 0.02",
+        /// Strengths of substrate_tilt (µm per mm, sign drawn; invisible layer to layer, no candidate), comma-separated.
+        pub substrate_tilt: String = "5",
+        /// Prints per effect and strength.
+        pub draws: i64 [1, 100_000] = 10,
+        /// Prints with no effect.
+        pub null_draws: i64 [0, 100_000] = 20,
+        /// Radius of each print's cylinder, droplet spacings (paper 002's Sec. V-A part, smaller: the paper gives no diameter).
+        pub radius_cells: i64 [3, 40] = 10,
+        /// Open-loop layers of each print.
+        pub layers: i64 [3, 1000] = 40,
+        /// Largest droplet-volume shortfall p in percent (the paper's [0 20%]).
+        pub variation_pct: f64 [0.0, 100.0] = 20.0,
+        /// Bootstrap draws of each gain interval inside a draw (the power table uses none of them).
+        pub bootstrap_draws: i64 [100, 100_000] = 200,
+    }
+    groups { pub search: LayerSearch, pub false_alarm: FalseAlarm, pub unit_size: UnitSize }
+}
 
-impl StageKind for DiscoveryPowerStage {
-    fn name(&self) -> &'static str {
-        "inkjet.discovery_power"
+impl StrengthLists for DiscoveryPowerParams {
+    fn list(&self, effect: Effect) -> &str {
+        match effect {
+            Effect::CuringShrinkage => &self.curing_shrinkage,
+            Effect::VolumeDrift => &self.volume_drift,
+            Effect::LevellingFlow => &self.levelling_flow,
+            Effect::NozzleBias => &self.nozzle_bias,
+            Effect::SubstrateTilt => &self.substrate_tilt,
+        }
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Power study of the discrepancy engine on virtual ink-jet prints: each effect hidden at a grid of strengths, plus null prints, scored against the printer's truth → power.parquet, power_draws.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 (tests that hide an effect and require finding it), on paper 002's layer-to-layer model"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        POWER_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+}
+
+impl Stage for DiscoveryPowerStage {
+    type Params = DiscoveryPowerParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.discovery_power",
+        version: 1,
+        summary: "Power study of the discrepancy engine on virtual ink-jet prints: each effect hidden at a grid of strengths, plus null prints, scored against the printer's truth → power.parquet, power_draws.parquet",
+        implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 002's layer-to-layer model",
+        inputs: &[],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
+        p.cells(&STUDIED).map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &DiscoveryPowerParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -243,12 +215,20 @@ impl StageKind for DiscoveryPowerStage {
 /// Work units: blocks of `draws_per_unit` consecutive draws ([`crate::parts`]).
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
-        study_units(params, 1, STUDIED.map(|e| e.name()))
+        let p = DiscoveryPowerParams::from_params(params);
+        let size = StudySize {
+            null_draws: p.null_draws,
+            draws: p.draws,
+            strength_lists: STUDIED.map(|e| p.list(e)).to_vec(),
+            unit_size: &p.unit_size,
+        };
+        study_units(&size, 1)
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        let design = power_design(ctx)?;
-        let (_, range) = study_unit_draws(&ctx.params, index, design.draw_count());
+        let p = DiscoveryPowerParams::from_params(&ctx.params);
+        let design = power_design(&p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
+        let (_, range) = study_unit_draws(&p.unit_size, index, design.draw_count());
         let results = run_draw_range(&design, range).map_err(StageError::domain)?;
         let base = format!("cylinder r{} × {} layers", design.print.radius_cells, design.print.layers);
         let covered = results.iter().map(|d| d.score().covered).collect();
@@ -260,33 +240,38 @@ impl Split for DiscoveryPowerStage {
     }
 }
 
-fn power_design(ctx: &StageContext) -> Result<PowerDesign, StageError> {
-    let p = &ctx.params;
-    let mut cells = Vec::new();
-    for effect in STUDIED {
-        for strength in strengths(ctx, effect)? {
-            cells.push((effect, strength));
-        }
-    }
+fn power_design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError> {
     Ok(PowerDesign {
         print: PrintDesign {
-            radius_cells: p.i64("radius_cells") as usize,
-            layers: p.i64("layers") as usize,
-            max_shortfall: p.f64("variation_pct") / 100.0,
-            layers_per_group: p.i64("layers_per_group") as usize,
+            radius_cells: p.radius_cells as usize,
+            layers: p.layers as usize,
+            max_shortfall: p.variation_pct / 100.0,
+            layers_per_group: p.search.layers_per_group as usize,
         },
-        cells,
-        draws_per_cell: p.i64("draws") as usize,
-        null_draws: p.i64("null_draws") as usize,
-        seed: ctx.seed,
-        engine: study_settings(ctx, p.i64("bootstrap_draws") as usize),
+        cells: p.cells(&STUDIED)?,
+        draws_per_cell: p.draws as usize,
+        null_draws: p.null_draws as usize,
+        seed,
+        engine: study_settings(p.false_alarm.alpha, p.search.max_rounds, seed, p.bootstrap_draws as usize),
     })
 }
 
-/// The strengths listed for `effect`, each a magnitude within the effect's range.
-pub(super) fn strengths(ctx: &StageContext, effect: Effect) -> Result<Vec<f64>, StageError> {
-    let (lo, hi, unit) = effect.range();
-    strength_list(ctx, effect.name(), hi.max(-lo), &format!(" ({unit})"))
+/// A study's comma-separated strength list per effect.
+pub(super) trait StrengthLists {
+    /// The list of `effect` (a study lists only the effects it studies).
+    fn list(&self, effect: Effect) -> &str;
+
+    /// Every (effect, strength) cell of `studied`, each strength a magnitude within the
+    /// effect's range.
+    fn cells(&self, studied: &[Effect]) -> Result<Vec<(Effect, f64)>, ParamError> {
+        let mut cells = Vec::new();
+        for &effect in studied {
+            let (lo, hi, unit) = effect.range();
+            let listed = strength_list(effect.name(), self.list(effect), hi.max(-lo), &format!(" ({unit})"))?;
+            cells.extend(listed.into_iter().map(|s| (effect, s)));
+        }
+        Ok(cells)
+    }
 }
 
 fn draws_frame(base: &str, draws: &[DrawResult]) -> Result<polars::prelude::DataFrame, StageError> {

@@ -18,7 +18,40 @@ pub use print::{height_map_frame, summary_frame, PrintExperimentStage};
 pub use recovery::{recovery_frame, RecoveryStage};
 pub use scans::{effects_label, layer_residuals, GenerateScansStage, LayerResidual, ScanResidualsStage};
 
+use models::inkjet::experiments::ControlLaw;
 use pipeline::Registry;
+
+pipeline::choice! {
+    /// The parts of paper 002's experiments.
+    pub enum Part {
+        /// The cylinder of Sec. V-A.
+        Cylinder = "cylinder",
+        /// The cuboid of Sec. V-D (Table II).
+        Cuboid = "cuboid",
+        /// The two-material pipe junction of Figs 13-15.
+        PipeJunction = "pipe_junction",
+    }
+}
+
+pipeline::choice! {
+    /// How the patterns of a print are chosen.
+    pub enum Controller {
+        /// The footprint every layer (Sec. IV-A).
+        OpenLoop = "open_loop",
+        /// Measure, solve eq. 8, print the first layer of the plan (Sec. IV-C).
+        ClosedLoop = "closed_loop",
+    }
+}
+
+impl Controller {
+    /// The experiments' control law.
+    pub fn law(self) -> ControlLaw {
+        match self {
+            Self::OpenLoop => ControlLaw::OpenLoop,
+            Self::ClosedLoop => ControlLaw::ClosedLoop,
+        }
+    }
+}
 
 /// Registers the paper-002 stage kinds.
 pub fn register(registry: &mut Registry) {

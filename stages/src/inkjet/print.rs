@@ -8,104 +8,76 @@
 //! surface and every layer's material map (for the cross-sections of Figs 13-14).
 
 use models::inkjet::experiments::{
-    cuboid_with_layers, cylinder, pipe_junction, run_print_predicting, ControlLaw, PrintOutcome, PrintRecording,
-    Scenario,
+    cuboid_with_layers, cylinder, pipe_junction, run_print_predicting, PrintOutcome, PrintRecording, Scenario,
 };
 use models::inkjet::height_model::Material;
 use models::inkjet::pipe_junction::{desired_part_top, edge_deformation, RegionMetrics};
 use models::inkjet::HeightMap;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use super::{Controller, Part};
 use crate::progress::StageProgress;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.print_experiment` stage kind.
 pub struct PrintExperimentStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "scenario",
-        ty: ParamType::Choice(&["cylinder", "cuboid", "pipe_junction"]),
-        default: ParamDefault::Required,
-        doc: "The part: the cylinder of Sec. V-A (h_d = 400 µm, radius 15 droplets), the 8 × 8-droplet cuboid of Table II (h_d = 22.8 µm) or the two-material pipe junction of Figs 13-15 (100 × 100 grid, h_d = 200 µm).",
-    },
-    ParamSpec {
-        name: "variation_pct",
-        ty: ParamType::Float { min: 0.0, max: 100.0 },
-        default: ParamDefault::Required,
-        doc: "Largest droplet-volume shortfall p in percent (each droplet scaled by 1 − u, u ~ U[0, p]); the paper uses 20 and 40 (Figs 11-12).",
-    },
-    ParamSpec {
-        name: "controller",
-        ty: ParamType::Choice(&["open_loop", "closed_loop"]),
-        default: ParamDefault::Required,
-        doc: "open_loop: the footprint h_d / h_layer times (Sec. IV-A); closed_loop: measure, solve eq. 8, print the first layer of the plan (Sec. IV-C).",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 0, max: 10_000 },
-        default: ParamDefault::Int(0),
-        doc: "Open-loop layer count; 0 = the nominal h_d / (h1 + 4h2 + 4h3) (3 for the cuboid; 4 is the Sec. V-D-1 print of Figs 21-23). Ignored by the closed loop.",
-    },
-    ParamSpec {
-        name: "edge_band_cells",
-        ty: ParamType::Int { min: 1, max: 10 },
-        default: ParamDefault::Int(2),
-        doc: "Pipe junction only: width of the edge band (cells from the part's plan-view boundary) for edge_deformation.parquet.",
-    },
-];
+pipeline::params! {
+    /// The parameters of `inkjet.print_experiment`.
+    pub struct PrintParams {
+        /// The part: the cylinder of Sec. V-A (h_d = 400 µm, radius 15 droplets), the 8 × 8-droplet cuboid of Table II (h_d = 22.8 µm) or the two-material pipe junction of Figs 13-15 (100 × 100 grid, h_d = 200 µm).
+        pub scenario: Part,
+        /// Largest droplet-volume shortfall p in percent (each droplet scaled by 1 − u, u ~ U[0, p]); the paper uses 20 and 40 (Figs 11-12).
+        pub variation_pct: f64 [0.0, 100.0],
+        /// open_loop: the footprint h_d / h_layer times (Sec. IV-A); closed_loop: measure, solve eq. 8, print the first layer of the plan (Sec. IV-C).
+        pub controller: Controller,
+        /// Open-loop layer count; 0 = the nominal h_d / (h1 + 4h2 + 4h3) (3 for the cuboid; 4 is the Sec. V-D-1 print of Figs 21-23). Ignored by the closed loop.
+        pub layers: i64 [0, 10_000] = 0,
+        /// Pipe junction only: width of the edge band (cells from the part's plan-view boundary) for edge_deformation.parquet.
+        pub edge_band_cells: i64 [1, 10] = 2,
+    }
+}
 
-impl StageKind for PrintExperimentStage {
-    fn name(&self) -> &'static str {
-        "inkjet.print_experiment"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "One simulated ink-jet print (cylinder, cuboid or two-material pipe junction, open or closed loop) → summary.parquet, height_map.parquet (+ edge_deformation.parquet, part_top.parquet, layers.parquet for the pipe junction)"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Sec. V-A (Figs 11-15), Sec. V-D (Table II, Figs 21-24), Sec. IV (open / closed loop, two materials)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
-    }
+impl Stage for PrintExperimentStage {
+    type Params = PrintParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.print_experiment",
+        version: 2,
+        summary: "One simulated ink-jet print (cylinder, cuboid or two-material pipe junction, open or closed loop) → summary.parquet, height_map.parquet (+ edge_deformation.parquet, part_top.parquet, layers.parquet for the pipe junction)",
+        implements: "paper 002 Sec. V-A (Figs 11-15), Sec. V-D (Table II, Figs 21-24), Sec. IV (open / closed loop, two materials)",
+        inputs: &[],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let scenario_name = ctx.params.str("scenario").to_string();
-        let controller = ctx.params.str("controller").to_string();
-        let variation_pct = ctx.params.f64("variation_pct");
-        let layers = ctx.params.i64("layers") as usize;
+    fn run(&self, ctx: &mut StageContext, p: &PrintParams) -> Result<(), StageError> {
+        let (scenario_name, controller) = (p.scenario.name(), p.controller.name());
+        let variation_pct = p.variation_pct;
+        let layers = p.layers as usize;
         let max_shortfall = variation_pct / 100.0;
-        let scenario = match scenario_name.as_str() {
-            "cylinder" => cylinder(max_shortfall),
-            "pipe_junction" => pipe_junction(max_shortfall),
-            _ => cuboid_with_layers(max_shortfall, (layers > 0).then_some(layers)),
+        let scenario = match p.scenario {
+            Part::Cylinder => cylinder(max_shortfall),
+            Part::PipeJunction => pipe_junction(max_shortfall),
+            Part::Cuboid => cuboid_with_layers(max_shortfall, (layers > 0).then_some(layers)),
         };
-        let law = if controller == "open_loop" { ControlLaw::OpenLoop } else { ControlLaw::ClosedLoop };
+        let law = p.controller.law();
         let two_material = scenario.two_material.is_some();
         let mut rng = ChaCha8Rng::seed_from_u64(ctx.seed);
         let progress = StageProgress::new(ctx);
         let (outcome, recording) = run_print_predicting(&scenario, law, &mut rng, two_material, None, &progress)
             .map_err(StageError::domain)?;
         drop(progress);
-        let mut summary = summary_frame(&scenario_name, &controller, variation_pct, &outcome)?;
+        let mut summary = summary_frame(scenario_name, controller, variation_pct, &outcome)?;
         ctx.write_table("summary", &mut summary)?;
         let mut map = height_map_frame(&outcome.final_heights)?;
         ctx.write_table("height_map", &mut map)?;
         if let Some(recording) = recording {
-            let band = ctx.params.i64("edge_band_cells") as usize;
+            let band = p.edge_band_cells as usize;
             let regions = edge_deformation(&scenario, &outcome, band).map_err(StageError::domain)?;
-            let mut edges = edge_frame(&scenario_name, &controller, variation_pct, &regions)?;
+            let mut edges = edge_frame(scenario_name, controller, variation_pct, &regions)?;
             ctx.write_table("edge_deformation", &mut edges)?;
             let mut top = part_top_frame(&scenario, &outcome)?;
             ctx.write_table("part_top", &mut top)?;

@@ -4,9 +4,8 @@
 //! all-ones pattern (the paper: recovered in every trial).
 
 use models::inkjet::experiments::{recovery_study, RecoverySetup, RecoveryTrial};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
 
 use crate::table::{f64_col, frame, i64_col};
@@ -14,36 +13,28 @@ use crate::table::{f64_col, frame, i64_col};
 /// The `inkjet.recovery` stage kind.
 pub struct RecoveryStage;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "trials",
-    ty: ParamType::Int { min: 1, max: 100_000 },
-    default: ParamDefault::Int(50),
-    doc: "Number of independent trials (trial t seeded with the stage seed + t); the paper reports 50.",
-}];
+pipeline::params! {
+    /// The parameters of `inkjet.recovery`.
+    pub struct RecoveryParams {
+        /// Number of independent trials (trial t seeded with the stage seed + t); the paper reports 50.
+        pub trials: i64 [1, 100_000] = 50,
+    }
+}
 
-impl StageKind for RecoveryStage {
-    fn name(&self) -> &'static str {
-        "inkjet.recovery"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Exact-recovery trials of the greedy MPC search on random patterns → recovery.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Sec. IV-C (exact recovery of random patterns, α = 1)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
-    }
+impl Stage for RecoveryStage {
+    type Params = RecoveryParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.recovery",
+        version: 1,
+        summary: "Exact-recovery trials of the greedy MPC search on random patterns → recovery.parquet",
+        implements: "paper 002 Sec. IV-C (exact recovery of random patterns, α = 1)",
+        inputs: &[],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let trials = ctx.params.i64("trials") as usize;
-        let results = recovery_study(&RecoverySetup::paper(), trials, ctx.seed).map_err(StageError::domain)?;
+    fn run(&self, ctx: &mut StageContext, p: &RecoveryParams) -> Result<(), StageError> {
+        let results =
+            recovery_study(&RecoverySetup::paper(), p.trials as usize, ctx.seed).map_err(StageError::domain)?;
         let mut table = recovery_frame(&results)?;
         ctx.write_table("recovery", &mut table)?;
         Ok(())

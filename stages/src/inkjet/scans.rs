@@ -10,84 +10,60 @@
 
 use datasets::inkjet::{generate, GenerateOptions, InkjetScans, Scenario};
 use datasets::manifest::Provenance;
-use models::inkjet::experiments::ControlLaw;
 use models::inkjet::height_model::{deposit_layer_into, DropletCoeffs, Material};
 use models::inkjet::printer::Effects;
 use models::inkjet::Grid;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::{NoParams, ParamError};
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
 
+use super::{Controller, Part};
+use crate::roles;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.generate_scans` stage kind.
 pub struct GenerateScansStage;
 
-const GENERATE_PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "scenario",
-        ty: ParamType::Choice(&["cylinder", "cuboid", "pipe_junction"]),
-        default: ParamDefault::Required,
-        doc: "The part (as in inkjet.print_experiment).",
-    },
-    ParamSpec {
-        name: "variation_pct",
-        ty: ParamType::Float { min: 0.0, max: 100.0 },
-        default: ParamDefault::Float(20.0),
-        doc: "Largest droplet-volume shortfall p in percent (the paper's [0 20%]).",
-    },
-    ParamSpec {
-        name: "controller",
-        ty: ParamType::Choice(&["open_loop", "closed_loop"]),
-        default: ParamDefault::Str("open_loop"),
-        doc: "How the patterns are chosen (open loop: the footprint every layer).",
-    },
-    ParamSpec {
-        name: "effects",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("none"),
-        doc: "Extra effects of the virtual printer, `name=strength,...` (curing_shrinkage, levelling_flow, nozzle_bias, substrate_tilt, volume_drift; DESIGN §5.2) or `none`.",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 0, max: 10_000 },
-        default: ParamDefault::Int(0),
-        doc: "Open-loop layer count; 0 = the scenario's nominal count.",
-    },
-];
+pipeline::params! {
+    /// The parameters of `inkjet.generate_scans`.
+    pub struct GenerateScansParams {
+        /// The part (as in inkjet.print_experiment).
+        pub scenario: Part,
+        /// Largest droplet-volume shortfall p in percent (the paper's [0 20%]).
+        pub variation_pct: f64 [0.0, 100.0] = 20.0,
+        /// How the patterns are chosen (open loop: the footprint every layer).
+        pub controller: Controller = Controller::OpenLoop,
+        /// Extra effects of the virtual printer, `name=strength,...` (curing_shrinkage, levelling_flow, nozzle_bias, substrate_tilt, volume_drift; DESIGN §5.2) or `none`.
+        pub effects: String = "none",
+        /// Open-loop layer count; 0 = the scenario's nominal count.
+        pub layers: i64 [0, 10_000] = 0,
+    }
+}
 
-impl StageKind for GenerateScansStage {
-    fn name(&self) -> &'static str {
-        "inkjet.generate_scans"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "A print on the virtual ink-jet printer, scanned after every layer → an inkjet-scans dataset (dataset.toml, grid.toml, target.csv, scans.csv, patterns.csv, truth/)"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §4 inkjet-scans, §5.2 virtual ink-jet printer; paper 002 Sec. V (profiler after each layer)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        GENERATE_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+impl Stage for GenerateScansStage {
+    type Params = GenerateScansParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.generate_scans",
+        version: 1,
+        summary: "A print on the virtual ink-jet printer, scanned after every layer → an inkjet-scans dataset (dataset.toml, grid.toml, target.csv, scans.csv, patterns.csv, truth/)",
+        implements: "DESIGN §4 inkjet-scans, §5.2 virtual ink-jet printer; paper 002 Sec. V (profiler after each layer)",
+        inputs: &[],
+        output: Output::Dataset("inkjet-scans"),
+    };
+
+    fn check(p: &GenerateScansParams) -> Result<(), ParamError> {
+        Effects::parse(&p.effects).map(|_| ()).map_err(|e| ParamError::new("effects", e.to_string()))
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let layers = ctx.params.i64("layers") as usize;
+    fn run(&self, ctx: &mut StageContext, p: &GenerateScansParams) -> Result<(), StageError> {
+        let layers = p.layers as usize;
         let opts = GenerateOptions {
-            scenario: Scenario::parse(ctx.params.str("scenario")).map_err(StageError::domain)?,
+            scenario: Scenario::parse(p.scenario.name()).map_err(StageError::domain)?,
             seed: ctx.seed,
-            variation_pct: ctx.params.f64("variation_pct"),
-            controller: match ctx.params.str("controller") {
-                "open_loop" => ControlLaw::OpenLoop,
-                _ => ControlLaw::ClosedLoop,
-            },
-            effects: Effects::parse(ctx.params.str("effects")).map_err(StageError::domain)?,
+            variation_pct: p.variation_pct,
+            controller: p.controller.law(),
+            effects: Effects::parse(&p.effects).map_err(StageError::domain)?,
             open_loop_layers: (layers > 0).then_some(layers),
         };
         let (dataset, truth) = generate(&opts).map_err(StageError::domain)?;
@@ -99,28 +75,19 @@ impl StageKind for GenerateScansStage {
 /// The `inkjet.scan_residuals` stage kind.
 pub struct ScanResidualsStage;
 
-impl StageKind for ScanResidualsStage {
-    fn name(&self) -> &'static str {
-        "inkjet.scan_residuals"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "The paper's layer-to-layer model tested on an inkjet-scans dataset: predict each scan from the previous one and the printed pattern → scan_residuals.parquet; the open-loop model run from the first scan → profiles.parquet (Figs 8, 21-22)"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 eqs 2-7 (height-change model), Sec. V-D-1 (model verification against measured layers)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for ScanResidualsStage {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "inkjet.scan_residuals",
+        version: 1,
+        summary: "The paper's layer-to-layer model tested on an inkjet-scans dataset: predict each scan from the previous one and the printed pattern → scan_residuals.parquet; the open-loop model run from the first scan → profiles.parquet (Figs 8, 21-22)",
+        implements: "paper 002 eqs 2-7 (height-change model), Sec. V-D-1 (model verification against measured layers)",
+        inputs: &[roles::INKJET_SCANS],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dataset = InkjetScans::read(&ctx.inputs[0].dir).map_err(StageError::domain)?;
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let dataset = InkjetScans::read(&ctx.input(&roles::INKJET_SCANS).dir).map_err(StageError::domain)?;
         let residuals = layer_residuals(&dataset).map_err(StageError::domain)?;
         let mut table = residuals_frame(&dataset, &residuals)?;
         ctx.write_table("scan_residuals", &mut table)?;
@@ -259,6 +226,7 @@ fn profiles_frame(dataset: &InkjetScans, model: &[Vec<f64>]) -> Result<DataFrame
 #[cfg(test)]
 mod tests {
     use super::*;
+    use models::inkjet::experiments::ControlLaw;
 
     fn dataset(effects: &str, variation_pct: f64) -> InkjetScans {
         let opts = GenerateOptions {

@@ -38,64 +38,65 @@ use models::stats::{finite_median, nearest_rank_quantile};
 use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::thermal::DepositGrid;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use vision::camera::Undistorter;
 use vision::corners::{precision_recall, CornerDetection};
 use vision::homography::Homography;
 
 use super::common::{camera_model, f64s, ints, open_sequence, read_table};
+use crate::roles;
 use crate::table::{f64_col, frame, i64_col, if_present, opt_bools, opt_strs, str_col};
 
 /// The `thermal.accuracy_evaluate` stage kind.
 pub struct AccuracyEvaluateStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "match_radius_px",
-        ty: ParamType::Float { min: 0.5, max: 20.0 },
-        default: ParamDefault::Float(3.0),
-        doc: "A detection within this distance of a true corner (raw pixels) is a true positive.",
-    },
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(140.0),
-        doc: "True corners at or above this temperature count as positives (°C); the detector's band, Sec. 3.2.",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(150.0),
-        doc: "True corners at or below this temperature count as positives (°C).",
-    },
-];
+/// The monitor scored.
+pub const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "the sequence's monitor: its frames, detections, mount, vertices and widths tables",
+);
 
-impl StageKind for AccuracyEvaluateStage {
-    fn name(&self) -> &'static str {
-        "thermal.accuracy_evaluate"
+pipeline::params! {
+    /// The parameters of `thermal.accuracy_evaluate`.
+    pub struct AccuracyParams {
+        /// A detection within this distance of a true corner (raw pixels) is a true positive.
+        pub match_radius_px: f64 [0.5, 20.0] = 3.0,
+        /// True corners at or above this temperature count as positives (°C); the detector's band, Sec. 3.2.
+        pub band_low_c: f64 [0.0, 300.0] = 140.0,
+        /// True corners at or below this temperature count as positives (°C).
+        pub band_high_c: f64 [0.0, 300.0] = 150.0,
     }
-    fn version(&self) -> u32 {
-        8
-    }
-    fn summary(&self) -> &'static str {
-        "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 eqs 27-32 and Sec. 3.2 (mAP → precision/recall), DESIGN §5.3 (evaluation: reads truth/)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
+}
+
+impl Stage for AccuracyEvaluateStage {
+    type Params = AccuracyParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.accuracy_evaluate",
+        version: 8,
+        summary: "Frame pipeline against ground truth: capture time, homography, widths, corner precision/recall → accuracy.parquet",
+        implements: "paper 003 eqs 27-32 and Sec. 3.2 (mAP → precision/recall), DESIGN §5.3 (evaluation: reads truth/)",
+        inputs: &[roles::THERMAL_SEQUENCE, MONITOR],
+        output: Output::Tables,
+    };
+
+    fn check(p: &AccuracyParams) -> Result<(), ParamError> {
+        if p.band_low_c > p.band_high_c {
+            return Err(ParamError::new(
+                "band_low_c",
+                format!("{} °C is above band_high_c ({} °C): no corner could count", p.band_low_c, p.band_high_c),
+            ));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let seq = open_sequence(&ctx.inputs[0].dir)?;
-        let truth = ThermalTruth::open(&ctx.inputs[0].dir).map_err(StageError::domain)?;
-        let monitor = ctx.inputs[1].dir.clone();
+    fn run(&self, ctx: &mut StageContext, p: &AccuracyParams) -> Result<(), StageError> {
+        let sequence_dir = &ctx.input(&roles::THERMAL_SEQUENCE).dir;
+        let seq = open_sequence(sequence_dir)?;
+        let truth = ThermalTruth::open(sequence_dir).map_err(StageError::domain)?;
+        let monitor = ctx.input(&MONITOR).dir.clone();
         let frames = FrameRows::read(&monitor)?;
         let undistorter = Undistorter::new(&camera_model(&seq.camera)).map_err(StageError::domain)?;
         let mut metrics = Metrics::default();
@@ -106,8 +107,8 @@ impl StageKind for AccuracyEvaluateStage {
         vertex_metrics(&monitor, &seq, &truth, &undistorter, mounts.as_ref(), &mut metrics)?;
         homography_metrics(&frames, &truth, &seq.path_mm, &undistorter, &mut metrics);
         width_metrics(&monitor, &truth, &mut metrics)?;
-        let band = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
-        detection_metrics(&monitor, &frames, &truth, band, ctx.params.f64("match_radius_px"), &mut metrics)?;
+        let band = (p.band_low_c, p.band_high_c);
+        detection_metrics(&monitor, &frames, &truth, band, p.match_radius_px, &mut metrics)?;
         let used = frames.used.iter().filter(|u| **u).count();
         metrics.push("frames_used", used as f64, "frames", used, "frames placed from their corners (eqs 27-30)");
         let dead_reckoned = frames.by_recorded_time.iter().filter(|r| **r).count();

@@ -1,7 +1,8 @@
 //! What the paper-003 stages share: opening a `thermal-sequence` input, the commanded
 //! trajectory rebuilt from its table (eq. 1, eq. 4), the deposition directions the
 //! analysis assumes (eqs 13-26 with the nominal lagged flow), and the camera model
-//! converted from `camera.toml` to the vision crate's types.
+//! and the filmed frames converted from `camera.toml` and `frames.csv` to the vision
+//! crate's types.
 
 use std::path::Path;
 
@@ -12,6 +13,7 @@ use models::thermal::{PrintSetup, Trajectory};
 use pipeline::StageError;
 use polars::prelude::DataFrame;
 use vision::camera::{CameraModel, Distortion, Intrinsics, Mount};
+use vision::localiser::{FrameSource, Sequence, SequenceFrame};
 
 /// Opens the `thermal-sequence` dataset in `dir`.
 pub fn open_sequence(dir: &Path) -> Result<ThermalSequence, StageError> {
@@ -61,15 +63,52 @@ pub fn camera_model(camera: &CameraFile) -> CameraModel {
     }
 }
 
-/// Time at which the trajectory passes closest to each CAD vertex (s).
-pub fn vertex_passage_times(seq: &ThermalSequence, trajectory: &Trajectory) -> Vec<f64> {
-    seq.path_mm
-        .iter()
-        .map(|v| {
-            let k = trajectory.nearest_sample(*v);
-            trajectory.t_s[k]
-        })
-        .collect()
+/// A `thermal-sequence` dataset's frames (`frames.csv`) and their PNG files, as the
+/// frame localiser reads them (`vision::localiser`).
+pub struct DatasetFrames<'a> {
+    seq: &'a ThermalSequence,
+    frames: Vec<SequenceFrame>,
+}
+
+impl<'a> DatasetFrames<'a> {
+    /// The frames of `seq`, in file order.
+    pub fn new(seq: &'a ThermalSequence) -> Self {
+        let frames = seq
+            .frames
+            .iter()
+            .map(|f| SequenceFrame {
+                layer: f.layer,
+                frame: f.frame,
+                recorded_time_s: f.recorded_time_s,
+                file: f.file.clone(),
+            })
+            .collect();
+        Self { seq, frames }
+    }
+}
+
+impl FrameSource for DatasetFrames<'_> {
+    fn frames(&self) -> &[SequenceFrame] {
+        &self.frames
+    }
+
+    fn png_bytes(&self, index: usize) -> std::io::Result<Vec<u8>> {
+        std::fs::read(self.seq.frame_path(&self.seq.frames[index]))
+    }
+}
+
+/// `seq` as the frame localiser reads it, with its commanded `trajectory`.
+pub fn filmed_sequence<'a>(seq: &'a ThermalSequence, trajectory: &'a Trajectory) -> Sequence<'a, DatasetFrames<'a>> {
+    Sequence { frames: DatasetFrames::new(seq), path_mm: &seq.path_mm, trajectory, nozzle_px: seq.camera.nozzle_px }
+}
+
+/// Row `row`'s trajectory sample index (column `sample` of `file`), checked below `samples`.
+pub fn sample_index(file: &Path, row: usize, sample: i64, samples: usize) -> Result<usize, StageError> {
+    usize::try_from(sample).ok().filter(|&k| k < samples).ok_or_else(|| StageError::BadInput {
+        file: file.to_path_buf(),
+        location: Some(format!("row {row}, column sample")),
+        expected: format!("a trajectory sample index below {samples}, found {sample}"),
+    })
 }
 
 /// Reads a Parquet table an upstream stage wrote into `dir`.

@@ -72,12 +72,13 @@ use models::thermal::compensation::{
 use models::thermal::dynamics::lag_excess;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
-use pipeline::params::{ParamDefault, Params};
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::StageParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
 
-use super::common::{f64s, ints, open_sequence, read_table, trajectory_of};
+use super::common::{f64s, ints, open_sequence, read_table, sample_index, trajectory_of};
+use crate::roles;
 use crate::table::{f64_col, frame, i64_col};
 use models::thermal::setup::interior_angles_deg;
 
@@ -90,113 +91,115 @@ const PAPER_BAND_C: (f64, f64) = (140.0, 150.0);
 /// The `thermal.compensate` stage kind.
 pub struct CompensateStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "source",
-        ty: ParamType::Choice(&["widths", "lag_model"]),
-        default: ParamDefault::Str("widths"),
-        doc: "What the compensation cancels: `widths` = the measured width errors (the paper, eqs 31-33); `lag_model` = our extension, the flow excess the deposition dynamics of eq. 34 predict for the nominal command, lag(v_e) − v_e over the whole layer, with no widths (feed-forward; module doc).",
-    },
-    ParamSpec {
-        name: "layer",
-        ty: ParamType::Int { min: 0, max: 19 },
-        default: ParamDefault::Int(0),
-        doc: "First monitored layer whose widths drive the compensation (the paper's one-layer verification print is layer 0).",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 1, max: 20 },
-        default: ParamDefault::Int(1),
-        doc: "Number of consecutive monitored layers from `layer` whose widths are combined (per sample, the median over the layers that read it); 1 = the paper's single layer.",
-    },
-    ParamSpec {
-        name: "epsilon_mm",
-        ty: ParamType::Float { min: 0.0, max: 2.0 },
-        default: ParamDefault::Float(0.05),
-        doc: "Largest tolerable width error ε (mm): spans with |Δw| ≥ ε are compensated (Sec. 2.4; the paper gives no value, 0.05 mm is about a third of a camera pixel on the plane).",
-    },
-    ParamSpec {
-        name: "extension_s",
-        ty: ParamType::Float { min: 0.0, max: 1.0 },
-        default: ParamDefault::Float(0.1),
-        doc: "Time added at both ends of each span for the deposition dynamics (s); Sec. 3.2: 0.1 s.",
-    },
-    ParamSpec {
-        name: "knot_spacing_s",
-        ty: ParamType::Float { min: 0.002, max: 0.5 },
-        default: ParamDefault::Float(0.02),
-        doc: "Knot spacing of the cubic B-spline input (s); about τ/4 (the paper does not state it).",
-    },
-    ParamSpec {
-        name: "dv_min_mm_s",
-        ty: ParamType::Float { min: -100.0, max: 0.0 },
-        default: ParamDefault::Float(-2.0),
-        doc: "Lower bound ΔV_min of the control points (mm/s of filament), Sec. 3.2: −2 mm/s.",
-    },
-    ParamSpec {
-        name: "dv_max_mm_s",
-        ty: ParamType::Float { min: 0.0, max: 100.0 },
-        default: ParamDefault::Float(4.0),
-        doc: "Upper bound ΔV_max of the control points (mm/s of filament), Sec. 3.2: 4 mm/s.",
-    },
-    ParamSpec {
-        name: "add_material",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(true),
-        doc: "Also compensate where the bead is measured narrower than desired (Δw < 0) by adding material, as eq. 33 is signed; false: only over-deposition (module doc).",
-    },
-    ParamSpec {
-        name: "gain",
-        ty: ParamType::Choice(&["paper", "unit"]),
-        default: ParamDefault::Str("unit"),
-        doc: "Deposition correction gain K_e: `unit` = 1 (mass conservation), `paper` = 1 + (150 − T_p)/15 with T_p the corner temperature clamped to 140-150 °C (Sec. 3.2; identified on the paper's printer, module doc).",
-    },
-    ParamSpec {
-        name: "desired_width",
-        ty: ParamType::Choice(&["cad", "eq31"]),
-        default: ParamDefault::Str("cad"),
-        doc: "Desired half widths along each deposition direction: `cad` = extent of the ideal (CAD, mitred) bead along it, `eq31` = w0/cos ψ as eq. 31 (a straight bead; counts the inner wedge of a sharp corner as excess).",
-    },
-    ParamSpec {
-        name: "volume",
-        ty: ParamType::Choice(&["sweep", "linear"]),
-        default: ParamDefault::Str("linear"),
-        doc: "Flow excess from the half widths: `linear` = h·|v|·cos ψ·Δw (eq. 33 as printed), `sweep` = area swept by the turning deposition segments (eqs 5-6 in the rotated frame, with the sector terms).",
-    },
-    ParamSpec {
-        name: "tail_s",
-        ty: ParamType::Float { min: 0.0, max: 1.0 },
-        default: ParamDefault::Float(0.26),
-        doc: "Time after each extended window over which the lagged output of its input is fitted to zero (s); 3τ = 0.26 s lets the response die out, 0 = the paper's window only.",
-    },
-];
+/// The monitor of the sequence.
+pub const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "the sequence's monitor: its widths.parquet, directions.parquet and detections.parquet",
+);
 
-impl StageKind for CompensateStage {
-    fn name(&self) -> &'static str {
-        "thermal.compensate"
-    }
-    fn version(&self) -> u32 {
-        6
-    }
-    fn summary(&self) -> &'static str {
-        "Width-error spans, corner gains and filtered-B-spline compensation → spans, compensation, command"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 eqs 31-39 (Sec. 2.4), parameters of Sec. 3.2"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        // sequence, monitor and, optionally, the widths to use in place of the
-        // monitor's (`thermal.true_widths_evaluate`: the printer's true widths).
-        Arity { min: 2, max: 3 }
-    }
+/// Widths read otherwise, in place of the monitor's.
+pub const WIDTHS: Input = Input::optional(
+    "widths",
+    &[Source::Stage("thermal.true_widths_evaluate"), Source::Stage("thermal.monitor")],
+    "a widths.parquet with the monitor's columns used in place of the monitor's: `thermal.true_widths_evaluate`, the printer's true widths (an evaluation of the method with a perfect camera)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let seq = open_sequence(&ctx.inputs[0].dir)?;
-        let monitor_dir = ctx.inputs[1].dir.clone();
-        let widths_dir = ctx.inputs.get(2).map_or(monitor_dir.clone(), |i| i.dir.clone());
+pipeline::choice! {
+    /// What the compensation cancels.
+    pub enum CompensationSource {
+        /// The measured width errors (the paper, eqs 31-33).
+        Widths = "widths",
+        /// Our extension: the flow excess eq. 34 predicts for the nominal command.
+        LagModel = "lag_model",
+    }
+}
+
+pipeline::choice! {
+    /// The deposition correction gain K_e.
+    pub enum GainRule {
+        /// 1 + (150 − T_p)/15 with T_p clamped to 140-150 °C (Sec. 3.2).
+        Paper = "paper",
+        /// 1: mass conservation.
+        Unit = "unit",
+    }
+}
+
+pipeline::choice! {
+    /// The desired half widths along each deposition direction.
+    pub enum DesiredWidth {
+        /// The extent of the ideal (CAD, mitred) bead along it.
+        Cad = "cad",
+        /// w0/cos ψ, as eq. 31.
+        Eq31 = "eq31",
+    }
+}
+
+pipeline::choice! {
+    /// How the flow excess follows from the half widths.
+    pub enum Volume {
+        /// The area swept by the turning deposition segments.
+        Sweep = "sweep",
+        /// h·|v|·cos ψ·Δw, eq. 33 as printed.
+        Linear = "linear",
+    }
+}
+
+pipeline::params! {
+    /// The parameters of `thermal.compensate`.
+    pub struct CompensateParams {
+        /// What the compensation cancels: `widths` = the measured width errors (the paper, eqs 31-33); `lag_model` = our extension, the flow excess the deposition dynamics of eq. 34 predict for the nominal command, lag(v_e) − v_e over the whole layer, with no widths (feed-forward; module doc).
+        pub source: CompensationSource = CompensationSource::Widths,
+        /// First monitored layer whose widths drive the compensation (the paper's one-layer verification print is layer 0).
+        pub layer: i64 [0, 19] = 0,
+        /// Number of consecutive monitored layers from `layer` whose widths are combined (per sample, the median over the layers that read it); 1 = the paper's single layer.
+        pub layers: i64 [1, 20] = 1,
+        /// Largest tolerable width error ε (mm): spans with |Δw| ≥ ε are compensated (Sec. 2.4; the paper gives no value, 0.05 mm is about a third of a camera pixel on the plane).
+        pub epsilon_mm: f64 [0.0, 2.0] = 0.05,
+        /// Time added at both ends of each span for the deposition dynamics (s); Sec. 3.2: 0.1 s.
+        pub extension_s: f64 [0.0, 1.0] = 0.1,
+        /// Knot spacing of the cubic B-spline input (s); about τ/4 (the paper does not state it).
+        pub knot_spacing_s: f64 [0.002, 0.5] = 0.02,
+        /// Lower bound ΔV_min of the control points (mm/s of filament), Sec. 3.2: −2 mm/s.
+        pub dv_min_mm_s: f64 [-100.0, 0.0] = -2.0,
+        /// Upper bound ΔV_max of the control points (mm/s of filament), Sec. 3.2: 4 mm/s.
+        pub dv_max_mm_s: f64 [0.0, 100.0] = 4.0,
+        /// Also compensate where the bead is measured narrower than desired (Δw < 0) by adding material, as eq. 33 is signed; false: only over-deposition (module doc).
+        pub add_material: bool = true,
+        /// Deposition correction gain K_e: `unit` = 1 (mass conservation), `paper` = 1 + (150 − T_p)/15 with T_p the corner temperature clamped to 140-150 °C (Sec. 3.2; identified on the paper's printer, module doc).
+        pub gain: GainRule = GainRule::Unit,
+        /// Desired half widths along each deposition direction: `cad` = extent of the ideal (CAD, mitred) bead along it, `eq31` = w0/cos ψ as eq. 31 (a straight bead; counts the inner wedge of a sharp corner as excess).
+        pub desired_width: DesiredWidth = DesiredWidth::Cad,
+        /// Flow excess from the half widths: `linear` = h·|v|·cos ψ·Δw (eq. 33 as printed), `sweep` = area swept by the turning deposition segments (eqs 5-6 in the rotated frame, with the sector terms).
+        pub volume: Volume = Volume::Linear,
+        /// Time after each extended window over which the lagged output of its input is fitted to zero (s); 3τ = 0.26 s lets the response die out, 0 = the paper's window only.
+        pub tail_s: f64 [0.0, 1.0] = 0.26,
+    }
+}
+
+impl CompensateParams {
+    /// `thermal.compensate`'s declared defaults (the paper's settings where it gives
+    /// them, ours beside them where it does not; module doc), for [`compensate`].
+    pub fn stage_defaults() -> Self {
+        Self::defaults().expect("every parameter of thermal.compensate has a default")
+    }
+}
+
+impl Stage for CompensateStage {
+    type Params = CompensateParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.compensate",
+        version: 6,
+        summary: "Width-error spans, corner gains and filtered-B-spline compensation → spans, compensation, command",
+        implements: "paper 003 eqs 31-39 (Sec. 2.4), parameters of Sec. 3.2",
+        inputs: &[roles::THERMAL_SEQUENCE, MONITOR, WIDTHS],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &CompensateParams) -> Result<(), StageError> {
+        let seq = open_sequence(&ctx.input(&roles::THERMAL_SEQUENCE).dir)?;
+        let monitor_dir = ctx.input(&MONITOR).dir.clone();
+        let widths_dir = ctx.optional_input(&WIDTHS).map_or(monitor_dir.clone(), |i| i.dir.clone());
         let tables = MonitorInputs {
             dir: &monitor_dir,
             widths_dir: &widths_dir,
@@ -205,7 +208,7 @@ impl StageKind for CompensateStage {
             detections: &read_table(&monitor_dir, "detections.parquet")?,
         };
         let tau_s = seq.process.print_setup().tau_s;
-        let c = compensate(&seq, &tables, &ctx.params, tau_s)?;
+        let c = compensate(&seq, &tables, p, tau_s)?;
         let angles = interior_angles_deg(&seq.path_mm);
         let t_s = &c.trajectory.t_s;
         let mut rows = Rows::default();
@@ -263,18 +266,17 @@ pub struct Compensated {
 }
 
 /// Eqs 31-39 on `seq` from the monitor's `tables`, with the stage's parameters `params`
-/// (checked against [`CompensateStage`]'s declarations) and the deposition dynamics
+/// and the deposition dynamics
 /// G(s) of eq. 34 with time constant `tau_s` (the nominal τ, or a fitted one).
 pub fn compensate(
     seq: &ThermalSequence,
     tables: &MonitorInputs<'_>,
-    params: &Params,
+    params: &CompensateParams,
     tau_s: f64,
 ) -> Result<Compensated, StageError> {
     let setup = seq.process.print_setup();
     let trajectory = trajectory_of(seq)?;
-    let first_layer = params.i64("layer");
-    let layers = first_layer..first_layer + params.i64("layers");
+    let layers = params.layer..params.layer + params.layers;
     let measured =
         MeasuredWidths::read(tables.widths, &tables.widths_dir.join("widths.parquet"), layers, trajectory.len())?;
     let frame_geometry =
@@ -282,12 +284,12 @@ pub fn compensate(
     let corner_temps_c =
         corner_temperatures(tables.detections, &tables.dir.join("detections.parquet"), seq.path_mm.len())?;
     let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
-    let desired = match params.str("desired_width") {
-        "eq31" => frame_geometry.eq31_desired(setup.bead_width_mm / 2.0),
-        _ => frame_geometry.cad_desired(&trajectory, &bead),
+    let desired = match params.desired_width {
+        DesiredWidth::Eq31 => frame_geometry.eq31_desired(setup.bead_width_mm / 2.0),
+        DesiredWidth::Cad => frame_geometry.cad_desired(&trajectory, &bead),
     };
     let mut sweep = frame_geometry.sweep.clone();
-    if params.str("volume") == "linear" {
+    if params.volume == Volume::Linear {
         sweep.iter_mut().for_each(|s| s.kappa_eff_per_mm = 0.0);
     }
     let widths_mm: Vec<(f64, f64)> =
@@ -301,23 +303,23 @@ pub fn compensate(
         setup.filament_area_mm2(),
         1.0,
     );
-    if !params.bool("add_material") {
+    if !params.add_material {
         // (f64::max would turn an unmeasured NaN into 0.)
         dw.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
         dv.iter_mut().filter(|d| d.is_finite()).for_each(|d| *d = d.max(0.0));
     }
     let span_params = SpanParams {
-        epsilon_mm: params.f64("epsilon_mm"),
-        extension_s: params.f64("extension_s"),
+        epsilon_mm: params.epsilon_mm,
+        extension_s: params.extension_s,
         fbs: FbsParams {
-            knot_spacing_s: params.f64("knot_spacing_s"),
+            knot_spacing_s: params.knot_spacing_s,
             tau_s,
-            dv_min_mm_s: params.f64("dv_min_mm_s"),
-            dv_max_mm_s: params.f64("dv_max_mm_s"),
-            tail_s: params.f64("tail_s"),
+            dv_min_mm_s: params.dv_min_mm_s,
+            dv_max_mm_s: params.dv_max_mm_s,
+            tail_s: params.tail_s,
         },
     };
-    let paper_gain_on = params.str("gain") == "paper";
+    let paper_gain_on = params.gain == GainRule::Paper;
     let vertex_of = |span: SampleSpan| span_vertex(&seq.path_mm, &trajectory, &dw, span);
     let gain = |span: SampleSpan| {
         let t = corner_temps_c[vertex_of(span)];
@@ -328,7 +330,7 @@ pub fn compensate(
         }
     };
     let nominal_mm_s = setup.conventional_command(&trajectory);
-    let spans = if params.str("source") == "lag_model" {
+    let spans = if params.source == CompensationSource::LagModel {
         // The flow excess eq. 34 predicts for the nominal command (mm/s of filament).
         let excess = lag_excess(&nominal_mm_s, trajectory.dt_s, tau_s);
         let whole_layer = vec![f64::INFINITY; trajectory.len()];
@@ -341,13 +343,6 @@ pub fn compensate(
     let command_mm_s = apply_spans(&nominal_mm_s, &spans);
     let span_vertices = spans.iter().map(|s| vertex_of(s.span)).collect();
     Ok(Compensated { trajectory, nominal_mm_s, command_mm_s, spans, span_vertices, dw, widths_mm, corner_temps_c })
-}
-
-/// The compensation's default parameters (the paper's settings, for [`compensate`]);
-/// `ctx` names the stage that asks in an error.
-pub fn default_params(ctx: &StageContext) -> Result<Params, StageError> {
-    Params::check(PARAMS, &std::collections::BTreeMap::new())
-        .map_err(|(name, why)| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") })
 }
 
 /// The monitored half widths (left, right) of a run of consecutive layers, indexed by
@@ -382,15 +377,6 @@ impl MeasuredWidths {
         let sides_mm = readings.into_iter().map(|(l, r)| (finite_median(l), finite_median(r))).collect();
         Ok(Self { sides_mm })
     }
-}
-
-/// Row `row`'s trajectory sample index, checked below `samples`.
-fn sample_index(file: &Path, row: usize, sample: i64, samples: usize) -> Result<usize, StageError> {
-    usize::try_from(sample).ok().filter(|&k| k < samples).ok_or_else(|| StageError::BadInput {
-        file: file.to_path_buf(),
-        location: Some(format!("row {row}, column sample")),
-        expected: format!("a trajectory sample index below {samples}, found {sample}"),
-    })
 }
 
 /// The allocated deposition frame of every sample, from the monitor's `directions.parquet`.

@@ -35,21 +35,18 @@ use datasets::thermal::Effects;
 use discrepancy::stats::{mix_seed, t_interval};
 use models::thermal::discrepancy::TAU_MISMATCH;
 use models::thermal::metrics::{print_quality, IdealBead, PrintQuality};
-use pipeline::params::{ParamDefault, Params};
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::DataFrame;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use super::common::trajectory_of;
-use super::compensate::{self, compensate, MonitorInputs};
-use super::discrepancy::WIDTH_CLEARANCE;
-use super::filmed_print::{named_list, FilmedPrint, Filming};
-use super::monitor;
-use crate::discrepancy_tables::{max_rounds, ALPHA};
+use super::compensate::{compensate, CompensateParams, MonitorInputs};
+use super::filmed_print::{named_list, FilmedPrint, Filming, FilmingParams};
 use crate::effects::strength_list;
 use crate::parts::{listed, read_parts, PART_TABLE};
 use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
@@ -66,73 +63,55 @@ const EFFECT: &str = "tau_mismatch";
 /// Mixed into a print's seed for the re-prints' flow draws (all three the same).
 const REPRINT_SALT: u64 = 0x4354_524c_5245_5052;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "tau_mismatch",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.3"),
-        doc: "Strengths of tau_mismatch (actual τ = nominal·(1 + strength)), comma-separated.",
-    },
-    ParamSpec {
-        name: "prints",
-        ty: ParamType::Int { min: 2, max: 10_000 },
-        default: ParamDefault::Int(4),
-        doc: "Prints (seeds) per strength; each is filmed, then re-printed three times.",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 2, max: 20 },
-        default: ParamDefault::Int(8),
-        doc: "Filmed layers of each print (the engine's groups).",
-    },
-    ParamSpec {
-        name: "reprint_layers",
-        ty: ParamType::Int { min: 1, max: 50 },
-        default: ParamDefault::Int(20),
-        doc: "Layers of each re-print scored by eq. 41 (Table 3: 20).",
-    },
-    ParamSpec {
-        name: "corner_radius_mm",
-        ty: ParamType::Float { min: 0.1, max: 5.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Radius of the corner window of eq. 40 (mm), as `thermal.reprint_evaluate`'s.",
-    },
-    ParamSpec {
-        name: "contour_spacing_mm",
-        ty: ParamType::Float { min: 0.005, max: 1.0 },
-        default: ParamDefault::Float(0.05),
-        doc: "Spacing of the CAD contour points of eq. 41 (mm), as `thermal.reprint_evaluate`'s.",
-    },
-    ALPHA,
-    max_rounds(5, 2),
-    WIDTH_CLEARANCE,
-    monitor::STUDY_PARAMS[0],
-    monitor::STUDY_PARAMS[1],
-    monitor::STUDY_PARAMS[2],
-    monitor::STUDY_PARAMS[3],
-];
+pipeline::params! {
+    /// The parameters of `thermal.control_gain`.
+    pub struct ControlGainParams {
+        /// Strengths of tau_mismatch (actual τ = nominal·(1 + strength)), comma-separated.
+        pub tau_mismatch: String = "0.3",
+        /// Prints (seeds) per strength; each is filmed, then re-printed three times.
+        pub prints: i64 [2, 10_000] = 4,
+        /// Filmed layers of each print (the engine's groups).
+        pub layers: i64 [2, 20] = 8,
+        /// Layers of each re-print scored by eq. 41 (Table 3: 20).
+        pub reprint_layers: i64 [1, 50] = 20,
+        /// Radius of the corner window of eq. 40 (mm), as `thermal.reprint_evaluate`'s.
+        pub corner_radius_mm: f64 [0.1, 5.0] = 1.0,
+        /// Spacing of the CAD contour points of eq. 41 (mm), as `thermal.reprint_evaluate`'s.
+        pub contour_spacing_mm: f64 [0.005, 1.0] = 0.05,
+        /// Most causes named: after each, the extended model is the baseline and the search repeats.
+        pub max_rounds: i64 [1, 5] = 2,
+    }
+    groups {
+        /// How the prints are filmed and read.
+        pub filming: FilmingParams,
+    }
+}
 
-impl StageKind for ControlGainStage {
-    fn name(&self) -> &'static str {
-        "thermal.control_gain"
+impl ControlGainParams {
+    /// The strengths of `tau_mismatch`, each checked against the printer's range.
+    fn strengths(&self) -> Result<Vec<f64>, ParamError> {
+        strength_list(EFFECT, &self.tau_mismatch, 10.0, " (relative)")
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Prints with a flow τ off the nominal, compensated (eqs 31-39) with the paper's τ and with the τ the discrepancy engine fitted, re-printed and scored (eqs 40-41) → control_gain.parquet, control_trials.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 eqs 31-41 (Secs 2.4, 3.3) with the discrepancy engine's extended model (DESIGN §7; evaluation)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+}
+
+impl Stage for ControlGainStage {
+    type Params = ControlGainParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.control_gain",
+        // 2: the engine's noise scales use models::stats' median.
+        version: 2,
+        summary: "Prints with a flow τ off the nominal, compensated (eqs 31-39) with the paper's τ and with the τ the discrepancy engine fitted, re-printed and scored (eqs 40-41) → control_gain.parquet, control_trials.parquet",
+        implements: "paper 003 eqs 31-41 (Secs 2.4, 3.3) with the discrepancy engine's extended model (DESIGN §7; evaluation)",
+        inputs: &[],
+        output: Output::Tables,
+    };
+
+    fn check(p: &ControlGainParams) -> Result<(), ParamError> {
+        p.strengths()?;
+        p.filming.check()
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &ControlGainParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -144,14 +123,16 @@ impl StageKind for ControlGainStage {
 /// Work units: one per print, strength-major (the order of the tables' rows).
 impl Split for ControlGainStage {
     fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
-        let prints = params.i64("prints") as usize;
-        (0..listed(params, EFFECT))
+        let study = ControlGainParams::from_params(params);
+        let prints = study.prints as usize;
+        (0..listed(&study.tau_mismatch))
             .flat_map(|c| (0..prints).map(move |p| Unit { key: format!("strength {c} print {p}"), cost: 1.0 }))
             .collect()
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        let design = Design::from_params(ctx)?;
+        let p = ControlGainParams::from_params(&ctx.params);
+        let design = Design::new(&p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let (cell, print) = (index / design.prints, index % design.prints);
         let strength = *design.strengths.get(cell).ok_or_else(|| StageError::Params {
             stage: ctx.stage.clone(),
@@ -181,7 +162,7 @@ struct Design {
     contour_spacing_mm: f64,
     seed: u64,
     filming: Filming,
-    compensation: Params,
+    compensation: CompensateParams,
 }
 
 /// One print: what the engine made of it and its three re-prints.
@@ -197,17 +178,18 @@ struct Trial {
 }
 
 impl Design {
-    fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
-        let p = &ctx.params;
+    /// The study of `p`, its prints seeded from the stage's `seed`; the compensation
+    /// runs with `thermal.compensate`'s defaults.
+    fn new(p: &ControlGainParams, seed: u64) -> Result<Self, ParamError> {
         Ok(Self {
-            strengths: strength_list(ctx, EFFECT, 10.0, " (relative)")?,
-            prints: p.i64("prints") as usize,
-            reprint_layers: p.i64("reprint_layers") as usize,
-            corner_radius_mm: p.f64("corner_radius_mm"),
-            contour_spacing_mm: p.f64("contour_spacing_mm"),
-            seed: ctx.seed,
-            filming: Filming::from_params(ctx)?,
-            compensation: compensate::default_params(ctx)?,
+            strengths: p.strengths()?,
+            prints: p.prints as usize,
+            reprint_layers: p.reprint_layers as usize,
+            corner_radius_mm: p.corner_radius_mm,
+            contour_spacing_mm: p.contour_spacing_mm,
+            seed,
+            filming: Filming::new(&p.filming, p.layers, p.max_rounds, seed)?,
+            compensation: CompensateParams::stage_defaults(),
         })
     }
 

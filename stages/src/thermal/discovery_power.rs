@@ -22,18 +22,16 @@ use discrepancy::power::{DrawScore, DrawVerdict, Outcome};
 use discrepancy::stats::mix_seed;
 use discrepancy::Mechanism;
 use models::thermal::discrepancy::{candidate_index, CANDIDATES};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 use rayon::prelude::*;
 
-use super::discrepancy::WIDTH_CLEARANCE;
-use super::filmed_print::{named_list, FilmedPrint, Filming};
-use super::monitor;
-use crate::discrepancy_tables::{draws_frame, max_rounds, DrawRow, ALPHA};
+use super::filmed_print::{named_list, FilmedPrint, Filming, FilmingParams};
+use crate::discrepancy_tables::{draws_frame, DrawRow};
 use crate::effects::strength_list;
-use crate::parts::{merge_study, study_unit_draws, study_units, write_study_part, DRAWS_PER_UNIT};
+use crate::parts::{merge_study, study_unit_draws, study_units, write_study_part, StudySize, UnitSize};
 
 /// The `thermal.discovery_power` stage kind.
 pub struct DiscoveryPowerStage;
@@ -48,86 +46,76 @@ const STUDIED: [(&str, f64, &str); 5] = [
     ("melt_squeeze_out", 1.0, "fraction"),
 ];
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "camera_latency",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.005, 0.01"),
-        doc: "Strengths of camera_latency (capture delay, s), comma-separated; empty for none.",
-    },
-    ParamSpec {
-        name: "layer_heat_accumulation",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.3, 0.6"),
-        doc: "Strengths of layer_heat_accumulation (fraction of a layer's residual heat carried into the next layer's substrate), comma-separated.",
-    },
-    ParamSpec {
-        name: "tau_mismatch",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.3"),
-        doc: "Strengths of tau_mismatch (relative error of the flow's τ: actual τ = nominal·(1 + strength)), comma-separated.",
-    },
-    ParamSpec {
-        name: "heat_diffusion_widening",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("1"),
-        doc: "Strengths of heat_diffusion_widening (relative increase of the lateral diffusivity; no candidate), comma-separated.",
-    },
-    ParamSpec {
-        name: "melt_squeeze_out",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("0.2"),
-        doc: "Strengths of melt_squeeze_out (fraction of the volume squeezed out; no candidate), comma-separated.",
-    },
-    ParamSpec {
-        name: "draws",
-        ty: ParamType::Int { min: 1, max: 100_000 },
-        default: ParamDefault::Int(4),
-        doc: "Prints per effect and strength.",
-    },
-    ParamSpec {
-        name: "null_draws",
-        ty: ParamType::Int { min: 0, max: 100_000 },
-        default: ParamDefault::Int(8),
-        doc: "Prints with no effect.",
-    },
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 2, max: 20 },
-        default: ParamDefault::Int(8),
-        doc: "Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 5 candidates).",
-    },
-    ALPHA,
-    max_rounds(5, 2),
-    WIDTH_CLEARANCE,
-    monitor::STUDY_PARAMS[0],
-    monitor::STUDY_PARAMS[1],
-    monitor::STUDY_PARAMS[2],
-    monitor::STUDY_PARAMS[3],
-    DRAWS_PER_UNIT,
-];
+pipeline::params! {
+    /// The parameters of `thermal.discovery_power`.
+    pub struct DiscoveryPowerParams {
+        /// Strengths of camera_latency (capture delay, s), comma-separated; empty for none.
+        pub camera_latency: String = "0.005, 0.01",
+        /// Strengths of layer_heat_accumulation (fraction of a layer's residual heat carried into the next layer's substrate), comma-separated.
+        pub layer_heat_accumulation: String = "0.3, 0.6",
+        /// Strengths of tau_mismatch (relative error of the flow's τ: actual τ = nominal·(1 + strength)), comma-separated.
+        pub tau_mismatch: String = "0.3",
+        /// Strengths of heat_diffusion_widening (relative increase of the lateral diffusivity; no candidate), comma-separated.
+        pub heat_diffusion_widening: String = "1",
+        /// Strengths of melt_squeeze_out (fraction of the volume squeezed out; no candidate), comma-separated.
+        pub melt_squeeze_out: String = "0.2",
+        /// Prints per effect and strength.
+        pub draws: i64 [1, 100_000] = 4,
+        /// Prints with no effect.
+        pub null_draws: i64 [0, 100_000] = 8,
+        /// Filmed layers per print (each is a group: 8 or more before anything can be named at α = 0.05 over 5 candidates).
+        pub layers: i64 [2, 20] = 8,
+        /// Most causes named: after each, the extended model is the baseline and the search repeats.
+        pub max_rounds: i64 [1, 5] = 2,
+    }
+    groups {
+        /// How the prints are filmed and read.
+        pub filming: FilmingParams,
+        /// How the draws are cut into work units.
+        pub unit_size: UnitSize,
+    }
+}
 
-impl StageKind for DiscoveryPowerStage {
-    fn name(&self) -> &'static str {
-        "thermal.discovery_power"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+impl DiscoveryPowerParams {
+    /// Each studied effect's list of strengths, in [`STUDIED`] order.
+    fn lists(&self) -> [&str; 5] {
+        [
+            &self.camera_latency,
+            &self.layer_heat_accumulation,
+            &self.tau_mismatch,
+            &self.heat_diffusion_widening,
+            &self.melt_squeeze_out,
+        ]
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    /// The study's cells (effect, strength), each strength checked against its effect's range.
+    fn cells(&self) -> Result<Vec<(&'static str, f64)>, ParamError> {
+        let mut cells = Vec::new();
+        for ((effect, top, unit), list) in STUDIED.into_iter().zip(self.lists()) {
+            cells.extend(strength_list(effect, list, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
+        }
+        Ok(cells)
+    }
+}
+
+impl Stage for DiscoveryPowerStage {
+    type Params = DiscoveryPowerParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.discovery_power",
+        // 3: the engine's noise scales use models::stats' median.
+        version: 3,
+        summary: "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet",
+        implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models",
+        inputs: &[],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
+        p.cells()?;
+        p.filming.check()
+    }
+
+    fn run(&self, ctx: &mut StageContext, _: &DiscoveryPowerParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -139,13 +127,21 @@ impl StageKind for DiscoveryPowerStage {
 /// Work units: blocks of `draws_per_unit` consecutive prints ([`crate::parts`]).
 impl Split for DiscoveryPowerStage {
     fn units(&self, params: &Params, _inputs: usize) -> Vec<Unit> {
-        study_units(params, 1, STUDIED.iter().map(|(effect, _, _)| *effect))
+        let p = DiscoveryPowerParams::from_params(params);
+        let size = StudySize {
+            null_draws: p.null_draws,
+            draws: p.draws,
+            strength_lists: p.lists().to_vec(),
+            unit_size: &p.unit_size,
+        };
+        study_units(&size, 1)
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        let design = Design::from_params(ctx)?;
+        let p = DiscoveryPowerParams::from_params(&ctx.params);
+        let design = Design::new(&p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let jobs = design.jobs();
-        let (_, range) = study_unit_draws(&ctx.params, index, jobs.len());
+        let (_, range) = study_unit_draws(&p.unit_size, index, jobs.len());
         let scratch = ctx.output_dir().join("scratch");
         let draws: Vec<Draw> = jobs[range]
             .par_iter()
@@ -194,18 +190,14 @@ struct Draw {
 }
 
 impl Design {
-    fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
-        let p = &ctx.params;
-        let mut cells = Vec::new();
-        for (effect, top, unit) in STUDIED {
-            cells.extend(strength_list(ctx, effect, top, &format!(" ({unit})"))?.into_iter().map(|s| (effect, s)));
-        }
+    /// The study of `p`, its prints seeded from the stage's `seed`.
+    fn new(p: &DiscoveryPowerParams, seed: u64) -> Result<Self, ParamError> {
         Ok(Self {
-            cells,
-            draws: p.i64("draws") as usize,
-            null_draws: p.i64("null_draws") as usize,
-            seed: ctx.seed,
-            filming: Filming::from_params(ctx)?,
+            cells: p.cells()?,
+            draws: p.draws as usize,
+            null_draws: p.null_draws as usize,
+            seed,
+            filming: Filming::new(&p.filming, p.layers, p.max_rounds, seed)?,
         })
     }
 

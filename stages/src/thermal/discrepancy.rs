@@ -21,14 +21,14 @@ use models::thermal::discrepancy::{
     straight_run_samples, Deposition, FrameObservation, RecordParts, TemperatureObservation, ThermalModel,
     ThermalRecord, WidthObservation,
 };
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
-use pipeline::{ParamSpec, ParamType, Params, Split, StageContext, StageError, StageKind, Unit};
+use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::DataFrame;
 
 use super::common::{bools, f64s, ints, open_sequence, read_table, trajectory_of};
-use crate::discrepancy_tables::{engine_settings, max_rounds, DiscrepancyTables, Domain, ALPHA, BINS, BOOTSTRAP_DRAWS};
+use crate::discrepancy_tables::{DiscrepancyTables, Domain, EngineParams};
 use crate::parts::{data_set_units, merge_tables};
 
 /// The thermal tables' names: one discovery per dataset, residuals in noise std's.
@@ -37,38 +37,55 @@ const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
 /// The `thermal.discrepancy` stage kind.
 pub struct DiscrepancyStage;
 
-/// How far from every CAD vertex a bead width must be read to enter the model (shared
-/// with `thermal.discovery_power`).
-pub const WIDTH_CLEARANCE: ParamSpec = ParamSpec {
-    name: "width_clearance_mm",
-    ty: ParamType::Float { min: 0.0, max: 20.0 },
-    default: ParamDefault::Float(1.5),
-    doc: "Smallest distance from every CAD vertex at which a bead width enters the model (mm): nearer, the threshold contour of the corner's hot bulge is not the straight bead of eq. 34 (on the corner test part, about three bead widths lets it settle).",
-};
+/// The filmed prints: a role cannot say that its inputs alternate, so one role takes
+/// both kinds and the stage checks the pairing when it runs.
+pub const PRINTS: Input = Input::many(
+    "prints",
+    2,
+    &[Source::Dataset("thermal-sequence"), Source::Stage("thermal.monitor")],
+    "filmed prints as (sequence, monitor) pairs in turn: a `thermal-sequence` and its `thermal.monitor`, whose frames.parquet and widths.parquet it reads (the pairing is checked when the stage runs)",
+);
 
-const PARAMS: &[ParamSpec] = &[ALPHA, max_rounds(5, 3), BINS, BOOTSTRAP_DRAWS, WIDTH_CLEARANCE];
+pipeline::params! {
+    /// How far from every CAD vertex a bead width must be read to enter the model
+    /// (shared with `thermal.discovery_power` and `thermal.control_gain`).
+    pub struct WidthClearance {
+        /// Smallest distance from every CAD vertex at which a bead width enters the model (mm): nearer, the threshold contour of the corner's hot bulge is not the straight bead of eq. 34 (on the corner test part, about three bead widths lets it settle).
+        pub width_clearance_mm: f64 [0.0, 20.0] = 1.5,
+    }
+}
 
-impl StageKind for DiscrepancyStage {
-    fn name(&self) -> &'static str {
-        "thermal.discrepancy"
+pipeline::params! {
+    /// The parameters of `thermal.discrepancy`.
+    pub struct DiscrepancyParams {
+        /// Most causes named: after each, the extended model is the baseline and the search repeats.
+        pub max_rounds: i64 [1, 5] = 3,
     }
-    fn version(&self) -> u32 {
-        2
+    groups {
+        /// The engine's settings.
+        pub engine: EngineParams,
+        /// Which bead widths enter the model.
+        pub width_clearance: WidthClearance,
     }
-    fn summary(&self) -> &'static str {
-        "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(2)
+}
+
+impl Stage for DiscrepancyStage {
+    type Params = DiscrepancyParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.discrepancy",
+        // 3: the noise scales are the mean-of-middle-two median (models::stats), not the upper one.
+        version: 3,
+        summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
+        implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
+        inputs: &[PRINTS],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
+        p.engine.settings(p.max_rounds, 0).map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &DiscrepancyParams) -> Result<(), StageError> {
         run_split(self, ctx)
     }
 
@@ -85,21 +102,22 @@ impl Split for DiscrepancyStage {
     }
 
     fn run_unit(&self, ctx: &mut StageContext, index: usize) -> Result<(), StageError> {
-        if !ctx.inputs.len().is_multiple_of(2) {
+        let p = DiscrepancyParams::from_params(&ctx.params);
+        let prints = ctx.inputs_of(&PRINTS);
+        if !prints.len().is_multiple_of(2) {
             return Err(StageError::Params {
                 stage: ctx.stage.clone(),
                 message: format!(
                     "inputs come in (sequence, monitor) pairs, got {} inputs: {}",
-                    ctx.inputs.len(),
-                    ctx.inputs.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", ")
+                    prints.len(),
+                    prints.iter().map(|i| i.name.as_str()).collect::<Vec<_>>().join(", ")
                 ),
             });
         }
-        let settings = engine_settings(ctx)?;
+        let settings = p.engine.settings(p.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let mut tables = DiscrepancyTables::new(THERMAL, settings.alpha);
-        let (sequence, monitor) = (&ctx.inputs[2 * index], &ctx.inputs[2 * index + 1]);
-        let clearance_mm = ctx.params.f64(WIDTH_CLEARANCE.name);
-        let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, clearance_mm)?);
+        let (sequence, monitor) = (prints[2 * index], prints[2 * index + 1]);
+        let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, p.width_clearance.width_clearance_mm)?);
         let blocks = model.record().layer_groups();
         let found = discover(&model, &blocks, &[], &settings).map_err(|e| {
             StageError::Domain(

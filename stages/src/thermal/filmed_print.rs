@@ -11,21 +11,42 @@ use datasets::thermal::sequence::ThermalSequence;
 use datasets::thermal::{generate_into, Effects, GenerateConfig, LeptonHabits};
 use discrepancy::{discover, Discovery, Mechanism, Settings};
 use models::thermal::discrepancy::{ThermalFit, ThermalModel, CANDIDATES};
-use pipeline::params::Params;
-use pipeline::{StageContext, StageError};
+use pipeline::params::ParamError;
+use pipeline::StageError;
 
 use super::common::open_sequence;
-use super::discrepancy::{record_from_tables, WIDTH_CLEARANCE};
-use super::monitor::{self, MonitorTables};
-use crate::discrepancy_tables::study_settings;
+use super::discrepancy::{record_from_tables, WidthClearance};
+use super::monitor::{self, MonitorParams, MonitorTables, StudyMonitor};
+use crate::discrepancy_tables::{study_settings, FalseAlarm};
+
+pipeline::params! {
+    /// What both thermal studies declare of how they film their prints and let the
+    /// engine read them (beyond `layers` and `max_rounds`, which each words itself).
+    pub struct FilmingParams {}
+    groups {
+        /// The engine's false-alarm rate.
+        pub false_alarm: FalseAlarm,
+        /// Which bead widths enter the engine's model.
+        pub width_clearance: WidthClearance,
+        /// The monitor's parameters the study sets.
+        pub monitor: StudyMonitor,
+    }
+}
+
+impl FilmingParams {
+    /// The constraints the planner checks: the monitor's, on the study's monitor parameters.
+    pub fn check(&self) -> Result<(), ParamError> {
+        self.monitor.monitor_params().map(|_| ())
+    }
+}
 
 /// How a study films its prints and lets the engine read them.
 #[derive(Debug, Clone)]
 pub struct Filming {
     /// Filmed layers per print (the engine's groups).
     pub layers: usize,
-    /// The monitor's checked parameters ([`monitor::study_params`]).
-    pub monitor: Params,
+    /// The monitor's parameters ([`StudyMonitor::monitor_params`]).
+    pub monitor: MonitorParams,
     /// `thermal.discrepancy`'s `width_clearance_mm`.
     pub width_clearance_mm: f64,
     /// The engine's settings; each print's seed replaces `seed`.
@@ -44,14 +65,15 @@ pub struct FilmedPrint {
 }
 
 impl Filming {
-    /// From a study's `layers`, its monitor parameters ([`monitor::STUDY_PARAMS`]),
-    /// `width_clearance_mm` and the engine's `alpha` and `max_rounds`.
-    pub fn from_params(ctx: &StageContext) -> Result<Self, StageError> {
+    /// From a study's `layers`, `max_rounds` and filming parameters (its monitor
+    /// parameters, `width_clearance_mm` and the engine's `alpha`), the engine seeded
+    /// with the stage's `seed`.
+    pub fn new(params: &FilmingParams, layers: i64, max_rounds: i64, seed: u64) -> Result<Self, ParamError> {
         Ok(Self {
-            layers: ctx.params.i64("layers") as usize,
-            monitor: monitor::study_params(ctx)?,
-            width_clearance_mm: ctx.params.f64(WIDTH_CLEARANCE.name),
-            engine: study_settings(ctx, 100),
+            layers: layers as usize,
+            monitor: params.monitor.monitor_params()?,
+            width_clearance_mm: params.width_clearance.width_clearance_mm,
+            engine: study_settings(params.false_alarm.alpha, max_rounds, seed, 100),
         })
     }
 

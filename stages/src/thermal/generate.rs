@@ -6,64 +6,51 @@
 use datasets::thermal::effects::Effects;
 use datasets::thermal::{generate_into_observed, GenerateConfig, LeptonHabits};
 
+use pipeline::params::ParamError;
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+
 use crate::progress::StageProgress;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
 
 /// The `thermal.generate_sequence` stage kind.
 pub struct GenerateSequenceStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 1, max: 20 },
-        default: ParamDefault::Int(1),
-        doc: "Layers printed and filmed (the paper's one-layer verification print films one; its part has 20).",
-    },
-    ParamSpec {
-        name: "effects",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Extra physical effects as `name=strength` pairs separated by commas (camera_latency, tau_mismatch, heat_diffusion_widening, layer_heat_accumulation, melt_squeeze_out); empty: none.",
-    },
-    ParamSpec {
-        name: "lepton_habits",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(false),
-        doc: "Let the camera repeat frames and freeze ~0.9 s for its shutter, as real FLIR Leptons do (DESIGN §5.3).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `thermal.generate_sequence`.
+    pub struct GenerateSequenceParams {
+        /// Layers printed and filmed (the paper's one-layer verification print films one; its part has 20).
+        pub layers: i64 [1, 20] = 1,
+        /// Extra physical effects as `name=strength` pairs separated by commas (camera_latency, tau_mismatch, heat_diffusion_widening, layer_heat_accumulation, melt_squeeze_out); empty: none.
+        pub effects: String = "",
+        /// Let the camera repeat frames and freeze ~0.9 s for its shutter, as real FLIR Leptons do (DESIGN §5.3).
+        pub lepton_habits: bool = false,
+    }
+}
 
-impl StageKind for GenerateSequenceStage {
-    fn name(&self) -> &'static str {
-        "thermal.generate_sequence"
-    }
-    fn version(&self) -> u32 {
-        6
-    }
-    fn summary(&self) -> &'static str {
-        "Virtual extrusion printer + nozzle-mounted thermal camera → a thermal-sequence dataset (the output folder)"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §5.3; paper 003 Tables 1-2, Fig. 7, eqs 28 and 34"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(0)
+impl Stage for GenerateSequenceStage {
+    type Params = GenerateSequenceParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.generate_sequence",
+        version: 6,
+        summary:
+            "Virtual extrusion printer + nozzle-mounted thermal camera → a thermal-sequence dataset (the output folder)",
+        implements: "DESIGN §5.3; paper 003 Tables 1-2, Fig. 7, eqs 28 and 34",
+        inputs: &[],
+        output: Output::Dataset("thermal-sequence"),
+    };
+
+    fn check(p: &GenerateSequenceParams) -> Result<(), ParamError> {
+        parse_effects(&p.effects).map(|_| ()).map_err(|message| ParamError::new("effects", message))
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let effects = parse_effects(ctx.params.str("effects"))
-            .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
-        let habits = ctx.params.bool("lepton_habits");
+    fn run(&self, ctx: &mut StageContext, p: &GenerateSequenceParams) -> Result<(), StageError> {
+        let effects =
+            parse_effects(&p.effects).map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
         let config = GenerateConfig {
             seed: ctx.seed,
-            layers: ctx.params.i64("layers") as usize,
+            layers: p.layers as usize,
             effects,
-            lepton_habits: LeptonHabits { repeated_frames: habits, shutter_freeze: habits },
+            lepton_habits: LeptonHabits { repeated_frames: p.lepton_habits, shutter_freeze: p.lepton_habits },
         };
         generate_into_observed(&config, ctx.output_dir(), &StageProgress::new(ctx)).map_err(StageError::domain)?;
         Ok(())

@@ -27,7 +27,6 @@ pub mod discovery_power;
 pub mod discrepancy;
 pub mod filmed_print;
 pub mod generate;
-pub mod localise;
 pub mod monitor;
 pub mod reprint;
 pub mod true_widths;

@@ -3,7 +3,7 @@
 //! 1. Deposition directions along the commanded trajectory with and without the
 //!    allocation of Sec. 2.2 (eqs 1-26), for the flow the printer should deliver (the
 //!    commanded flow through the nominal G(s) of eq. 34) → `directions.parquet`.
-//! 2. Every frame localised twice (`super::localise`; a bad frame becomes a diagnostic
+//! 2. Every frame localised twice (`vision::localiser`; a bad frame becomes a diagnostic
 //!    row, never an abort): by the paper's per-frame homography (undistort, detect the
 //!    hot corners in the band, pair them with the CAD corners predicted through the
 //!    nominal mount from the recorded time, place each on its path vertex by
@@ -40,125 +40,113 @@
 //! Also written for the figures (Fig. 4): the undistorted frame with the most matched
 //! corners, its detections, and a mosaic of all localised frames on the plane.
 
-use std::collections::BTreeMap;
-
 use datasets::thermal::sequence::ThermalSequence;
+use models::progress::Progress;
 use models::stats::finite_median;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
 use models::thermal::dynamics::lag_excess;
 use models::thermal::geometry::half_widths_mm;
 use models::thermal::{PrintSetup, Trajectory};
-use pipeline::params::{ParamDefault, Params};
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::{ParamError, StageParams};
+use pipeline::stage::{Output, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use vision::camera::Undistorter;
+use vision::localiser::{DetectionRow, Estimator, FrameOutcome, Localiser, LocaliserParams, Located, MountRow};
 use vision::pipeline::PipelineParams;
 use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 
-use super::common::{camera_model, deposition_directions, left_directions, open_sequence, trajectory_of};
-use super::localise::{DetectionRow, FrameOutcome, Localisation, Localiser, MountRow};
+use super::common::{
+    camera_model, deposition_directions, filmed_sequence, left_directions, open_sequence, trajectory_of, DatasetFrames,
+};
 use crate::progress::StageProgress;
+use crate::roles;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 /// The `thermal.monitor` stage kind.
 pub struct MonitorStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "measure_age_s",
-        ty: ParamType::Float { min: 0.05, max: 3.0 },
-        default: ParamDefault::Float(0.1),
-        doc: "Age of the bead (s since deposition) at which its width is read; each sample is read in the frame closest to this age (frames every 0.125 s). Young, because a corner pile's heat spreads along the bead as it ages and smears the apex excess onto the thin stretch after it (module doc).",
-    },
-    ParamSpec {
-        name: "calibrate_threshold",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(true),
-        doc: "Choose T_t per layer so that straight beads read the nominal width (the paper identifies w0 on straight lines, Sec. 3.2); false: use threshold_c.",
-    },
-    ParamSpec {
-        name: "threshold_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(120.0),
-        doc: "Threshold temperature T_t of the width contour (°C) when calibrate_threshold is false (the paper does not state its value).",
-    },
-    ParamSpec {
-        name: "straight_clearance_mm",
-        ty: ParamType::Float { min: 0.5, max: 10.0 },
-        default: ParamDefault::Float(1.5),
-        doc: "Samples farther than this from every CAD corner count as straight for the T_t calibration.",
-    },
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(140.0),
-        doc: "Lower edge of the corner temperature band (°C), Sec. 3.2: 140 °C ≤ T_p ≤ 150 °C.",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(150.0),
-        doc: "Upper edge of the corner temperature band (°C), Sec. 3.2.",
-    },
-    ParamSpec {
-        name: "localisation",
-        ty: ParamType::Choice(Localisation::NAMES),
-        default: ParamDefault::Str("rigid_mount"),
-        doc: "Frame localisation used for the widths: `dlt`, the paper's per-frame homography from ≥ 4 corners in the band (eq. 27); `rigid_mount`, ours: one mount homography fitted to the whole sequence, one translation per frame from any ridge-placed corner (see `frames.parquet` for both capture times).",
-    },
-    ParamSpec {
-        name: "max_corner_age_s",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(0.8),
-        doc: "rigid_mount only: corners printed longer ago than this (s, from the commanded trajectory) are not used; as a bead cools its heat spreads and the ridges of a corner's two arms pull each other inwards (≈ 0.1 mm after 2 s).",
-    },
-    ParamSpec {
-        name: "place_cornerless",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(true),
-        doc: "rigid_mount only: place a frame with no readable corner (the first few of each layer) by the commanded position at its recorded time (plus the median capture offset of the frames placed from corners) through the fitted mount, so the widths of the layer's start are read; it gets no capture-time estimate (NaN in frames.parquet, `placed_by` = recorded_time). false: skip it, as the paper's method must.",
-    },
-    ParamSpec {
-        name: "window_s",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.010),
-        doc: "Half width δt of the capture-time search window of eq. 30 (s); the paper: within 10 ms.",
-    },
-];
+pipeline::choice! {
+    /// The estimator whose result the monitor uses.
+    pub enum Localisation {
+        /// The paper's per-frame homography (eq. 27).
+        Dlt = "dlt",
+        /// Our rigid-mount estimator.
+        RigidMount = "rigid_mount",
+    }
+}
 
-impl StageKind for MonitorStage {
-    fn name(&self) -> &'static str {
-        "thermal.monitor"
+impl Localisation {
+    /// The frame localiser's estimator of this choice.
+    pub fn estimator(self) -> Estimator {
+        match self {
+            Self::Dlt => Estimator::Dlt,
+            Self::RigidMount => Estimator::RigidMount,
+        }
     }
-    fn version(&self) -> u32 {
-        11
+}
+
+pipeline::params! {
+    /// The parameters of `thermal.monitor`.
+    pub struct MonitorParams {
+        /// Age of the bead (s since deposition) at which its width is read; each sample is read in the frame closest to this age (frames every 0.125 s). Young, because a corner pile's heat spreads along the bead as it ages and smears the apex excess onto the thin stretch after it (module doc).
+        pub measure_age_s: f64 [0.05, 3.0] = 0.1,
+        /// Choose T_t per layer so that straight beads read the nominal width (the paper identifies w0 on straight lines, Sec. 3.2); false: use threshold_c.
+        pub calibrate_threshold: bool = true,
+        /// Threshold temperature T_t of the width contour (°C) when calibrate_threshold is false (the paper does not state its value).
+        pub threshold_c: f64 [0.0, 300.0] = 120.0,
+        /// Samples farther than this from every CAD corner count as straight for the T_t calibration.
+        pub straight_clearance_mm: f64 [0.5, 10.0] = 1.5,
+        /// Lower edge of the corner temperature band (°C), Sec. 3.2: 140 °C ≤ T_p ≤ 150 °C.
+        pub band_low_c: f64 [0.0, 300.0] = 140.0,
+        /// Upper edge of the corner temperature band (°C), Sec. 3.2.
+        pub band_high_c: f64 [0.0, 300.0] = 150.0,
+        /// Frame localisation used for the widths: `dlt`, the paper's per-frame homography from ≥ 4 corners in the band (eq. 27); `rigid_mount`, ours: one mount homography fitted to the whole sequence, one translation per frame from any ridge-placed corner (see `frames.parquet` for both capture times).
+        pub localisation: Localisation = Localisation::RigidMount,
+        /// rigid_mount only: corners printed longer ago than this (s, from the commanded trajectory) are not used; as a bead cools its heat spreads and the ridges of a corner's two arms pull each other inwards (≈ 0.1 mm after 2 s).
+        pub max_corner_age_s: f64 [0.1, 100.0] = 0.8,
+        /// rigid_mount only: place a frame with no readable corner (the first few of each layer) by the commanded position at its recorded time (plus the median capture offset of the frames placed from corners) through the fitted mount, so the widths of the layer's start are read; it gets no capture-time estimate (NaN in frames.parquet, `placed_by` = recorded_time). false: skip it, as the paper's method must.
+        pub place_cornerless: bool = true,
+        /// Half width δt of the capture-time search window of eq. 30 (s); the paper: within 10 ms.
+        pub window_s: f64 [0.001, 0.5] = 0.010,
     }
-    fn summary(&self) -> &'static str {
-        "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 eqs 1-32 (Secs 2.1-2.4), Sec. 3.2"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
+}
+
+impl Stage for MonitorStage {
+    type Params = MonitorParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.monitor",
+        version: 11,
+        summary: "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)",
+        implements: "paper 003 eqs 1-32 (Secs 2.1-2.4), Sec. 3.2",
+        inputs: &[roles::THERMAL_SEQUENCE],
+        output: Output::Tables,
+    };
+
+    fn check(p: &MonitorParams) -> Result<(), ParamError> {
+        if p.band_low_c > p.band_high_c {
+            return Err(ParamError::new(
+                "band_low_c",
+                format!(
+                    "{} °C is above band_high_c ({} °C): the corner band would be empty",
+                    p.band_low_c, p.band_high_c
+                ),
+            ));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let seq = open_sequence(&ctx.inputs[0].dir)?;
+    fn run(&self, ctx: &mut StageContext, p: &MonitorParams) -> Result<(), StageError> {
+        let seq = open_sequence(&ctx.input(&roles::THERMAL_SEQUENCE).dir)?;
         let setup = seq.process.print_setup();
         let trajectory = trajectory_of(&seq)?;
         let (with_dda, without_dda) = deposition_directions(&seq, &trajectory, &setup)?;
         let mut directions = directions_frame(&trajectory, &with_dda, &without_dda, &setup)?;
         ctx.write_table("directions", &mut directions)?;
-        let settings = Settings::from_params(&ctx.params);
-        let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, settings)?;
-        let (frames, mounts) = analysis.localiser.run(ctx.seed, settings.localisation, &StageProgress::new(ctx))?;
+        let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, p)?;
+        let (frames, mounts) = analysis.localise(ctx.seed, p.localisation, &StageProgress::new(ctx))?;
         let widths = analysis.widths(&frames);
-        write_frame_tables(ctx, &analysis.localiser.undistorter, &frames, settings.localisation)?;
+        write_frame_tables(ctx, &analysis.localiser.undistorter, &frames, p.localisation)?;
         write_mount_tables(ctx, &analysis.localiser.undistorter, &frames, &mounts)?;
         let mut table = widths_frame(&trajectory, &with_dda, &setup, &widths)?;
         ctx.write_table("widths", &mut table)?;
@@ -179,93 +167,56 @@ pub struct MonitorTables {
 }
 
 /// [`MonitorTables`] of `seq` as [`MonitorStage`] writes them, with its parameters
-/// `params` (checked against its declarations) and localisation seed `seed`, without a
-/// stage: for studies that monitor many sequences.
+/// `params` and localisation seed `seed`, without a stage: for studies that monitor
+/// many sequences.
 pub fn monitor_tables(
     seq: &datasets::thermal::ThermalSequence,
-    params: &pipeline::params::Params,
+    params: &MonitorParams,
     seed: u64,
 ) -> Result<MonitorTables, StageError> {
     let setup = seq.process.print_setup();
     let trajectory = trajectory_of(seq)?;
     let (with_dda, without_dda) = deposition_directions(seq, &trajectory, &setup)?;
-    let settings = Settings::from_params(params);
-    let analysis = Analysis::new(seq, &trajectory, &with_dda, &setup, settings)?;
-    let (frames, _) = analysis.localiser.run(seed, settings.localisation, &())?;
+    let analysis = Analysis::new(seq, &trajectory, &with_dda, &setup, params)?;
+    let (frames, _) = analysis.localise(seed, params.localisation, &())?;
     let widths = analysis.widths(&frames);
     Ok(MonitorTables {
-        frames: frames_frame(&frames, settings.localisation)?,
+        frames: frames_frame(&frames, params.localisation)?,
         widths: widths_frame(&trajectory, &with_dda, &setup, &widths)?,
         directions: directions_frame(&trajectory, &with_dda, &without_dda, &setup)?,
         detections: detections_frame(&analysis.localiser.undistorter, &frames)?,
     })
 }
 
-/// The monitor's parameters a study that films its own prints sets (the others keep
-/// the monitor's defaults), with the studies' defaults.
-pub const STUDY_PARAMS: [ParamSpec; 4] = [
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(90.0),
-        doc: "The monitor's band_low_c (as in specs/chen2024.toml).",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: 0.0, max: 300.0 },
-        default: ParamDefault::Float(220.0),
-        doc: "The monitor's band_high_c.",
-    },
-    ParamSpec {
-        name: "max_corner_age_s",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(0.8),
-        doc: "The monitor's max_corner_age_s.",
-    },
-    ParamSpec {
-        name: "window_s",
-        ty: ParamType::Float { min: 0.001, max: 0.5 },
-        default: ParamDefault::Float(0.05),
-        doc: "The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.",
-    },
-];
-
-/// The monitor's checked parameters from a study's [`STUDY_PARAMS`] values.
-pub fn study_params(ctx: &StageContext) -> Result<Params, StageError> {
-    let raw: BTreeMap<String, toml::Value> = (STUDY_PARAMS.iter())
-        .map(|spec| (spec.name.to_string(), toml::Value::Float(ctx.params.f64(spec.name))))
-        .collect();
-    Params::check(PARAMS, &raw)
-        .map_err(|(name, why)| StageError::Params { stage: ctx.stage.clone(), message: format!("{name}: {why}") })
+pipeline::params! {
+    /// The monitor's parameters a study that films its own prints sets (the others keep
+    /// the monitor's defaults), with the studies' defaults.
+    pub struct StudyMonitor {
+        /// The monitor's band_low_c (as in specs/chen2024.toml).
+        pub band_low_c: f64 [0.0, 300.0] = 90.0,
+        /// The monitor's band_high_c.
+        pub band_high_c: f64 [0.0, 300.0] = 220.0,
+        /// The monitor's max_corner_age_s.
+        pub max_corner_age_s: f64 [0.1, 100.0] = 0.8,
+        /// The monitor's window_s, eq. 30's search half-width: wide enough that a camera delay is measured, not cut off.
+        pub window_s: f64 [0.001, 0.5] = 0.05,
+    }
 }
 
-/// The checked parameters.
-#[derive(Debug, Clone, Copy)]
-struct Settings {
-    measure_age_s: f64,
-    calibrate: bool,
-    threshold_c: f64,
-    straight_clearance_mm: f64,
-    band_c: (f64, f64),
-    window_s: f64,
-    localisation: Localisation,
-    max_corner_age_s: f64,
-    place_cornerless: bool,
-}
-
-impl Settings {
-    fn from_params(p: &pipeline::params::Params) -> Self {
-        Self {
-            measure_age_s: p.f64("measure_age_s"),
-            calibrate: p.bool("calibrate_threshold"),
-            threshold_c: p.f64("threshold_c"),
-            straight_clearance_mm: p.f64("straight_clearance_mm"),
-            band_c: (p.f64("band_low_c"), p.f64("band_high_c")),
-            window_s: p.f64("window_s"),
-            localisation: Localisation::from_name(p.str("localisation")),
-            max_corner_age_s: p.f64("max_corner_age_s"),
-            place_cornerless: p.bool("place_cornerless"),
-        }
+impl StudyMonitor {
+    /// The monitor's parameters: these four, the others at the monitor's defaults,
+    /// checked as the planner checks a `thermal.monitor` stage.
+    pub fn monitor_params(&self) -> Result<MonitorParams, ParamError> {
+        let defaults = MonitorParams::defaults().expect("every parameter of thermal.monitor has a default");
+        let params = MonitorParams {
+            band_low_c: self.band_low_c,
+            band_high_c: self.band_high_c,
+            max_corner_age_s: self.max_corner_age_s,
+            window_s: self.window_s,
+            ..defaults
+        };
+        MonitorStage::check(&params)?;
+        Ok(params)
     }
 }
 
@@ -273,10 +224,10 @@ impl Settings {
 struct Analysis<'a> {
     seq: &'a ThermalSequence,
     trajectory: &'a Trajectory,
-    localiser: Localiser<'a>,
+    localiser: Localiser<'a, DatasetFrames<'a>>,
     queries: Vec<WidthQuery>,
     straight: Vec<bool>,
-    settings: Settings,
+    settings: &'a MonitorParams,
     bead_width_mm: f64,
 }
 
@@ -286,13 +237,13 @@ impl<'a> Analysis<'a> {
         trajectory: &'a Trajectory,
         directions: &DepositionDirections,
         setup: &PrintSetup,
-        settings: Settings,
+        settings: &'a MonitorParams,
     ) -> Result<Self, StageError> {
         let camera = camera_model(&seq.camera);
         let undistorter = Undistorter::new(&camera).map_err(StageError::domain)?;
         let mut params = PipelineParams::paper_defaults(settings.threshold_c);
-        params.corners.band_lo_c = settings.band_c.0 as f32;
-        params.corners.band_hi_c = settings.band_c.1 as f32;
+        params.corners.band_lo_c = settings.band_low_c as f32;
+        params.corners.band_hi_c = settings.band_high_c as f32;
         params.window_s = settings.window_s;
         let left = left_directions(directions);
         let queries = (0..trajectory.len())
@@ -311,19 +262,30 @@ impl<'a> Analysis<'a> {
             seq,
             trajectory,
             localiser: Localiser::new(
-                seq,
-                trajectory,
+                filmed_sequence(seq, trajectory),
                 undistorter,
-                camera.nominal_homography(),
-                params,
-                settings.max_corner_age_s,
-                settings.place_cornerless,
+                LocaliserParams {
+                    pipeline: params,
+                    max_corner_age_s: settings.max_corner_age_s,
+                    place_cornerless: settings.place_cornerless,
+                },
             ),
             queries,
             straight,
             settings,
             bead_width_mm: setup.bead_width_mm,
         })
+    }
+
+    /// Every frame localised by both estimators, `method`'s placement chosen, and the
+    /// rigid mount of every pass.
+    fn localise(
+        &self,
+        seed: u64,
+        method: Localisation,
+        progress: &dyn Progress,
+    ) -> Result<(Vec<FrameOutcome>, Vec<MountRow>), StageError> {
+        self.localiser.run(seed, method.estimator(), progress).map_err(StageError::domain)
     }
 
     /// For each trajectory sample, the used frame in which its bead is closest to the
@@ -351,7 +313,7 @@ impl<'a> Analysis<'a> {
         (0..layers)
             .map(|layer| {
                 let owner = self.frame_of_samples(frames, layer);
-                let threshold_c = if self.settings.calibrate {
+                let threshold_c = if self.settings.calibrate_threshold {
                     self.calibrated_threshold(frames, &owner)
                 } else {
                     self.settings.threshold_c
@@ -591,10 +553,10 @@ fn frames_frame(frames: &[FrameOutcome], method: Localisation) -> Result<polars:
             f64_col(&format!("h{}{}", i / 3 + 1, i % 3 + 1), values)
         })
         .collect();
-    let of = |g: fn(&super::localise::Located) -> f64| -> Vec<f64> {
+    let of = |g: fn(&Located) -> f64| -> Vec<f64> {
         frames.iter().map(|f| located(f).map_or(f64::NAN, |l| g(&l))).collect()
     };
-    let time_of = |r: &Result<super::localise::Located, String>| r.as_ref().map_or(f64::NAN, |l| l.estimated_time_s());
+    let time_of = |r: &Result<Located, String>| r.as_ref().map_or(f64::NAN, |l| l.estimated_time_s());
     let mut columns = vec![
         i64_col("layer", frames.iter().map(|f| f.entry.layer as i64).collect()),
         i64_col("frame", frames.iter().map(|f| f.entry.frame as i64).collect()),
@@ -788,9 +750,37 @@ mod tests {
     use super::*;
 
     #[test]
+    fn localisation_names_round_trip() {
+        for name in Localisation::NAMES {
+            assert_eq!(Localisation::parse(name).map(Localisation::name), Some(*name));
+        }
+    }
+
+    #[test]
     fn frames_are_listed_as_runs_per_layer() {
         let ids = [(0, 42), (0, 3), (0, 4), (0, 5), (1, 0), (0, 40)];
         assert_eq!(frame_ranges(&ids), "layer 0, frames 3-5, 40, 42; layer 1, frame 0");
         assert_eq!(frame_ranges(&[(2, 7), (2, 8)]), "layer 2, frames 7-8");
+    }
+
+    #[test]
+    fn a_study_sets_four_of_the_monitor_s_parameters_with_the_monitor_s_names_and_ranges() {
+        for study in StudyMonitor::specs() {
+            let monitor = MonitorParams::specs().iter().find(|m| m.name == study.name).expect("a monitor parameter");
+            assert_eq!(study.ty.to_string(), monitor.ty.to_string(), "{}", study.name);
+        }
+        let study = StudyMonitor::defaults().expect("all defaulted");
+        let p = study.monitor_params().unwrap();
+        assert_eq!((p.band_low_c, p.band_high_c, p.max_corner_age_s, p.window_s), (90.0, 220.0, 0.8, 0.05));
+        let monitor = MonitorParams::defaults().expect("all defaulted");
+        assert_eq!(MonitorParams { band_low_c: 90.0, band_high_c: 220.0, window_s: 0.05, ..monitor }, p);
+    }
+
+    #[test]
+    fn an_inverted_corner_band_is_refused_before_anything_runs() {
+        let study = StudyMonitor { band_low_c: 200.0, band_high_c: 150.0, ..StudyMonitor::defaults().unwrap() };
+        assert_eq!(study.monitor_params().unwrap_err().field, "band_low_c");
+        let p = MonitorParams { band_low_c: 150.0, band_high_c: 150.0, ..MonitorParams::defaults().unwrap() };
+        assert!(MonitorStage::check(&p).is_ok(), "a one-temperature band is a band");
     }
 }

@@ -36,74 +36,60 @@ use models::thermal::metrics::{
     ContourPoint, ContourRegion, IdealBead, RegionSummary,
 };
 use models::thermal::{DepositGrid, PrintSetup};
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::common::{f64s, open_sequence, read_table, trajectory_of};
 use crate::progress::StageProgress;
+use crate::roles;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 use models::thermal::setup::{convex_vertices, interior_angles_deg};
 
 /// The `thermal.reprint_evaluate` stage kind.
 pub struct ReprintEvaluateStage;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "layers",
-        ty: ParamType::Int { min: 1, max: 50 },
-        default: ParamDefault::Int(20),
-        doc: "Layers of the evaluation part (Fig. 7b, Table 3: 20).",
-    },
-    ParamSpec {
-        name: "corner_radius_mm",
-        ty: ParamType::Float { min: 0.1, max: 5.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Radius of the corner window around each vertex in which A_o is counted (mm); must hold the corner bulge (about twice the bead width).",
-    },
-    ParamSpec {
-        name: "contour_spacing_mm",
-        ty: ParamType::Float { min: 0.005, max: 1.0 },
-        default: ParamDefault::Float(0.05),
-        doc: "Spacing of the CAD contour points of eq. 41 (mm); the paper's profiler samples every 0.5 mm in z, we sample the contour finely.",
-    },
-    ParamSpec {
-        name: "inner_face",
-        ty: ParamType::Bool,
-        default: ParamDefault::Bool(false),
-        doc: "Also score the wall's inside face in eq. 41; the paper's P_t is the external surface its profiler sees (Sec. 3.3).",
-    },
-];
+/// The compensation to re-print.
+pub const COMPENSATION: Input = Input::one(
+    "compensation",
+    &[Source::Stage("thermal.compensate")],
+    "the conventional and the compensated command of `thermal.compensate` (command.parquet)",
+);
 
-impl StageKind for ReprintEvaluateStage {
-    fn name(&self) -> &'static str {
-        "thermal.reprint_evaluate"
+pipeline::params! {
+    /// The parameters of `thermal.reprint_evaluate`.
+    pub struct ReprintParams {
+        /// Layers of the evaluation part (Fig. 7b, Table 3: 20).
+        pub layers: i64 [1, 50] = 20,
+        /// Radius of the corner window around each vertex in which A_o is counted (mm); must hold the corner bulge (about twice the bead width).
+        pub corner_radius_mm: f64 [0.1, 5.0] = 1.0,
+        /// Spacing of the CAD contour points of eq. 41 (mm); the paper's profiler samples every 0.5 mm in z, we sample the contour finely.
+        pub contour_spacing_mm: f64 [0.005, 1.0] = 0.05,
+        /// Also score the wall's inside face in eq. 41; the paper's P_t is the external surface its profiler sees (Sec. 3.3).
+        pub inner_face: bool = false,
     }
-    fn version(&self) -> u32 {
-        7
-    }
-    fn summary(&self) -> &'static str {
-        "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Sec. 3.3, eqs 40-41, Table 3 (evaluation: reads the printer's effects)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+}
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let seq = open_sequence(&ctx.inputs[0].dir)?;
+impl Stage for ReprintEvaluateStage {
+    type Params = ReprintParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.reprint_evaluate",
+        version: 7,
+        summary:
+            "Re-print with and without compensation on the virtual printer → corners (O_E), contour (max, RMS), maps",
+        implements: "paper 003 Sec. 3.3, eqs 40-41, Table 3 (evaluation: reads the printer's effects)",
+        inputs: &[roles::THERMAL_SEQUENCE, COMPENSATION],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &ReprintParams) -> Result<(), StageError> {
+        let seq = open_sequence(&ctx.input(&roles::THERMAL_SEQUENCE).dir)?;
         let setup = seq.process.print_setup();
         let trajectory = trajectory_of(&seq)?;
         let (effects, dataset_seed) = virtual_printer(&seq)?;
-        let commands = read_commands(&ctx.inputs[1].dir, trajectory.len())?;
-        let layers = ctx.params.i64("layers") as usize;
+        let commands = read_commands(&ctx.input(&COMPENSATION).dir, trajectory.len())?;
+        let layers = p.layers as usize;
         let progress = StageProgress::new(ctx);
         let print = |command: &[f64]| -> Result<Vec<DepositGrid>, StageError> {
             // Seeded from the dataset, not the stage: every re-print of one dataset (the
@@ -117,10 +103,10 @@ impl StageKind for ReprintEvaluateStage {
         let (before, after) = rayon::join(|| print(&commands.0), || print(&commands.1));
         let (before, after) = (before?, after?);
         let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
-        let radius_mm = ctx.params.f64("corner_radius_mm");
+        let radius_mm = p.corner_radius_mm;
         let mut corners = corners_frame(&seq, &setup, &bead, radius_mm, &before[0], &after[0])?;
         ctx.write_table("corners", &mut corners)?;
-        let cad = bead.contour_points(ctx.params.f64("contour_spacing_mm"), ctx.params.bool("inner_face"));
+        let cad = bead.contour_points(p.contour_spacing_mm, p.inner_face);
         let errors_before: Vec<Vec<ContourPoint>> = before.iter().map(|g| contour_errors(g, &cad)).collect();
         let errors_after: Vec<Vec<ContourPoint>> = after.iter().map(|g| contour_errors(g, &cad)).collect();
         let mut contour = contour_frame(&errors_before, &errors_after)?;

@@ -22,54 +22,54 @@ use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::stats::{finite_median, nearest_rank_quantile};
 use models::thermal::DepositGrid;
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 use rayon::prelude::*;
 
-use super::common::{f64s, ints, open_sequence, read_table, trajectory_of};
+use super::common::{f64s, ints, open_sequence, read_table, sample_index, trajectory_of};
+use crate::roles;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `thermal.true_widths_evaluate` stage kind.
 pub struct TrueWidthsStage;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "corner_radius_mm",
-    ty: ParamType::Float { min: 0.0, max: 5.0 },
-    default: ParamDefault::Float(0.5),
-    doc: "A reading within this distance of a CAD vertex counts as near a corner in width_errors.parquet (mm); about two bead widths.",
-}];
+/// The monitor whose directions and readings are used.
+pub const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "the sequence's monitor: its deposition directions (directions.parquet) and readings (widths.parquet)",
+);
 
-impl StageKind for TrueWidthsStage {
-    fn name(&self) -> &'static str {
-        "thermal.true_widths_evaluate"
+pipeline::params! {
+    /// The parameters of `thermal.true_widths_evaluate`.
+    pub struct TrueWidthsParams {
+        /// A reading within this distance of a CAD vertex counts as near a corner in width_errors.parquet (mm); about two bead widths.
+        pub corner_radius_mm: f64 [0.0, 5.0] = 0.5,
     }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "The deposit's true half widths along the monitor's deposition directions, and the monitor's width error near and away from the corners → widths, width_errors"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Sec. 2.4 (eqs 31-32) with a perfect camera (evaluation: reads truth/)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+}
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let seq = open_sequence(&ctx.inputs[0].dir)?;
-        let truth = ThermalTruth::open(&ctx.inputs[0].dir).map_err(StageError::domain)?;
+impl Stage for TrueWidthsStage {
+    type Params = TrueWidthsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "thermal.true_widths_evaluate",
+        version: 1,
+        summary: "The deposit's true half widths along the monitor's deposition directions, and the monitor's width error near and away from the corners → widths, width_errors",
+        implements: "paper 003 Sec. 2.4 (eqs 31-32) with a perfect camera (evaluation: reads truth/)",
+        inputs: &[roles::THERMAL_SEQUENCE, MONITOR],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, params: &TrueWidthsParams) -> Result<(), StageError> {
+        let sequence_dir = &ctx.input(&roles::THERMAL_SEQUENCE).dir;
+        let seq = open_sequence(sequence_dir)?;
+        let truth = ThermalTruth::open(sequence_dir).map_err(StageError::domain)?;
         let trajectory = trajectory_of(&seq)?;
-        let monitor = Monitored::read(&ctx.inputs[1].dir, trajectory.len())?;
+        let monitor = Monitored::read(&ctx.input(&MONITOR).dir, trajectory.len())?;
         let points_mm: Vec<[f64; 2]> =
             (0..trajectory.len()).map(|k| [trajectory.x_mm[k], trajectory.y_mm[k]]).collect();
         let near_corner: Vec<bool> = points_mm
             .iter()
-            .map(|p| seq.path_mm.iter().any(|v| (p[0] - v[0]).hypot(p[1] - v[1]) <= ctx.params.f64("corner_radius_mm")))
+            .map(|p| seq.path_mm.iter().any(|v| (p[0] - v[0]).hypot(p[1] - v[1]) <= params.corner_radius_mm))
             .collect();
         let mut widths = WidthRows::default();
         let mut errors = ErrorRows::default();
@@ -154,15 +154,6 @@ impl Monitored {
             expected: format!("a layer index of 0 or more, found {layer}"),
         }
     }
-}
-
-/// Row `row`'s trajectory sample index, checked below `samples`.
-fn sample_index(file: &Path, row: usize, sample: i64, samples: usize) -> Result<usize, StageError> {
-    usize::try_from(sample).ok().filter(|&k| k < samples).ok_or_else(|| StageError::BadInput {
-        file: file.to_path_buf(),
-        location: Some(format!("row {row}, column sample")),
-        expected: format!("a trajectory sample index below {samples}, found {sample}"),
-    })
 }
 
 /// `widths.parquet`: the columns of the monitor's that `thermal.compensate` reads.

@@ -16,9 +16,9 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -35,12 +35,38 @@ const MEASURED: RGBColor = RGBColor(70, 70, 70);
 /// The baseline's name in the tables (`extended_model` equals it when nothing was named).
 const LAG_MODEL: &str = "lag_model";
 
-const PRINTER: ParamSpec = ParamSpec {
-    name: "printer",
-    ty: ParamType::Text,
-    default: ParamDefault::Required,
-    doc: "Printer whose results are drawn.",
-};
+pipeline::params! {
+    /// The parameters of `figure.fdm_discrepancy_residuals`.
+    pub struct ResidualsParams {
+        /// Printer whose results are drawn.
+        pub printer: String,
+    }
+}
+
+pipeline::params! {
+    /// The parameters of `figure.fdm_discrepancy_lines`.
+    pub struct LinesParams {
+        /// Printer whose results are drawn.
+        pub printer: String,
+        /// How many lines to draw: those the lag model predicts worst (held-out RMSE).
+        pub lines: usize [1, 9] = 3,
+    }
+}
+
+/// The engine run whose results the residuals and lines figures draw.
+const DISCREPANCY: Input = Input::one(
+    "discrepancy",
+    &[Source::Stage("fdm.discrepancy")],
+    "the engine's held-out residuals, predictions and gain (`residuals.parquet`, `predictions.parquet`, `gain.parquet`)",
+);
+
+/// The power studies drawn together.
+const POWER: Input = Input::many(
+    "power",
+    1,
+    &[Source::Stage("fdm.discovery_power")],
+    "power studies (`power.parquet`), their bases drawn side by side",
+);
 
 /// The `figure.fdm_discrepancy_residuals` stage kind.
 pub struct DiscrepancyResidualsFigure;
@@ -51,31 +77,22 @@ pub struct DiscrepancyLinesFigure;
 /// The `figure.fdm_discovery_power` stage kind.
 pub struct DiscoveryPowerFigure;
 
-impl StageKind for DiscrepancyResidualsFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_discrepancy_residuals"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Held-out residuals of the lag model and the extended model against every candidate variable, bin means with 95 % intervals → discrepancy_residuals.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 step 1 (show)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[PRINTER]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for DiscrepancyResidualsFigure {
+    type Params = ResidualsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_discrepancy_residuals",
+        version: 1,
+        summary: "Held-out residuals of the lag model and the extended model against every candidate variable, bin means with 95 % intervals → discrepancy_residuals.png/.svg",
+        implements: "DESIGN §7 step 1 (show)",
+        inputs: &[DISCREPANCY],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printer = ctx.params.str("printer").to_string();
-        let path = ctx.inputs[0].dir.join("residuals.parquet");
-        let panels = read_residuals(&path, &printer)?;
-        let extended = read_extended_name(&ctx.inputs[0].dir.join("gain.parquet"), &printer)?;
+    fn run(&self, ctx: &mut StageContext, p: &ResidualsParams) -> Result<(), StageError> {
+        let printer = &p.printer;
+        let dir = &ctx.input(&DISCREPANCY).dir;
+        let panels = read_residuals(&dir.join("residuals.parquet"), printer)?;
+        let extended = read_extended_name(&dir.join("gain.parquet"), printer)?;
         let title = if extended == LAG_MODEL {
             format!("{printer}: held-out residual (measured − predicted) of the lag model (no cause named)")
         } else {
@@ -258,42 +275,23 @@ fn format_tick(x: f64) -> String {
     }
 }
 
-const LINES_PARAMS: &[ParamSpec] = &[
-    PRINTER,
-    ParamSpec {
-        name: "lines",
-        ty: ParamType::Int { min: 1, max: 9 },
-        default: ParamDefault::Int(3),
-        doc: "How many lines to draw: those the lag model predicts worst (held-out RMSE).",
-    },
-];
+impl Stage for DiscrepancyLinesFigure {
+    type Params = LinesParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_discrepancy_lines",
+        version: 1,
+        summary: "Measured vs lag model vs extended model along the lines the lag model predicts worst (held out) → discrepancy_lines.png/.svg",
+        implements: "DESIGN §7 steps 3-4 (extend, gain), in the style of paper 000 Fig. 6",
+        inputs: &[DISCREPANCY],
+        output: Output::Tables,
+    };
 
-impl StageKind for DiscrepancyLinesFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_discrepancy_lines"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Measured vs lag model vs extended model along the lines the lag model predicts worst (held out) → discrepancy_lines.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 steps 3-4 (extend, gain), in the style of paper 000 Fig. 6"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        LINES_PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
-
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printer = ctx.params.str("printer").to_string();
-        let count = ctx.params.i64("lines") as usize;
-        let lines = read_lines(&ctx.inputs[0].dir.join("predictions.parquet"), &printer)?;
-        let extended = read_extended_name(&ctx.inputs[0].dir.join("gain.parquet"), &printer)?;
-        let worst = worst_lines(lines, count);
+    fn run(&self, ctx: &mut StageContext, p: &LinesParams) -> Result<(), StageError> {
+        let printer = &p.printer;
+        let dir = &ctx.input(&DISCREPANCY).dir;
+        let lines = read_lines(&dir.join("predictions.parquet"), printer)?;
+        let extended = read_extended_name(&dir.join("gain.parquet"), printer)?;
+        let worst = worst_lines(lines, p.lines);
         let title = if extended == LAG_MODEL {
             format!("{printer}: the lines the lag model predicts worst, held out (no cause named)")
         } else {
@@ -423,29 +421,20 @@ fn draw_line_panel<DB: DrawingBackend>(
     draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
-impl StageKind for DiscoveryPowerFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_discovery_power"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Power curves of the discrepancy engine: share of draws naming a hidden effect against its strength, per base, with the null false-alarm rate → discovery_power.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §7 (tests that hide an effect and require finding it)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::at_least(1)
-    }
+impl Stage for DiscoveryPowerFigure {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_discovery_power",
+        version: 1,
+        summary: "Power curves of the discrepancy engine: share of draws naming a hidden effect against its strength, per base, with the null false-alarm rate → discovery_power.png/.svg",
+        implements: "DESIGN §7 (tests that hide an effect and require finding it)",
+        inputs: &[POWER],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let mut bases: Vec<PowerBase> = Vec::new();
-        for input in &ctx.inputs {
+        for input in ctx.inputs_of(&POWER) {
             for b in read_power(&input.dir.join("power.parquet"))? {
                 match bases.iter_mut().find(|x| x.base == b.base) {
                     Some(x) => {

@@ -15,9 +15,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::{infill, infill_map};
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text};
@@ -25,27 +26,49 @@ use crate::style::{draw_png_and_svg, text};
 /// The `figure.fdm_infill` stage kind.
 pub struct InfillFigure;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Text,
-        default: ParamDefault::Required,
-        doc: "Printer whose infill estimate is drawn.",
+pipeline::params! {
+    /// The parameters of `figure.fdm_infill`.
+    pub struct InfillParams {
+        /// Printer whose infill estimate is drawn.
+        pub printer: String,
+        /// Printing condition (`S800F9000`) whose infill estimate is drawn.
+        pub condition: String,
+        /// Length of line shown at each end; 15 mm covers the start blob and the end
+        /// thinning of paper 000 Fig. 3(a).
+        pub end_window_mm: f64 [1.0, 1000.0] = 15.0,
+    }
+}
+
+/// The infill estimate drawn.
+const INFILL: Input = Input::one(
+    "infill",
+    &[Source::Stage("fdm.infill")],
+    "the coverage maps and region fractions (`infill_map.parquet`, `infill.parquet`)",
+)
+.reading(&[
+    Reads {
+        table: &infill_map::TABLE,
+        columns: &[
+            infill_map::printer,
+            infill_map::condition,
+            infill_map::hatch_mm,
+            infill_map::x_mm,
+            infill_map::y_mm,
+            infill_map::coverage,
+        ],
     },
-    ParamSpec {
-        name: "condition",
-        ty: ParamType::Text,
-        default: ParamDefault::Required,
-        doc: "Printing condition (`S800F9000`) whose infill estimate is drawn.",
+    Reads {
+        table: &infill::TABLE,
+        columns: &[
+            infill::printer,
+            infill::condition,
+            infill::region,
+            infill::hatch_mm,
+            infill::void_fraction,
+            infill::overlap_fraction,
+        ],
     },
-    ParamSpec {
-        name: "end_window_mm",
-        ty: ParamType::Float { min: 1.0, max: 1000.0 },
-        default: ParamDefault::Float(15.0),
-        doc:
-            "Length of line shown at each end; 15 mm covers the start blob and the end thinning of paper 000 Fig. 3(a).",
-    },
-];
+]);
 
 /// At most this many hatch spacings are drawn (the smallest ones), one row each.
 const MAX_HATCHES: usize = 2;
@@ -135,29 +158,20 @@ pub struct InfillData {
     pub maps: Vec<HatchMap>,
 }
 
-impl StageKind for InfillFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_infill"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Coverage map (void / one line / overlap) of side-by-side infill lines near both ends, per hatch spacing → infill.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Fig. 7(b)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for InfillFigure {
+    type Params = InfillParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_infill",
+        version: 1,
+        summary: "Coverage map (void / one line / overlap) of side-by-side infill lines near both ends, per hatch spacing → infill.png/.svg",
+        implements: "paper 000 Fig. 7(b)",
+        inputs: &[INFILL],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let data = load(&ctx.inputs[0].dir, ctx.params.str("printer"), ctx.params.str("condition"))?;
-        let window_mm = ctx.params.f64("end_window_mm");
+    fn run(&self, ctx: &mut StageContext, p: &InfillParams) -> Result<(), StageError> {
+        let data = load(&ctx.input(&INFILL).dir, &p.printer, &p.condition)?;
+        let window_mm = p.end_window_mm;
         let stem = ctx.output_path("infill")?;
         let size = figure_size_px(data.maps.len());
         draw_png_and_svg(&stem, size, |a| draw(a, &data, window_mm), |a| draw(a, &data, window_mm))
@@ -166,8 +180,8 @@ impl StageKind for InfillFigure {
 
 /// Reads the maps and region fractions of `printer` at `condition`.
 pub fn load(dir: &Path, printer: &str, condition: &str) -> Result<InfillData, StageError> {
-    let mut maps = read_maps(&dir.join("infill_map.parquet"), printer, condition)?;
-    let fractions = read_fractions(&dir.join("infill.parquet"), printer, condition)?;
+    let mut maps = read_maps(&dir.join(infill_map::TABLE.file()), printer, condition)?;
+    let fractions = read_fractions(&dir.join(infill::TABLE.file()), printer, condition)?;
     for map in &mut maps {
         let key = hatch_key(map.hatch_mm);
         map.regions = fractions.iter().filter(|f| f.0 == key).map(|f| f.1.clone()).collect();
@@ -220,16 +234,17 @@ fn hatch_key(hatch_mm: f64) -> i64 {
 }
 
 fn read_maps(path: &Path, printer: &str, condition: &str) -> Result<Vec<HatchMap>, StageError> {
+    use infill_map as t;
     let df = read_parquet(path)?;
-    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
-    let (hatch, x, y) = (f64s(&df, "hatch_mm", path)?, f64s(&df, "x_mm", path)?, f64s(&df, "y_mm", path)?);
-    let coverage = ints(&df, "coverage", path)?;
+    let (printers, conditions) = (strs(&df, t::printer, path)?, strs(&df, t::condition, path)?);
+    let (hatch, x, y) = (f64s(&df, t::hatch_mm, path)?, f64s(&df, t::x_mm, path)?, f64s(&df, t::y_mm, path)?);
+    let coverage = ints(&df, t::coverage, path)?;
     let mut cells: BTreeMap<i64, Vec<(f64, f64, i64)>> = BTreeMap::new();
     for i in (0..df.height()).filter(|&i| printers[i] == printer && conditions[i] == condition) {
         cells.entry(hatch_key(hatch[i])).or_default().push((x[i], y[i], coverage[i]));
     }
     if cells.is_empty() {
-        return Err(no_rows(path, "condition", &format!("printer `{printer}`, condition `{condition}`")));
+        return Err(no_rows(path, t::condition, &format!("printer `{printer}`, condition `{condition}`")));
     }
     Ok(cells.into_iter().take(MAX_HATCHES).map(|(key, cells)| hatch_map(key as f64 * 1e-6, cells)).collect())
 }
@@ -255,11 +270,12 @@ fn grid_step(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 fn read_fractions(path: &Path, printer: &str, condition: &str) -> Result<Vec<(i64, RegionFractions)>, StageError> {
+    use infill as t;
     let df = read_parquet(path)?;
     let (printers, conditions, regions) =
-        (strs(&df, "printer", path)?, strs(&df, "condition", path)?, strs(&df, "region", path)?);
+        (strs(&df, t::printer, path)?, strs(&df, t::condition, path)?, strs(&df, t::region, path)?);
     let (hatch, void, overlap) =
-        (f64s(&df, "hatch_mm", path)?, f64s(&df, "void_fraction", path)?, f64s(&df, "overlap_fraction", path)?);
+        (f64s(&df, t::hatch_mm, path)?, f64s(&df, t::void_fraction, path)?, f64s(&df, t::overlap_fraction, path)?);
     Ok((0..df.height())
         .filter(|&i| printers[i] == printer && conditions[i] == condition)
         .map(|i| {
@@ -403,7 +419,7 @@ fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>) -> Result<(), 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, synthetic_width_mm, write_table};
+    use crate::figures::test_util::{assert_drawn, synthetic_width_mm, write_declared};
     use polars::df;
 
     const LENGTH_MM: f64 = 80.0;
@@ -478,11 +494,12 @@ mod tests {
             }
         }
         let (n, m) = (hatch.len(), f_hatch.len());
-        let map = df!("printer" => vec!["taz5"; n], "condition" => vec!["S800F6000"; n], "hatch_mm" => hatch,
-            "x_mm" => xs, "y_mm" => ys, "coverage" => coverage)
+        use {infill as f, infill_map as t};
+        let map = df!(t::printer => vec!["taz5"; n], t::condition => vec!["S800F6000"; n], t::hatch_mm => hatch,
+            t::x_mm => xs, t::y_mm => ys, t::coverage => coverage)
         .expect("frame");
-        let fractions = df!("printer" => vec!["taz5"; m], "condition" => vec!["S800F6000"; m],
-            "hatch_mm" => f_hatch, "region" => f_region, "void_fraction" => f_void, "overlap_fraction" => f_overlap)
+        let fractions = df!(f::printer => vec!["taz5"; m], f::condition => vec!["S800F6000"; m],
+            f::hatch_mm => f_hatch, f::region => f_region, f::void_fraction => f_void, f::overlap_fraction => f_overlap)
         .expect("frame");
         (map, fractions)
     }
@@ -491,8 +508,8 @@ mod tests {
     fn draws_both_ends_for_each_hatch() {
         let dir = tempfile::tempdir().expect("tempdir");
         let (map, fractions) = tables();
-        write_table(dir.path(), "infill_map", map);
-        write_table(dir.path(), "infill", fractions);
+        write_declared(dir.path(), &infill_map::TABLE, map);
+        write_declared(dir.path(), &infill::TABLE, fractions);
         let data = load(dir.path(), "taz5", "S800F6000").expect("loads");
         assert_eq!(data.maps.len(), 2);
         assert_eq!(data.maps[0].regions.iter().map(|r| r.region.as_str()).collect::<Vec<_>>(), REGIONS);
@@ -512,9 +529,9 @@ mod tests {
     fn unknown_condition_is_an_error_naming_the_file() {
         let dir = tempfile::tempdir().expect("tempdir");
         let (map, fractions) = tables();
-        write_table(dir.path(), "infill_map", map);
-        write_table(dir.path(), "infill", fractions);
+        write_declared(dir.path(), &infill_map::TABLE, map);
+        write_declared(dir.path(), &infill::TABLE, fractions);
         let err = load(dir.path(), "taz5", "S1F1").expect_err("no such condition");
-        assert!(err.to_string().contains("infill_map.parquet"), "{err}");
+        assert!(err.to_string().contains(&infill_map::TABLE.file()), "{err}");
     }
 }

@@ -10,9 +10,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::{loo, loo_predictions};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
@@ -22,20 +23,39 @@ use super::draw_width_profile_mesh;
 /// The `figure.fdm_loo_predictions` stage kind.
 pub struct LooPredictionsFigure;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Text,
-        default: ParamDefault::Required,
-        doc: "Printer whose held-out lines are drawn.",
+pipeline::params! {
+    /// The parameters of `figure.fdm_loo_predictions`.
+    pub struct LooPredictionsParams {
+        /// Printer whose held-out lines are drawn.
+        pub printer: String,
+        /// Model whose predictions are drawn (default: the paper's piecewise model).
+        pub model: String = "piecewise",
+    }
+}
+
+/// The leave-one-out drawn: one model's or a `table.concat` of both models'.
+const LOO: Input = Input::one(
+    "loo",
+    &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")],
+    "the held-out RMSEs and predictions (`loo.parquet`, `loo_predictions.parquet`)",
+)
+.reading(&[
+    Reads {
+        table: &loo::TABLE,
+        columns: &[loo::printer, loo::condition, loo::model, loo::accel_mm_s2, loo::feed_mm_s, loo::rmse_mm],
     },
-    ParamSpec {
-        name: "model",
-        ty: ParamType::Text,
-        default: ParamDefault::Str("piecewise"),
-        doc: "Model whose predictions are drawn (default: the paper's piecewise model).",
+    Reads {
+        table: &loo_predictions::TABLE,
+        columns: &[
+            loo_predictions::printer,
+            loo_predictions::condition,
+            loo_predictions::model,
+            loo_predictions::position_mm,
+            loo_predictions::measured_width_mm,
+            loo_predictions::predicted_width_mm,
+        ],
     },
-];
+]);
 
 /// The lag baseline's name in the `model` column.
 const LAG_MODEL: &str = "lag";
@@ -90,28 +110,19 @@ pub struct LooFigureData {
 /// Samples of one (condition, model): (position, measured, predicted) in mm.
 type Samples = BTreeMap<(String, String), Vec<[f64; 3]>>;
 
-impl StageKind for LooPredictionsFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_loo_predictions"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Measured vs predicted width of the held-out lines with the lowest and highest leave-one-out RMSE → loo_predictions.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Fig. 6"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for LooPredictionsFigure {
+    type Params = LooPredictionsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_loo_predictions",
+        version: 1,
+        summary: "Measured vs predicted width of the held-out lines with the lowest and highest leave-one-out RMSE → loo_predictions.png/.svg",
+        implements: "paper 000 Fig. 6",
+        inputs: &[LOO],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let data = load(&ctx.inputs[0].dir, ctx.params.str("printer"), ctx.params.str("model"))?;
+    fn run(&self, ctx: &mut StageContext, p: &LooPredictionsParams) -> Result<(), StageError> {
+        let data = load(&ctx.input(&LOO).dir, &p.printer, &p.model)?;
         let stem = ctx.output_path("loo_predictions")?;
         draw_png_and_svg(&stem, SIZE_PX, |a| draw(a, &data), |a| draw(a, &data))
     }
@@ -119,12 +130,12 @@ impl StageKind for LooPredictionsFigure {
 
 /// Reads the lines with the lowest and highest RMSE of `printer` under `model`.
 pub fn load(dir: &Path, printer: &str, model: &str) -> Result<LooFigureData, StageError> {
-    let summary_path = dir.join("loo.parquet");
+    let summary_path = dir.join(loo::TABLE.file());
     let folds = read_folds(&summary_path, printer)?;
     let (best, worst) = extremes(&folds, model).ok_or_else(|| {
-        no_rows(&summary_path, "model", &format!("printer `{printer}`, model `{model}`, finite RMSE"))
+        no_rows(&summary_path, loo::model, &format!("printer `{printer}`, model `{model}`, finite RMSE"))
     })?;
-    let samples_path = dir.join("loo_predictions.parquet");
+    let samples_path = dir.join(loo_predictions::TABLE.file());
     let samples = read_samples(&samples_path, printer)?;
     let line = |fold: &FoldSummary| held_out_line(fold, &folds, &samples, &samples_path);
     Ok(LooFigureData { printer: printer.into(), model: model.into(), best: line(best)?, worst: line(worst)? })
@@ -155,9 +166,9 @@ pub fn step_points(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 fn read_folds(path: &Path, printer: &str) -> Result<Vec<FoldSummary>, StageError> {
     let df = read_parquet(path)?;
     let (printers, conditions, models) =
-        (strs(&df, "printer", path)?, strs(&df, "condition", path)?, strs(&df, "model", path)?);
+        (strs(&df, loo::printer, path)?, strs(&df, loo::condition, path)?, strs(&df, loo::model, path)?);
     let (accel, feed, rmse) =
-        (f64s(&df, "accel_mm_s2", path)?, f64s(&df, "feed_mm_s", path)?, f64s(&df, "rmse_mm", path)?);
+        (f64s(&df, loo::accel_mm_s2, path)?, f64s(&df, loo::feed_mm_s, path)?, f64s(&df, loo::rmse_mm, path)?);
     Ok((0..df.height())
         .filter(|&i| printers[i] == printer)
         .map(|i| FoldSummary {
@@ -172,10 +183,11 @@ fn read_folds(path: &Path, printer: &str) -> Result<Vec<FoldSummary>, StageError
 
 fn read_samples(path: &Path, printer: &str) -> Result<Samples, StageError> {
     let df = read_parquet(path)?;
+    use loo_predictions as p;
     let (printers, conditions, models) =
-        (strs(&df, "printer", path)?, strs(&df, "condition", path)?, strs(&df, "model", path)?);
-    let position = f64s(&df, "position_mm", path)?;
-    let (measured, predicted) = (f64s(&df, "measured_width_mm", path)?, f64s(&df, "predicted_width_mm", path)?);
+        (strs(&df, p::printer, path)?, strs(&df, p::condition, path)?, strs(&df, p::model, path)?);
+    let position = f64s(&df, p::position_mm, path)?;
+    let (measured, predicted) = (f64s(&df, p::measured_width_mm, path)?, f64s(&df, p::predicted_width_mm, path)?);
     let mut samples = Samples::new();
     for i in (0..df.height()).filter(|&i| printers[i] == printer) {
         let key = (conditions[i].clone(), models[i].clone());
@@ -196,7 +208,7 @@ fn held_out_line(
     let key = |model: &str| (fold.condition.clone(), model.to_string());
     let Some(line) = samples.get(&key(&fold.model)) else {
         let wanted = format!("condition `{}`, model `{}`", fold.condition, fold.model);
-        return Err(no_rows(path, "condition", &wanted));
+        return Err(no_rows(path, loo_predictions::condition, &wanted));
     };
     let lag = if fold.model == LAG_MODEL { None } else { samples.get(&key(LAG_MODEL)) };
     let lag_rmse_mm = lag.and_then(|_| folds.iter().find(|f| f.model == LAG_MODEL && f.condition == fold.condition));
@@ -289,7 +301,7 @@ fn draw_lines<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, noise, synthetic_width_mm, write_table};
+    use crate::figures::test_util::{assert_drawn, noise, synthetic_width_mm, write_declared};
     use polars::df;
 
     const CONDITIONS: [(&str, f64, f64); 3] =
@@ -349,16 +361,18 @@ mod tests {
         let n = cond.len();
         let accel: Vec<f64> = CONDITIONS.iter().flat_map(|c| [c.1, c.1]).collect();
         let feed: Vec<f64> = CONDITIONS.iter().flat_map(|c| [c.2, c.2]).collect();
-        let loo = df!("printer" => vec!["taz5"; n], "condition" => cond, "accel_mm_s2" => accel,
-            "feed_mm_s" => feed, "model" => model, "rmse_mm" => rmse,
-            "r_a" => vec![1.0; n], "r_f" => vec![1.0; n])
+        let tau_s: Vec<f64> = model.iter().map(|m| if *m == LAG_MODEL { 0.05 } else { f64::NAN }).collect();
+        let folds = df!(loo::printer => vec!["taz5"; n], loo::condition => cond, loo::accel_mm_s2 => accel,
+            loo::feed_mm_s => feed, loo::model => model, loo::rmse_mm => rmse,
+            loo::r_a => vec![1.0; n], loo::r_f => vec![1.0; n], loo::tau_s => tau_s)
         .expect("frame");
-        write_table(dir, "loo", loo);
+        write_declared(dir, &loo::TABLE, folds);
         let m = p_cond.len();
-        let predictions = df!("printer" => vec!["taz5"; m], "condition" => p_cond, "model" => p_model,
-            "position_mm" => pos, "measured_width_mm" => meas, "predicted_width_mm" => pred)
+        use loo_predictions as p;
+        let predictions = df!(p::printer => vec!["taz5"; m], p::condition => p_cond, p::model => p_model,
+            p::position_mm => pos, p::measured_width_mm => meas, p::predicted_width_mm => pred)
         .expect("frame");
-        write_table(dir, "loo_predictions", predictions);
+        write_declared(dir, &p::TABLE, predictions);
     }
 
     #[test]
@@ -381,6 +395,6 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         write_inputs(dir.path());
         let err = load(dir.path(), "taz9", "piecewise").expect_err("no rows for taz9");
-        assert!(err.to_string().contains("loo.parquet"), "{err}");
+        assert!(err.to_string().contains(&loo::TABLE.file()), "{err}");
     }
 }

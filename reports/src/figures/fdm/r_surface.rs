@@ -11,8 +11,11 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::r_surface;
 
 use crate::figures::common::{grid_step, viridis};
 use crate::read::{f64s, no_rows, read_parquet, strs};
@@ -20,6 +23,20 @@ use crate::style::{draw_png_and_svg, text};
 
 /// The `figure.fdm_r_surface` stage kind.
 pub struct RSurfaceFigure;
+
+/// The leave-one-out whose surfaces are drawn. `r_surface.parquet` is written by
+/// `fdm.piecewise_loo`; the role also takes `fdm.lag_model` so that a `table.concat` of
+/// both models' leave-one-out (which stacks the piecewise surfaces) is accepted, and the
+/// planner checks that one of the concatenated stages writes the surface.
+const LOO: Input = Input::one(
+    "loo",
+    &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")],
+    "the training RMSE over the r_a × r_F grid per printer (`r_surface.parquet`)",
+)
+.reading(&[Reads {
+    table: &r_surface::TABLE,
+    columns: &[r_surface::printer, r_surface::r_a, r_surface::r_f, r_surface::training_rmse_mm],
+}]);
 
 /// Pixels per printer panel (heat map and its colour bar).
 const PANEL_PX: (u32, u32) = (700, 700);
@@ -39,28 +56,19 @@ pub struct Surface {
     pub cells: Vec<(f64, f64, f64)>,
 }
 
-impl StageKind for RSurfaceFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_r_surface"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Heat map per printer of the piecewise model's training RMSE over r_a × r_F, minimum marked → r_surface.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "not in paper 000: the r_a × r_F grid search of eq. (1), §II-A"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for RSurfaceFigure {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_r_surface",
+        version: 1,
+        summary: "Heat map per printer of the piecewise model's training RMSE over r_a × r_F, minimum marked → r_surface.png/.svg",
+        implements: "not in paper 000: the r_a × r_F grid search of eq. (1), §II-A",
+        inputs: &[LOO],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let surfaces = load(&ctx.inputs[0].dir)?;
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let surfaces = load(&ctx.input(&LOO).dir)?;
         let stem = ctx.output_path("r_surface")?;
         let size = figure_size_px(surfaces.len());
         draw_png_and_svg(&stem, size, |a| draw(a, &surfaces), |a| draw(a, &surfaces))
@@ -69,16 +77,18 @@ impl StageKind for RSurfaceFigure {
 
 /// Reads every printer's surface from `<dir>/r_surface.parquet`, by printer name.
 pub fn load(dir: &Path) -> Result<Vec<Surface>, StageError> {
-    let path = dir.join("r_surface.parquet");
+    use r_surface as t;
+    let path = dir.join(t::TABLE.file());
     let df = read_parquet(&path)?;
-    let printers = strs(&df, "printer", &path)?;
-    let (r_a, r_f, rmse) = (f64s(&df, "r_a", &path)?, f64s(&df, "r_f", &path)?, f64s(&df, "training_rmse_mm", &path)?);
+    let printers = strs(&df, t::printer, &path)?;
+    let (r_a, r_f, rmse) =
+        (f64s(&df, t::r_a, &path)?, f64s(&df, t::r_f, &path)?, f64s(&df, t::training_rmse_mm, &path)?);
     let mut by_printer: BTreeMap<String, Vec<(f64, f64, f64)>> = BTreeMap::new();
     for i in (0..df.height()).filter(|&i| rmse[i].is_finite()) {
         by_printer.entry(printers[i].clone()).or_default().push((r_a[i], r_f[i], rmse[i]));
     }
     if by_printer.is_empty() {
-        return Err(no_rows(&path, "training_rmse_mm", "a finite training RMSE"));
+        return Err(no_rows(&path, t::training_rmse_mm, "a finite training RMSE"));
     }
     Ok(by_printer.into_iter().map(|(printer, cells)| Surface { printer, cells }).collect())
 }
@@ -208,7 +218,7 @@ fn label_decimals(span_mm: f64) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, write_table};
+    use crate::figures::test_util::{assert_drawn, write_declared};
     use polars::df;
 
     #[test]
@@ -233,13 +243,14 @@ mod tests {
                 }
             }
         }
-        df!("printer" => printer, "r_a" => r_a, "r_f" => r_f, "training_rmse_mm" => rmse).expect("frame")
+        use r_surface as t;
+        df!(t::printer => printer, t::r_a => r_a, t::r_f => r_f, t::training_rmse_mm => rmse).expect("frame")
     }
 
     #[test]
     fn draws_one_heat_map_per_printer() {
         let dir = tempfile::tempdir().expect("tempdir");
-        write_table(dir.path(), "r_surface", surface_table());
+        write_declared(dir.path(), &r_surface::TABLE, surface_table());
         let surfaces = load(dir.path()).expect("loads");
         assert_eq!(surfaces.len(), 2);
         assert!(surfaces.iter().all(|s| s.cells.len() == 441));

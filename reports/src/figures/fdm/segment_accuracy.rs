@@ -8,8 +8,9 @@ use std::collections::BTreeMap;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, StageContext, StageError, StageKind};
+use pipeline::params::NoParams;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -19,31 +20,29 @@ use crate::figures::common::distinct;
 /// The `figure.fdm_segment_accuracy` stage kind.
 pub struct SegmentAccuracyFigure;
 
+/// The accuracy study drawn.
+const ACCURACY: Input = Input::one(
+    "accuracy",
+    &[Source::Stage("fdm.segment_accuracy")],
+    "the width RMSE of every photo per scale and method (`segment_accuracy.parquet`)",
+);
+
 /// Method → (px/mm, RMSE mm) per measured photo.
 type Points = BTreeMap<String, Vec<(f64, f64)>>;
 
-impl StageKind for SegmentAccuracyFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_segment_accuracy"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Width RMSE per photo against the truth, per camera scale and segmentation method → segment_accuracy.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Sec. III (widths from camera images), checked on virtual photos"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        &[]
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for SegmentAccuracyFigure {
+    type Params = NoParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_segment_accuracy",
+        version: 1,
+        summary: "Width RMSE per photo against the truth, per camera scale and segmentation method → segment_accuracy.png/.svg",
+        implements: "paper 000 Sec. III (widths from camera images), checked on virtual photos",
+        inputs: &[ACCURACY],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let path = ctx.inputs[0].dir.join("segment_accuracy.parquet");
+    fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
+        let path = ctx.input(&ACCURACY).dir.join("segment_accuracy.parquet");
         let df = read_parquet(&path)?;
         let (method, scale, rmse) =
             (strs(&df, "method", &path)?, f64s(&df, "px_per_mm", &path)?, f64s(&df, "rmse_mm", &path)?);

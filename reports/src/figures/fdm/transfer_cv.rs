@@ -11,9 +11,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -21,12 +20,20 @@ use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETT
 /// The `figure.fdm_transfer_cv` stage kind.
 pub struct TransferCvFigure;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "title",
-    ty: ParamType::Text,
-    default: ParamDefault::Str(""),
-    doc: "Figure title (default: says what is compared and cites paper 000 Fig. 9).",
-}];
+pipeline::params! {
+    /// The parameters of `figure.fdm_transfer_cv`.
+    pub struct TransferCvParams {
+        /// Figure title (default: says what is compared and cites paper 000 Fig. 9).
+        pub title: String = "",
+    }
+}
+
+/// The cross-validation drawn.
+const TRANSFER_CV: Input = Input::one(
+    "transfer_cv",
+    &[Source::Stage("fdm.transfer_cv")],
+    "the held-out RMSE per training-set size and method (`transfer_cv.parquet`)",
+);
 
 /// The baseline every transfer method is compared with.
 const SINGLE: &str = "single";
@@ -71,29 +78,20 @@ pub struct BoxStats {
     pub outliers: Vec<f64>,
 }
 
-impl StageKind for TransferCvFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_transfer_cv"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Box plots of held-out RMSE vs target training lines per method, and median improvement over single-printer learning → transfer_cv.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Fig. 9"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for TransferCvFigure {
+    type Params = TransferCvParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_transfer_cv",
+        version: 1,
+        summary: "Box plots of held-out RMSE vs target training lines per method, and median improvement over single-printer learning → transfer_cv.png/.svg",
+        implements: "paper 000 Fig. 9",
+        inputs: &[TRANSFER_CV],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let cv = load(&ctx.inputs[0].dir)?;
-        let title = crate::figures::common::title_or(ctx, || {
+    fn run(&self, ctx: &mut StageContext, p: &TransferCvParams) -> Result<(), StageError> {
+        let cv = load(&ctx.input(&TRANSFER_CV).dir)?;
+        let title = crate::figures::common::title_or(&p.title, || {
             "Transfer learning to the target printer: held-out RMSE vs training lines (paper 000 Fig. 9)".to_string()
         });
         let stem = ctx.output_path("transfer_cv")?;

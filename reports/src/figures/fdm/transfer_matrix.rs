@@ -14,9 +14,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -24,12 +23,20 @@ use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETT
 /// The `figure.fdm_transfer_matrix` stage kind.
 pub struct TransferMatrixFigure;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "title",
-    ty: ParamType::Text,
-    default: ParamDefault::Str(""),
-    doc: "Figure title (default: says what is compared and cites paper 000 Fig. 9).",
-}];
+pipeline::params! {
+    /// The parameters of `figure.fdm_transfer_matrix`.
+    pub struct TransferMatrixParams {
+        /// Figure title (default: says what is compared and cites paper 000 Fig. 9).
+        pub title: String = "",
+    }
+}
+
+/// The transfer matrix drawn.
+const MATRIX: Input = Input::one(
+    "matrix",
+    &[Source::Stage("fdm.transfer_matrix")],
+    "the median improvements with their intervals per task, n and method (`transfer_matrix.parquet`)",
+);
 
 /// Figure size in pixels (panels in a grid of two columns).
 const PANEL_PX: (u32, u32) = (760, 520);
@@ -56,29 +63,20 @@ pub struct Cell {
 /// The summary rows by target printer.
 pub type Matrix = BTreeMap<String, Vec<Cell>>;
 
-impl StageKind for TransferMatrixFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_transfer_matrix"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Fig. 9 over several printers"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for TransferMatrixFigure {
+    type Params = TransferMatrixParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_transfer_matrix",
+        version: 1,
+        summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg",
+        implements: "paper 000 Fig. 9 over several printers",
+        inputs: &[MATRIX],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let matrix = load(&ctx.inputs[0].dir)?;
-        let title = crate::figures::common::title_or(ctx, || {
+    fn run(&self, ctx: &mut StageContext, p: &TransferMatrixParams) -> Result<(), StageError> {
+        let matrix = load(&ctx.input(&MATRIX).dir)?;
+        let title = crate::figures::common::title_or(&p.title, || {
             "Transfer among printers: median RMSE improvement over single-printer learning (cf. paper 000 Fig. 9)"
                 .to_string()
         });

@@ -10,9 +10,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
@@ -23,12 +22,20 @@ use crate::figures::common::distinct;
 /// The `figure.fdm_virtual_agreement` stage kind.
 pub struct VirtualAgreementFigure;
 
-const PARAMS: &[ParamSpec] = &[ParamSpec {
-    name: "printer",
-    ty: ParamType::Text,
-    default: ParamDefault::Required,
-    doc: "Printer whose lines are drawn.",
-}];
+pipeline::params! {
+    /// The parameters of `figure.fdm_virtual_agreement`.
+    pub struct VirtualAgreementParams {
+        /// Printer whose lines are drawn.
+        pub printer: String,
+    }
+}
+
+/// The agreement study drawn.
+const AGREEMENT: Input = Input::one(
+    "agreement",
+    &[Source::Stage("fdm.virtual_agreement")],
+    "the real and virtual profiles per line (`agreement.parquet`, `agreement_profiles.parquet`)",
+);
 
 /// Colour of the measured widths.
 const MEASURED: RGBColor = RGBColor(70, 70, 70);
@@ -44,29 +51,20 @@ struct Panel {
     rows: Vec<[f64; 5]>,
 }
 
-impl StageKind for VirtualAgreementFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_virtual_agreement"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Real lines vs the virtual printer calibrated on the other lines (mean and 95 % band), a panel per condition → virtual_agreement.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "DESIGN §5.1 (virtual printer calibrated to the real data), in the style of paper 000 Fig. 3(a)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for VirtualAgreementFigure {
+    type Params = VirtualAgreementParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_virtual_agreement",
+        version: 1,
+        summary: "Real lines vs the virtual printer calibrated on the other lines (mean and 95 % band), a panel per condition → virtual_agreement.png/.svg",
+        implements: "DESIGN §5.1 (virtual printer calibrated to the real data), in the style of paper 000 Fig. 3(a)",
+        inputs: &[AGREEMENT],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printer = ctx.params.str("printer").to_string();
-        let panels = load(&ctx.inputs[0].dir, &printer)?;
+    fn run(&self, ctx: &mut StageContext, p: &VirtualAgreementParams) -> Result<(), StageError> {
+        let printer = &p.printer;
+        let panels = load(&ctx.input(&AGREEMENT).dir, printer)?;
         let title = format!("Real {printer} lines and the virtual {printer} calibrated without them");
         let stem = ctx.output_path("virtual_agreement")?;
         draw_png_and_svg(&stem, (1500, 1100), |a| draw(a, &title, &panels), |a| draw(a, &title, &panels))

@@ -9,9 +9,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::schema::Reads;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
+use tables::fdm::{line_summary, widths};
 
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_png_and_svg, text, PALETTE};
@@ -22,20 +23,43 @@ use crate::figures::common::distinct;
 /// The `figure.fdm_width_profiles` stage kind.
 pub struct WidthProfilesFigure;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "printer",
-        ty: ParamType::Text,
-        default: ParamDefault::Required,
-        doc: "Printer whose lines are drawn.",
-    },
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: the printer name).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `figure.fdm_width_profiles`.
+    pub struct WidthProfilesParams {
+        /// Printer whose lines are drawn.
+        pub printer: String,
+        /// Figure title (default: the printer name).
+        pub title: String = "",
+    }
+}
+
+/// The measured widths: `widths.parquet` of an `fdm.import` stage (an `fdm-widths`
+/// dataset folder holds no such table).
+const WIDTHS: Input =
+    Input::one("widths", &[Source::Stage("fdm.import")], "every line's measured widths (`widths.parquet`)").reading(&[
+        Reads {
+            table: &widths::TABLE,
+            columns: &[
+                widths::printer,
+                widths::condition,
+                widths::accel_mm_s2,
+                widths::feed_mm_s,
+                widths::position_mm,
+                widths::width_mm,
+            ],
+        },
+    ]);
+
+/// The steady widths, when given.
+const SUMMARY: Input = Input::optional(
+    "summary",
+    &[Source::Stage("fdm.line_summary")],
+    "each line's steady width (`line_summary.parquet`), marked dashed",
+)
+.reading(&[Reads {
+    table: &line_summary::TABLE,
+    columns: &[line_summary::printer, line_summary::condition, line_summary::steady_width_mm],
+}]);
 
 /// One line's profile.
 struct Profile {
@@ -45,33 +69,26 @@ struct Profile {
     steady_width_mm: Option<f64>,
 }
 
-impl StageKind for WidthProfilesFigure {
-    fn name(&self) -> &'static str {
-        "figure.fdm_width_profiles"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Width vs position of every line of one printer, a panel per (acceleration, feed) → width_profiles.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 000 Fig. 3(a)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity { min: 1, max: 2 }
-    }
+impl Stage for WidthProfilesFigure {
+    type Params = WidthProfilesParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.fdm_width_profiles",
+        version: 1,
+        summary:
+            "Width vs position of every line of one printer, a panel per (acceleration, feed) → width_profiles.png/.svg",
+        implements: "paper 000 Fig. 3(a)",
+        inputs: &[WIDTHS, SUMMARY],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let printer = ctx.params.str("printer").to_string();
-        let mut profiles = read_profiles(&ctx.inputs[0].dir.join("widths.parquet"), &printer)?;
-        if let Some(summary) = ctx.inputs.get(1) {
-            add_steady_widths(&summary.dir.join("line_summary.parquet"), &printer, &mut profiles)?;
+    fn run(&self, ctx: &mut StageContext, p: &WidthProfilesParams) -> Result<(), StageError> {
+        let printer = &p.printer;
+        let mut profiles = read_profiles(&ctx.input(&WIDTHS).dir.join(widths::TABLE.file()), printer)?;
+        if let Some(summary) = ctx.optional_input(&SUMMARY) {
+            add_steady_widths(&summary.dir.join(line_summary::TABLE.file()), printer, &mut profiles)?;
         }
-        let title = crate::figures::common::title_or(ctx, || format!("Measured line width along the line: {printer}"));
+        let title =
+            crate::figures::common::title_or(&p.title, || format!("Measured line width along the line: {printer}"));
         let stem = ctx.output_path("width_profiles")?;
         let profiles: Vec<Profile> = profiles.into_values().collect();
         draw_png_and_svg(&stem, (1500, 1050), |a| draw(a, &title, &profiles), |a| draw(a, &title, &profiles))
@@ -79,10 +96,11 @@ impl StageKind for WidthProfilesFigure {
 }
 
 fn read_profiles(path: &Path, printer: &str) -> Result<BTreeMap<String, Profile>, StageError> {
+    use widths as t;
     let df = read_parquet(path)?;
-    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
-    let (accel, feed) = (f64s(&df, "accel_mm_s2", path)?, f64s(&df, "feed_mm_s", path)?);
-    let (pos, width) = (f64s(&df, "position_mm", path)?, f64s(&df, "width_mm", path)?);
+    let (printers, conditions) = (strs(&df, t::printer, path)?, strs(&df, t::condition, path)?);
+    let (accel, feed) = (f64s(&df, t::accel_mm_s2, path)?, f64s(&df, t::feed_mm_s, path)?);
+    let (pos, width) = (f64s(&df, t::position_mm, path)?, f64s(&df, t::width_mm, path)?);
     let mut profiles: BTreeMap<String, Profile> = BTreeMap::new();
     for i in (0..df.height()).filter(|i| printers[*i] == printer) {
         profiles
@@ -99,7 +117,7 @@ fn read_profiles(path: &Path, printer: &str) -> Result<BTreeMap<String, Profile>
     if profiles.is_empty() {
         return Err(StageError::BadInput {
             file: path.to_path_buf(),
-            location: Some("printer".into()),
+            location: Some(t::printer.into()),
             expected: format!("expected rows of printer `{printer}`"),
         });
     }
@@ -107,9 +125,10 @@ fn read_profiles(path: &Path, printer: &str) -> Result<BTreeMap<String, Profile>
 }
 
 fn add_steady_widths(path: &Path, printer: &str, profiles: &mut BTreeMap<String, Profile>) -> Result<(), StageError> {
+    use line_summary as t;
     let df = read_parquet(path)?;
-    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
-    let steady = f64s(&df, "steady_width_mm", path)?;
+    let (printers, conditions) = (strs(&df, t::printer, path)?, strs(&df, t::condition, path)?);
+    let steady = f64s(&df, t::steady_width_mm, path)?;
     for i in (0..df.height()).filter(|i| printers[*i] == printer) {
         if let Some(p) = profiles.get_mut(&conditions[i]) {
             p.steady_width_mm = Some(steady[i]);

@@ -11,9 +11,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -31,15 +30,29 @@ const TOP_ROW_FRACTION: f64 = 0.58;
 /// Colour of cells without material (height ≤ 0), so the part's outline stands out.
 const NO_MATERIAL: RGBColor = RGBColor(225, 225, 225);
 
-const PARAMS: &[ParamSpec] = &[
-    crate::figures::common::TITLE,
-    ParamSpec {
-        name: "desired_height_um",
-        ty: ParamType::Float { min: 0.0, max: 10_000.0 },
-        default: ParamDefault::Required,
-        doc: "Desired part height (µm), drawn as a dashed line in the side view (paper 002: 400 µm).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `figure.inkjet_height_maps`.
+    pub struct HeightMapsParams {
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+        /// Desired part height (µm), drawn as a dashed line in the side view (paper 002: 400 µm).
+        pub desired_height_um: f64 [0.0, 10_000.0],
+    }
+}
+
+/// The open-loop print (drawn first).
+const OPEN_LOOP: Input = Input::one(
+    "open_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the open-loop print (`height_map.parquet`, `summary.parquet`)",
+);
+
+/// The closed-loop print.
+const CLOSED_LOOP: Input = Input::one(
+    "closed_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the closed-loop print (`height_map.parquet`, `summary.parquet`)",
+);
 
 /// One grid cell of a height map.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,30 +101,21 @@ impl Print {
     }
 }
 
-impl StageKind for InkjetHeightMapsFigure {
-    fn name(&self) -> &'static str {
-        "figure.inkjet_height_maps"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Aerial heat maps (shared scale) and middle-row cross-section of an open-loop and a closed-loop ink-jet print → inkjet_height_maps.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Figs 11-12 (aerial and side views)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+impl Stage for InkjetHeightMapsFigure {
+    type Params = HeightMapsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.inkjet_height_maps",
+        version: 1,
+        summary: "Aerial heat maps (shared scale) and middle-row cross-section of an open-loop and a closed-loop ink-jet print → inkjet_height_maps.png/.svg",
+        implements: "paper 002 Figs 11-12 (aerial and side views)",
+        inputs: &[OPEN_LOOP, CLOSED_LOOP],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let prints = [load(&ctx.inputs[0].dir)?, load(&ctx.inputs[1].dir)?];
-        let desired = ctx.params.f64("desired_height_um");
-        let title = crate::figures::common::title_or(ctx, || {
+    fn run(&self, ctx: &mut StageContext, p: &HeightMapsParams) -> Result<(), StageError> {
+        let prints = [load(&ctx.input(&OPEN_LOOP).dir)?, load(&ctx.input(&CLOSED_LOOP).dir)?];
+        let desired = p.desired_height_um;
+        let title = crate::figures::common::title_or(&p.title, || {
             "Printed part: aerial views and middle-row side view, open vs closed loop".to_string()
         });
         let stem = ctx.output_path("inkjet_height_maps")?;

@@ -11,9 +11,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::{DrawingArea, DrawingBackend};
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::inkjet::height_maps::{draw, Cell, Print};
 use crate::read::{f64s, ints, no_rows, read_parquet};
@@ -26,46 +25,41 @@ const SIZE_PX: (u32, u32) = (1400, 900);
 /// Cells lower than this fraction of the desired height count as having no material.
 pub const NO_MATERIAL_FRACTION: f64 = 0.05;
 
-const PARAMS: &[ParamSpec] = &[
-    crate::figures::common::TITLE,
-    ParamSpec {
-        name: "layer",
-        ty: ParamType::Int { min: 0, max: 100_000 },
-        default: ParamDefault::Int(0),
-        doc: "Layer to show (0 = the last one in the table).",
-    },
-    ParamSpec {
-        name: "desired_height_um",
-        ty: ParamType::Float { min: 0.0, max: 10_000.0 },
-        default: ParamDefault::Required,
-        doc: "Height drawn as the dashed reference line and against which the captions' mean error is taken (µm).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `figure.inkjet_model_vs_scan`.
+    pub struct ModelVsScanParams {
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+        /// Layer to show (0 = the last one in the table).
+        pub layer: i64 [0, 100_000] = 0,
+        /// Height drawn as the dashed reference line and against which the captions' mean
+        /// error is taken (µm).
+        pub desired_height_um: f64 [0.0, 10_000.0],
+    }
+}
 
-impl StageKind for InkjetModelVsScanFigure {
-    fn name(&self) -> &'static str {
-        "figure.inkjet_model_vs_scan"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Measured (profiler) vs model-predicted height maps of one layer of an inkjet-scans print, aerial and middle-row side views → inkjet_model_vs_scan.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Fig. 8 (model prediction of an open-loop print), Figs 21-22 (measured vs predicted four-layer cuboid)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+/// The scans and the model's predictions drawn.
+const RESIDUALS: Input = Input::one(
+    "residuals",
+    &[Source::Stage("inkjet.scan_residuals")],
+    "the measured and model-predicted profiles per layer (`profiles.parquet`)",
+);
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let desired = ctx.params.f64("desired_height_um");
-        let prints = load(&ctx.inputs[0].dir.join("profiles.parquet"), ctx.params.i64("layer"), desired)?;
-        let title = crate::figures::common::title_or(ctx, || {
+impl Stage for InkjetModelVsScanFigure {
+    type Params = ModelVsScanParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.inkjet_model_vs_scan",
+        version: 1,
+        summary: "Measured (profiler) vs model-predicted height maps of one layer of an inkjet-scans print, aerial and middle-row side views → inkjet_model_vs_scan.png/.svg",
+        implements: "paper 002 Fig. 8 (model prediction of an open-loop print), Figs 21-22 (measured vs predicted four-layer cuboid)",
+        inputs: &[RESIDUALS],
+        output: Output::Tables,
+    };
+
+    fn run(&self, ctx: &mut StageContext, p: &ModelVsScanParams) -> Result<(), StageError> {
+        let desired = p.desired_height_um;
+        let prints = load(&ctx.input(&RESIDUALS).dir.join("profiles.parquet"), p.layer, desired)?;
+        let title = crate::figures::common::title_or(&p.title, || {
             "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string()
         });
         let stem = ctx.output_path("inkjet_model_vs_scan")?;

@@ -11,9 +11,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -27,15 +26,29 @@ const COLOUR_BAR_PX: u32 = 120;
 const NO_PART: RGBColor = RGBColor(225, 225, 225);
 const SUPPORT: RGBColor = RGBColor(240, 190, 120);
 
-const PARAMS: &[ParamSpec] = &[
-    crate::figures::common::TITLE,
-    ParamSpec {
-        name: "section_x_index",
-        ty: ParamType::Int { min: 0, max: 100_000 },
-        default: ParamDefault::Int(20),
-        doc: "Grid column of the y–z cross-section (20: across the main pipe, away from the branch).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `figure.inkjet_pipe_junction`.
+    pub struct PipeJunctionParams {
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+        /// Grid column of the y–z cross-section (20: across the main pipe, away from the branch).
+        pub section_x_index: i64 [0, 100_000] = 20,
+    }
+}
+
+/// The open-loop print (drawn first).
+const OPEN_LOOP: Input = Input::one(
+    "open_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the open-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
+);
+
+/// The closed-loop print.
+const CLOSED_LOOP: Input = Input::one(
+    "closed_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the closed-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
+);
 
 /// One pipe-junction print as drawn.
 struct PipePrint {
@@ -48,30 +61,21 @@ struct PipePrint {
     regions: Vec<(String, f64, f64)>,
 }
 
-impl StageKind for InkjetPipeJunctionFigure {
-    fn name(&self) -> &'static str {
-        "figure.inkjet_pipe_junction"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Part-top aerial views and a material cross-section of the open- and closed-loop two-material pipe junction → inkjet_pipe_junction.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 002 Figs 13-15 (two-material pipe junction, open vs closed loop)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
-    }
+impl Stage for InkjetPipeJunctionFigure {
+    type Params = PipeJunctionParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.inkjet_pipe_junction",
+        version: 1,
+        summary: "Part-top aerial views and a material cross-section of the open- and closed-loop two-material pipe junction → inkjet_pipe_junction.png/.svg",
+        implements: "paper 002 Figs 13-15 (two-material pipe junction, open vs closed loop)",
+        inputs: &[OPEN_LOOP, CLOSED_LOOP],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let column = ctx.params.i64("section_x_index");
-        let prints = [load(&ctx.inputs[0].dir, column)?, load(&ctx.inputs[1].dir, column)?];
-        let title = crate::figures::common::title_or(ctx, || {
+    fn run(&self, ctx: &mut StageContext, p: &PipeJunctionParams) -> Result<(), StageError> {
+        let column = p.section_x_index;
+        let prints = [load(&ctx.input(&OPEN_LOOP).dir, column)?, load(&ctx.input(&CLOSED_LOOP).dir, column)?];
+        let title = crate::figures::common::title_or(&p.title, || {
             "Two-material pipe junction: part top and material cross-section, open vs closed loop".to_string()
         });
         let stem = ctx.output_path("inkjet_pipe_junction")?;

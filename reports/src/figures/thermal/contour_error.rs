@@ -9,7 +9,7 @@
 //! at a time reads better: by default the layer with the largest max error (over
 //! both prints), or every layer overlaid when `layer = -2`.
 //!
-//! Input: a `thermal.reprint` stage (`contour.parquet`, `contour_points.parquet`,
+//! Input: a `thermal.reprint_evaluate` stage (`contour.parquet`, `contour_points.parquet`,
 //! `path.parquet`).
 
 use std::collections::BTreeMap;
@@ -18,9 +18,8 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::thermal::common::{closed_outline, colour_level, level_colour, load_polygon, plane_chart, Vertex};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -36,15 +35,23 @@ const COLOUR_BAR_PX: u32 = 130;
 /// The variants in drawing order.
 pub const VARIANTS: [&str; 2] = ["conventional", "compensated"];
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "layer",
-        ty: ParamType::Int { min: -2, max: 100_000 },
-        default: ParamDefault::Int(-1),
-        doc: "Layer to draw; −1: the layer with the largest max error over both prints; −2: every layer overlaid.",
-    },
-    crate::figures::common::TITLE,
-];
+pipeline::params! {
+    /// The parameters of `figure.thermal_contour_error`.
+    pub struct ContourErrorParams {
+        /// Layer to draw; −1: the layer with the largest max error over both prints; −2: every
+        /// layer overlaid.
+        pub layer: i64 [-2, 100_000] = -1,
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+    }
+}
+
+/// The re-print whose contour error is drawn.
+const REPRINT: Input = Input::one(
+    "reprint",
+    &[Source::Stage("thermal.reprint_evaluate")],
+    "the contour error per point and its summary, and the CAD polygon (`contour_points.parquet`, `contour.parquet`, `path.parquet`)",
+);
 
 /// One contour point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,30 +79,21 @@ pub struct Plot {
     pub layer: Option<i64>,
 }
 
-impl StageKind for ThermalContourErrorFigure {
-    fn name(&self) -> &'static str {
-        "figure.thermal_contour_error"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Contour error (eq. 41) at the CAD contour points before and after compensation, shared viridis scale, max and RMS in the titles → thermal_contour_error.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Fig. 11(c)-(d), Table 3 (Sec. 3.3, eq. 41)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
-    }
+impl Stage for ThermalContourErrorFigure {
+    type Params = ContourErrorParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.thermal_contour_error",
+        version: 1,
+        summary: "Contour error (eq. 41) at the CAD contour points before and after compensation, shared viridis scale, max and RMS in the titles → thermal_contour_error.png/.svg",
+        implements: "paper 003 Fig. 11(c)-(d), Table 3 (Sec. 3.3, eq. 41)",
+        inputs: &[REPRINT],
+        output: Output::Tables,
+    };
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = &ctx.inputs[0].dir;
+    fn run(&self, ctx: &mut StageContext, p: &ContourErrorParams) -> Result<(), StageError> {
+        let dir = &ctx.input(&REPRINT).dir;
         let points = load_points(&dir.join("contour_points.parquet"))?;
-        let layer = match ctx.params.i64("layer") {
+        let layer = match p.layer {
             -2 => None,
             -1 => Some(worst_layer(&points)),
             l => Some(l),
@@ -106,7 +104,7 @@ impl StageKind for ThermalContourErrorFigure {
             polygon: load_polygon(dir)?,
             layer,
         };
-        let title = crate::figures::common::title_or(ctx, || {
+        let title = crate::figures::common::title_or(&p.title, || {
             "Deposition contour error e_t (eq. 41) at the CAD contour points, before and after compensation".to_string()
         });
         let stem = ctx.output_path("thermal_contour_error")?;

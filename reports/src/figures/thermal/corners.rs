@@ -22,9 +22,9 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::thermal::common::finite_range;
 use crate::figures::thermal::directions::parse_vertices;
@@ -42,39 +42,37 @@ const TITLE_PX: u32 = 50;
 /// The 140-150 °C band of freshly printed material (paper 003 Sec. 3.2).
 const BAND_C: (f64, f64) = (140.0, 150.0);
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "spans",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Comma-separated span ids to draw, one row each (default: every span).",
-    },
-    ParamSpec {
-        name: "layer",
-        ty: ParamType::Int { min: -1, max: 100_000 },
-        default: ParamDefault::Int(-1),
-        doc: "Layer of widths.parquet to draw; −1: the lowest layer with samples in each span's window.",
-    },
-    ParamSpec {
-        name: "pad_s",
-        ty: ParamType::Float { min: 0.0, max: 10.0 },
-        default: ParamDefault::Float(0.1),
-        doc: "Time shown before the extended span and after it (s).",
-    },
-    ParamSpec {
-        name: "dv_min_mm_s",
-        ty: ParamType::Float { min: -1000.0, max: 0.0 },
-        default: ParamDefault::Float(-2.0),
-        doc: "Lower bound ΔV_min of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: −2 mm/s.",
-    },
-    ParamSpec {
-        name: "dv_max_mm_s",
-        ty: ParamType::Float { min: 0.0, max: 1000.0 },
-        default: ParamDefault::Float(4.0),
-        doc: "Upper bound ΔV_max of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: 4 mm/s.",
-    },
-    crate::figures::common::TITLE,
-];
+pipeline::params! {
+    /// The parameters of `figure.thermal_corners`.
+    pub struct CornersParams {
+        /// Comma-separated span ids to draw, one row each (default: every span).
+        pub spans: String = "",
+        /// Layer of widths.parquet to draw; −1: the lowest layer with samples in each span's window.
+        pub layer: i64 [-1, 100_000] = -1,
+        /// Time shown before the extended span and after it (s).
+        pub pad_s: f64 [0.0, 10.0] = 0.1,
+        /// Lower bound ΔV_min of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: −2 mm/s.
+        pub dv_min_mm_s: f64 [-1000.0, 0.0] = -2.0,
+        /// Upper bound ΔV_max of eq. 39 drawn dashed (mm/s); paper 003 Sec. 3.2: 4 mm/s.
+        pub dv_max_mm_s: f64 [0.0, 1000.0] = 4.0,
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+    }
+}
+
+/// The monitor whose temperatures are drawn.
+const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "the temperature at the path per sample (`widths.parquet`)",
+);
+
+/// The compensation drawn.
+const COMPENSATE: Input = Input::one(
+    "compensate",
+    &[Source::Stage("thermal.compensate")],
+    "the compensated spans and their sequences (`spans.parquet`, `compensation.parquet`)",
+);
 
 /// One compensated span (a row of `spans.parquet`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -150,39 +148,33 @@ pub struct Plot {
     pub dv_bounds_mm_s: (f64, f64),
 }
 
-impl StageKind for ThermalCornersFigure {
-    fn name(&self) -> &'static str {
-        "figure.thermal_corners"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "Per compensated corner: temperature at the path, extracted vs desired width, and the compensation sequence with its bounds → thermal_corners.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Figs 5 and 8 (Sec. 2.4, eqs 31-39)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(2)
+impl Stage for ThermalCornersFigure {
+    type Params = CornersParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.thermal_corners",
+        version: 2,
+        summary: "Per compensated corner: temperature at the path, extracted vs desired width, and the compensation sequence with its bounds → thermal_corners.png/.svg",
+        implements: "paper 003 Figs 5 and 8 (Sec. 2.4, eqs 31-39)",
+        inputs: &[MONITOR, COMPENSATE],
+        output: Output::Tables,
+    };
+
+    fn check(p: &CornersParams) -> Result<(), ParamError> {
+        parse_vertices(&p.spans, "spans").map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let widths = load_widths(&ctx.inputs[0].dir.join("widths.parquet"))?;
-        let wanted = parse_vertices(ctx.params.str("spans"), &ctx.stage)?;
-        let rows = load_spans(&ctx.inputs[1].dir, &wanted)?;
-        let layer = ctx.params.i64("layer");
+    fn run(&self, ctx: &mut StageContext, p: &CornersParams) -> Result<(), StageError> {
+        let widths = load_widths(&ctx.input(&MONITOR).dir.join("widths.parquet"))?;
+        let wanted = parse_vertices(&p.spans, "spans").map_err(|e| StageError::params(ctx, e))?;
+        let rows = load_spans(&ctx.input(&COMPENSATE).dir, &wanted)?;
         let plot = Plot {
             rows,
             widths,
-            layer: (layer >= 0).then_some(layer),
-            pad_s: ctx.params.f64("pad_s"),
-            dv_bounds_mm_s: (ctx.params.f64("dv_min_mm_s"), ctx.params.f64("dv_max_mm_s")),
+            layer: (p.layer >= 0).then_some(p.layer),
+            pad_s: p.pad_s,
+            dv_bounds_mm_s: (p.dv_min_mm_s, p.dv_max_mm_s),
         };
-        let title = crate::figures::common::title_or(ctx, || {
+        let title = crate::figures::common::title_or(&p.title, || {
             "Compensated corners: temperature, extracted vs desired width, compensation sequence".to_string()
         });
         let stem = ctx.output_path("thermal_corners")?;

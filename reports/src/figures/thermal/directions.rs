@@ -15,8 +15,9 @@
 //! clipped to it.
 //!
 //! Inputs: a `thermal.monitor` stage (`directions.parquet`) and, optionally, a stage
-//! holding the CAD polygon `path.parquet` (`thermal.reprint`). Without the polygon
-//! the zoom centres on the sample of largest path curvature and `vertices` is ignored.
+//! holding the CAD polygon `path.parquet` (`thermal.reprint_evaluate`). Without the polygon
+//! the zoom centres on the sample of largest path curvature and `vertices` is not used
+//! (a malformed list is still refused when the spec is checked).
 
 use std::ops::Range;
 use std::path::Path;
@@ -24,9 +25,9 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::thermal::common::{
     clip_polyline, closed_outline, draw_key, finite_range, interior_angle_deg, load_polygon, plane_chart, KeySwatch,
@@ -49,27 +50,37 @@ const CAD_GREY: RGBColor = RGBColor(150, 150, 150);
 /// Height of the key band below the panels, in pixels.
 const KEY_PX: u32 = 40;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "vertices",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Comma-separated CAD vertex ids to zoom on, one row each (default: the sharpest corner, the 45° apex of the test path).",
-    },
-    ParamSpec {
-        name: "zoom_mm",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(1.2),
-        doc: "Radius around each vertex whose samples the zoom box is fitted to (mm); 1.2 mm shows the corner and about five bead widths of each leg.",
-    },
-    ParamSpec {
-        name: "every_k_samples",
-        ty: ParamType::Int { min: 1, max: 100_000 },
-        default: ParamDefault::Int(8),
-        doc: "Draw the deposition direction of every k-th sample (at 1 ms sampling and 20 mm/s, k = 8 is one segment per 0.16 mm on the straights, denser where the head slows).",
-    },
-    crate::figures::common::TITLE,
-];
+pipeline::params! {
+    /// The parameters of `figure.thermal_directions`.
+    pub struct DirectionsParams {
+        /// Comma-separated CAD vertex ids to zoom on, one row each (default: the sharpest
+        /// corner, the 45° apex of the test path).
+        pub vertices: String = "",
+        /// Radius around each vertex whose samples the zoom box is fitted to (mm); 1.2 mm
+        /// shows the corner and about five bead widths of each leg.
+        pub zoom_mm: f64 [0.1, 100.0] = 1.2,
+        /// Draw the deposition direction of every k-th sample (at 1 ms sampling and 20 mm/s,
+        /// k = 8 is one segment per 0.16 mm on the straights, denser where the head slows).
+        pub every_k_samples: usize [1, 100_000] = 8,
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+    }
+}
+
+/// The monitor whose deposition directions are drawn.
+const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "the deposition directions and half widths per sample (`directions.parquet`)",
+);
+
+/// The CAD polygon, when given; without it the zoom centres on the sample of largest
+/// path curvature.
+const POLYGON: Input = Input::optional(
+    "polygon",
+    &[Source::Stage("thermal.reprint_evaluate")],
+    "the CAD polygon whose vertices are zoomed on (`path.parquet`)",
+);
 
 /// The columns of `directions.parquet` this figure draws.
 #[derive(Debug, Clone, Default)]
@@ -145,41 +156,39 @@ pub struct Zoom {
     pub centre_mm: (f64, f64),
 }
 
-impl StageKind for ThermalDirectionsFigure {
-    fn name(&self) -> &'static str {
-        "figure.thermal_directions"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Principal deposition directions and estimated boundaries at the sharpest corners, without and with DDA → thermal_directions.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Fig. 3 (Sec. 2.2, eqs 10-26)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity { min: 1, max: 2 }
+impl Stage for ThermalDirectionsFigure {
+    type Params = DirectionsParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.thermal_directions",
+        version: 1,
+        summary: "Principal deposition directions and estimated boundaries at the sharpest corners, without and with DDA → thermal_directions.png/.svg",
+        implements: "paper 003 Fig. 3 (Sec. 2.2, eqs 10-26)",
+        inputs: &[MONITOR, POLYGON],
+        output: Output::Tables,
+    };
+
+    fn check(p: &DirectionsParams) -> Result<(), ParamError> {
+        parse_vertices(&p.vertices, "vertices").map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let directions = load(&ctx.inputs[0].dir)?;
-        let polygon = ctx.inputs.get(1).map(|i| load_polygon(&i.dir)).transpose()?;
+    fn run(&self, ctx: &mut StageContext, p: &DirectionsParams) -> Result<(), StageError> {
+        let directions = load(&ctx.input(&MONITOR).dir)?;
+        let polygon = ctx.optional_input(&POLYGON).map(|i| load_polygon(&i.dir)).transpose()?;
         let zooms = match &polygon {
-            Some(p) => zooms_at_vertices(p, &parse_vertices(ctx.params.str("vertices"), &ctx.stage)?, &ctx.stage)?,
+            Some(polygon) => {
+                let wanted = parse_vertices(&p.vertices, "vertices").map_err(|e| StageError::params(ctx, e))?;
+                zooms_at_vertices(polygon, &wanted, &ctx.stage)?
+            }
             None => vec![zoom_at_max_curvature(&directions)],
         };
         let plot = Plot {
             directions,
             polygon: polygon.unwrap_or_default(),
             zooms,
-            half_mm: ctx.params.f64("zoom_mm"),
-            every_k: ctx.params.i64("every_k_samples") as usize,
+            half_mm: p.zoom_mm,
+            every_k: p.every_k_samples,
         };
-        let title = crate::figures::common::title_or(ctx, || {
+        let title = crate::figures::common::title_or(&p.title, || {
             "Principal deposition directions (red) and estimated boundaries: (a) without DDA, (b) with DDA".to_string()
         });
         let stem = ctx.output_path("thermal_directions")?;
@@ -208,17 +217,13 @@ pub fn load(dir: &Path) -> Result<Directions, StageError> {
     Ok(directions)
 }
 
-/// Parses the `vertices` parameter: comma-separated integers, empty for the default.
-pub fn parse_vertices(raw: &str, stage: &str) -> Result<Vec<i64>, StageError> {
+/// Parses a list of vertex ids, the parameter `field`: comma-separated integers, empty
+/// for the default.
+pub fn parse_vertices(raw: &str, field: &'static str) -> Result<Vec<i64>, ParamError> {
     raw.split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.parse::<i64>().map_err(|_| StageError::Params {
-                stage: stage.to_string(),
-                message: format!("vertices: `{s}` is not an integer vertex id"),
-            })
-        })
+        .map(|s| s.parse::<i64>().map_err(|_| ParamError::new(field, format!("`{s}` is not an integer vertex id"))))
         .collect()
 }
 
@@ -424,9 +429,11 @@ mod tests {
 
     #[test]
     fn vertex_list_parses_and_unknown_ids_are_errors() {
-        assert_eq!(parse_vertices(" 9, 7 ,", "s").expect("parses"), vec![9, 7]);
-        assert!(parse_vertices("", "s").expect("parses").is_empty());
-        assert!(parse_vertices("nine", "s").is_err());
+        assert_eq!(parse_vertices(" 9, 7 ,", "vertices").expect("parses"), vec![9, 7]);
+        assert!(parse_vertices("", "vertices").expect("parses").is_empty());
+        let err = parse_vertices("nine", "vertices").expect_err("not an integer");
+        assert_eq!(err.field, "vertices");
+        assert!(err.message.contains("`nine`"), "{}", err.message);
         let dir = tempfile::tempdir().expect("tempdir");
         write_table(dir.path(), "path", path_table(&corner_path()));
         let polygon = load_polygon(dir.path()).expect("loads");

@@ -12,7 +12,7 @@
 //!
 //! Inputs: a `thermal.monitor` stage (`frame_example.parquet`,
 //! `detections_example.parquet`, `frame_example_meta.parquet`, `mosaic.parquet`) and,
-//! optionally, a stage holding the CAD polygon `path.parquet` (`thermal.reprint`).
+//! optionally, a stage holding the CAD polygon `path.parquet` (`thermal.reprint_evaluate`).
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -22,9 +22,9 @@ use polars::prelude::DataFrame;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::thermal::common::{
     closed_outline, colour_level, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour, load_polygon,
@@ -51,21 +51,31 @@ const MATCHED: RGBColor = RGBColor(0, 0, 0);
 const UNMATCHED: RGBColor = RGBColor(214, 39, 40);
 const NOZZLE: RGBColor = RGBColor(230, 159, 0);
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "band_low_c",
-        ty: ParamType::Float { min: -50.0, max: 1000.0 },
-        default: ParamDefault::Float(140.0),
-        doc: "Lower edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 140 °C.",
-    },
-    ParamSpec {
-        name: "band_high_c",
-        ty: ParamType::Float { min: -50.0, max: 1000.0 },
-        default: ParamDefault::Float(150.0),
-        doc: "Upper edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 150 °C.",
-    },
-    crate::figures::common::TITLE,
-];
+pipeline::params! {
+    /// The parameters of `figure.thermal_frame`.
+    pub struct FrameParams {
+        /// Lower edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 140 °C.
+        pub band_low_c: f64 [-50.0, 1000.0] = 140.0,
+        /// Upper edge of the outlined temperature band (°C); paper 003 Sec. 3.2: 150 °C.
+        pub band_high_c: f64 [-50.0, 1000.0] = 150.0,
+        /// Figure title (default: a generic description).
+        pub title: String = "",
+    }
+}
+
+/// The monitor whose example frame and mosaic are drawn.
+const MONITOR: Input = Input::one(
+    "monitor",
+    &[Source::Stage("thermal.monitor")],
+    "an example frame, its detections and the mosaic (`frame_example.parquet`, `detections_example.parquet`, `frame_example_meta.parquet`, `mosaic.parquet`)",
+);
+
+/// The CAD polygon overlaid on the mosaic, when given.
+const POLYGON: Input = Input::optional(
+    "polygon",
+    &[Source::Stage("thermal.reprint_evaluate")],
+    "the CAD polygon drawn over the mosaic (`path.parquet`)",
+);
 
 /// One pixel or plane cell with its temperature.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -108,39 +118,31 @@ pub struct FrameData {
     pub band_c: (f64, f64),
 }
 
-impl StageKind for ThermalFrameFigure {
-    fn name(&self) -> &'static str {
-        "figure.thermal_frame"
-    }
-    fn version(&self) -> u32 {
-        2
-    }
-    fn summary(&self) -> &'static str {
-        "An undistorted thermal frame with its 140-150 °C band, its detected corners and the nozzle, and the mosaic of aligned frames on the plane → thermal_frame.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Fig. 4 (Sec. 2.3, eqs 27-30)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity { min: 1, max: 2 }
+impl Stage for ThermalFrameFigure {
+    type Params = FrameParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.thermal_frame",
+        version: 2,
+        summary: "An undistorted thermal frame with its 140-150 °C band, its detected corners and the nozzle, and the mosaic of aligned frames on the plane → thermal_frame.png/.svg",
+        implements: "paper 003 Fig. 4 (Sec. 2.3, eqs 27-30)",
+        inputs: &[MONITOR, POLYGON],
+        output: Output::Tables,
+    };
+
+    fn check(p: &FrameParams) -> Result<(), ParamError> {
+        if p.band_low_c >= p.band_high_c {
+            let message = format!("band_low_c ({}) must be below band_high_c ({})", p.band_low_c, p.band_high_c);
+            return Err(ParamError::new("band_low_c", message));
+        }
+        Ok(())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let band_c = (ctx.params.f64("band_low_c"), ctx.params.f64("band_high_c"));
-        if band_c.0 >= band_c.1 {
-            return Err(StageError::Params {
-                stage: ctx.stage.clone(),
-                message: format!("band_low_c ({}) must be below band_high_c ({})", band_c.0, band_c.1),
-            });
-        }
-        let mut data = load(&ctx.inputs[0].dir, band_c)?;
-        if let Some(input) = ctx.inputs.get(1) {
+    fn run(&self, ctx: &mut StageContext, p: &FrameParams) -> Result<(), StageError> {
+        let mut data = load(&ctx.input(&MONITOR).dir, (p.band_low_c, p.band_high_c))?;
+        if let Some(input) = ctx.optional_input(&POLYGON) {
             data.polygon = load_polygon(&input.dir)?;
         }
-        let title = crate::figures::common::title_or(ctx, || {
+        let title = crate::figures::common::title_or(&p.title, || {
             "Thermal frame alignment: undistorted frame, detected corners, aligned frames on the plane".to_string()
         });
         let stem = ctx.output_path("thermal_frame")?;

@@ -6,7 +6,7 @@
 //! before and after in each panel's title. Each corner is a pair of panels on one
 //! square zoom box (equal-aspect millimetres); pairs are laid out in rows.
 //!
-//! Input: a `thermal.reprint` stage (`corners.parquet`, `deposit_regions.parquet`,
+//! Input: a `thermal.reprint_evaluate` stage (`corners.parquet`, `deposit_regions.parquet`,
 //! `path.parquet`).
 
 use std::path::Path;
@@ -14,9 +14,9 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use pipeline::params::ParamDefault;
-use pipeline::stage::Arity;
-use pipeline::{ParamSpec, ParamType, StageContext, StageError, StageKind};
+use pipeline::params::ParamError;
+use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
+use pipeline::{StageContext, StageError};
 
 use crate::figures::common::grid_step;
 use crate::figures::thermal::common::{
@@ -39,32 +39,27 @@ const DESIRED: RGBColor = RGBColor(170, 170, 170);
 const OVER: RGBColor = RGBColor(214, 39, 40);
 const UNDER: RGBColor = RGBColor(0, 114, 178);
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "vertices",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Comma-separated vertex ids to draw (default: every corner of corners.parquet).",
-    },
-    ParamSpec {
-        name: "zoom_mm",
-        ty: ParamType::Float { min: 0.1, max: 100.0 },
-        default: ParamDefault::Float(1.0),
-        doc: "Half side of the square box around each corner (mm); 1 mm holds the corner region of a 0.45 mm bead.",
-    },
-    ParamSpec {
-        name: "pairs_per_row",
-        ty: ParamType::Int { min: 1, max: 20 },
-        default: ParamDefault::Int(3),
-        doc: "Corners (before/after pairs) per row of the figure.",
-    },
-    ParamSpec {
-        name: "title",
-        ty: ParamType::Text,
-        default: ParamDefault::Str(""),
-        doc: "Figure title (default: a generic description with the mean O_E).",
-    },
-];
+pipeline::params! {
+    /// The parameters of `figure.thermal_overdeposition`.
+    pub struct OverdepositionParams {
+        /// Comma-separated vertex ids to draw (default: every corner of corners.parquet).
+        pub vertices: String = "",
+        /// Half side of the square box around each corner (mm); 1 mm holds the corner region
+        /// of a 0.45 mm bead.
+        pub zoom_mm: f64 [0.1, 100.0] = 1.0,
+        /// Corners (before/after pairs) per row of the figure.
+        pub pairs_per_row: usize [1, 20] = 3,
+        /// Figure title (default: a generic description with the mean O_E).
+        pub title: String = "",
+    }
+}
+
+/// The re-print whose corners are drawn.
+const REPRINT: Input = Input::one(
+    "reprint",
+    &[Source::Stage("thermal.reprint_evaluate")],
+    "the corners' O_E, the deposit classes and the CAD polygon (`corners.parquet`, `deposit_regions.parquet`, `path.parquet`)",
+);
 
 /// A deposit class of one grid cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -127,39 +122,34 @@ pub struct Plot {
     pub pairs_per_row: usize,
 }
 
-impl StageKind for ThermalOverdepositionFigure {
-    fn name(&self) -> &'static str {
-        "figure.thermal_overdeposition"
-    }
-    fn version(&self) -> u32 {
-        1
-    }
-    fn summary(&self) -> &'static str {
-        "Desired, over- and under-deposition around every corner before and after compensation, O_E in each title → thermal_overdeposition.png/.svg"
-    }
-    fn implements(&self) -> &'static str {
-        "paper 003 Fig. 10 (Sec. 3.3, eq. 40)"
-    }
-    fn params(&self) -> &'static [ParamSpec] {
-        PARAMS
-    }
-    fn arity(&self) -> Arity {
-        Arity::exactly(1)
+impl Stage for ThermalOverdepositionFigure {
+    type Params = OverdepositionParams;
+    const INFO: &'static StageInfo = &StageInfo {
+        name: "figure.thermal_overdeposition",
+        version: 1,
+        summary: "Desired, over- and under-deposition around every corner before and after compensation, O_E in each title → thermal_overdeposition.png/.svg",
+        implements: "paper 003 Fig. 10 (Sec. 3.3, eq. 40)",
+        inputs: &[REPRINT],
+        output: Output::Tables,
+    };
+
+    fn check(p: &OverdepositionParams) -> Result<(), ParamError> {
+        parse_vertices(&p.vertices, "vertices").map(|_| ())
     }
 
-    fn run(&self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let dir = &ctx.inputs[0].dir;
-        let wanted = parse_vertices(ctx.params.str("vertices"), &ctx.stage)?;
+    fn run(&self, ctx: &mut StageContext, p: &OverdepositionParams) -> Result<(), StageError> {
+        let dir = &ctx.input(&REPRINT).dir;
+        let wanted = parse_vertices(&p.vertices, "vertices").map_err(|e| StageError::params(ctx, e))?;
         let (cells, step_mm) = load_cells(&dir.join("deposit_regions.parquet"))?;
         let plot = Plot {
             corners: load_corners(&dir.join("corners.parquet"), &wanted)?,
             cells,
             step_mm,
             polygon: load_polygon(dir)?,
-            half_mm: ctx.params.f64("zoom_mm"),
-            pairs_per_row: ctx.params.i64("pairs_per_row") as usize,
+            half_mm: p.zoom_mm,
+            pairs_per_row: p.pairs_per_row,
         };
-        let title = crate::figures::common::title_or(ctx, || default_title(&plot.corners));
+        let title = crate::figures::common::title_or(&p.title, || default_title(&plot.corners));
         let stem = ctx.output_path("thermal_overdeposition")?;
         let size = figure_size_px(plot.corners.len(), plot.pairs_per_row);
         draw_png_and_svg(&stem, size, |a| draw(a, &title, &plot), |a| draw(a, &title, &plot))
