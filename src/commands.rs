@@ -6,6 +6,7 @@ use datasets::fsu::{self, FsuPrinter, ImportOptions};
 use pipeline::execute::{open_out_dir, run_plan, run_plan_locked, RunOptions};
 use pipeline::graph::{render, GraphFormat};
 use pipeline::plan::sources_text;
+use pipeline::schema::Reads;
 use pipeline::stage::Count;
 use pipeline::{Plan, Registry, StageKind};
 
@@ -151,11 +152,12 @@ fn kind_text(kind: &dyn StageKind) -> String {
     let mut s = format!("{} (v{})\n  {}\n  implements: {}\n", info.name, info.version, info.summary, info.implements);
     for input in info.inputs {
         s += &format!(
-            "  input {:<14} {:<10} {}: {}\n",
+            "  input {:<14} {:<10} {}: {}{}\n",
             input.role,
             count_text(input.count),
             sources_text(input.takes),
-            input.doc
+            input.doc,
+            reads_text(input.reads)
         );
     }
     for p in kind.params() {
@@ -170,6 +172,10 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
         "## `{}` (version {})\n\n{}\n\nImplements: {}.\n\n",
         info.name, info.version, info.summary, info.implements
     );
+    for table in kind.writes() {
+        let columns: Vec<String> = table.columns.iter().map(|c| format!("`{}` {}", c.name, c.dtype)).collect();
+        s += &format!("Writes `{}` (declared in `tables`): {}.\n\n", table.file(), columns.join(", "));
+    }
     if info.inputs.is_empty() {
         s += "No inputs.\n\n";
     } else {
@@ -180,7 +186,7 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
                 input.role,
                 count_text(input.count),
                 sources_text(input.takes),
-                input.doc.replace('|', "\\|")
+                format!("{}{}", input.doc, reads_text(input.reads)).replace('|', "\\|")
             );
         }
         s += "\n";
@@ -193,6 +199,11 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
         s += &format!("| `{}` | {} | `{}` | {} |\n", p.name, p.ty, p.default, p.doc.replace('|', "\\|"));
     }
     s + "\n"
+}
+
+/// "; reads `t.parquet` (a, b)" for each declared table a role reads (checked at plan time).
+fn reads_text(reads: &[Reads]) -> String {
+    reads.iter().map(|r| format!("; reads `{}` ({})", r.table.file(), r.columns.join(", "))).collect()
 }
 
 /// How many inputs a role takes, in words.
