@@ -63,12 +63,12 @@ impl FsuPrinter {
     /// Both printers.
     pub const ALL: [Self; 2] = [Self::Taz5, Self::Taz6];
 
+    /// Their names, in the order of [`FsuPrinter::ALL`].
+    pub const NAMES: [&'static str; 2] = ["taz5", "taz6"];
+
     /// Name used as folder and `printer` value.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Taz5 => "taz5",
-            Self::Taz6 => "taz6",
-        }
+        Self::NAMES[self as usize]
     }
 
     /// Parses `taz5` / `taz6`.

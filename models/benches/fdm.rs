@@ -10,29 +10,16 @@
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
-use models::fdm::synthetic::{synthetic_truth, TABLE_I};
+use models::fdm::synthetic::perturbed_lines;
 use models::fdm::{
-    default_tasks, fit, leave_one_out, transfer_cv, transfer_matrix_for_target, transfer_source_mean, LineKinematics,
-    MeasuredLine, PiecewiseParams, SourcePrior, StudyPrinter, TransferParams,
+    default_tasks, fit, leave_one_out, transfer_cv, transfer_matrix_for_target, transfer_source_mean, MeasuredLine,
+    PiecewiseParams, SourcePrior, StudyPrinter, TransferParams,
 };
 
-/// A Taz-5-like (blob) or Taz-6-like model; `bump` perturbs the widths per line so the
-/// fit is not exact.
+/// A Taz-5-like (blob) or Taz-6-like model's lines; `bump` perturbs the widths per line
+/// so the fit is not exact.
 fn lines(blob: bool, bump: f64) -> Vec<MeasuredLine> {
-    let model = synthetic_truth(blob);
-    TABLE_I
-        .iter()
-        .enumerate()
-        .map(|(k, &(a, f))| {
-            let nominal = LineKinematics::paper_line(a, f).unwrap();
-            let xs: Vec<f64> = (0..2500).map(|i| i as f64 * 0.048).collect();
-            let mut ws = model.predict(&nominal, &xs).unwrap();
-            for (i, w) in ws.iter_mut().enumerate() {
-                *w += bump * ((i * 13 + k * 5) as f64).sin();
-            }
-            MeasuredLine::new(nominal, xs, ws).unwrap()
-        })
-        .collect()
+    perturbed_lines(blob, bump, 1.0)
 }
 
 fn bench_fit(c: &mut Criterion) {
@@ -81,18 +68,11 @@ fn bench_transfer_matrix(c: &mut Criterion) {
     // beads (another nozzle); all nine lines each, the λ grid in whole decades as the
     // stage's, every target printer's work unit in turn as `fdm.transfer_matrix` runs
     // them (`examples/transfer_matrix_full.rs` runs the same on the measured lines).
-    let scaled = |lines: Vec<MeasuredLine>, k: f64| -> Vec<MeasuredLine> {
-        lines
-            .into_iter()
-            .map(|l| MeasuredLine::new(l.nominal, l.positions_mm.clone(), l.widths_mm.iter().map(|w| w * k).collect()))
-            .collect::<Result<_, _>>()
-            .unwrap()
-    };
     let printers_lines = [
-        scaled(lines(true, 0.01), 1.0),
-        scaled(lines(false, 0.012), 1.0),
-        scaled(lines(true, 0.008), 1.3),
-        scaled(lines(false, 0.01), 1.3),
+        perturbed_lines(true, 0.01, 1.0),
+        perturbed_lines(false, 0.012, 1.0),
+        perturbed_lines(true, 0.008, 1.3),
+        perturbed_lines(false, 0.01, 1.3),
     ];
     let (blob, plain) = (
         PiecewiseParams::paper_defaults().check().unwrap(),

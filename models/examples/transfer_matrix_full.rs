@@ -20,7 +20,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use models::fdm::synthetic::{synthetic_truth, TABLE_I};
+use models::fdm::synthetic::{perturbed_lines, TABLE_I};
 use models::fdm::{
     default_tasks, other_family_widths, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
     PiecewiseParams, StudyPrinter, TransferParams,
@@ -111,21 +111,10 @@ fn read_printer(dir: &Path, printer: &str, suffix: &str) -> Vec<MeasuredLine> {
 
 /// The `fdm` bench's four synthetic printers, all nine lines each.
 fn synthetic_printers() -> Vec<Vec<MeasuredLine>> {
-    let lines = |blob: bool, bump: f64, scale: f64| -> Vec<MeasuredLine> {
-        let model = synthetic_truth(blob);
-        TABLE_I
-            .iter()
-            .enumerate()
-            .map(|(k, &(a, f))| {
-                let nominal = LineKinematics::paper_line(a, f).unwrap();
-                let xs: Vec<f64> = (0..2500).map(|i| i as f64 * 0.048).collect();
-                let mut ws = model.predict(&nominal, &xs).unwrap();
-                for (i, w) in ws.iter_mut().enumerate() {
-                    *w = scale * (*w + bump * ((i * 13 + k * 5) as f64).sin());
-                }
-                MeasuredLine::new(nominal, xs, ws).unwrap()
-            })
-            .collect()
-    };
-    vec![lines(true, 0.01, 1.0), lines(false, 0.012, 1.0), lines(true, 0.008, 1.3), lines(false, 0.01, 1.3)]
+    vec![
+        perturbed_lines(true, 0.01, 1.0),
+        perturbed_lines(false, 0.012, 1.0),
+        perturbed_lines(true, 0.008, 1.3),
+        perturbed_lines(false, 0.01, 1.3),
+    ]
 }

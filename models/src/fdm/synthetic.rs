@@ -2,6 +2,8 @@
 //! Table I conditions and a plausible known piecewise model (eqs 2-3) from which
 //! noiseless widths are drawn, so fits can be checked for parameter recovery.
 
+use super::kinematics::LineKinematics;
+use super::line::MeasuredLine;
 use super::piecewise::{Bp1PowerLaw, PiecewiseCoefficients};
 use super::predict::FittedPiecewise;
 
@@ -38,4 +40,25 @@ pub fn synthetic_truth(blob: bool) -> FittedPiecewise {
         training_rmse_mm: 0.0,
         lambda: 0.0,
     }
+}
+
+/// The nine Table I lines of [`synthetic_truth`]`(blob)`, sampled every 0.048 mm (the
+/// real data's step, 2500 samples), each width `w` turned into
+/// `scale·(w + bump·sin(13 i + 5 k))` (sample `i` of line `k`): the perturbation keeps
+/// fits from being exact, `scale` stands for another nozzle. The benchmarks' printers.
+pub fn perturbed_lines(blob: bool, bump: f64, scale: f64) -> Vec<MeasuredLine> {
+    let model = synthetic_truth(blob);
+    TABLE_I
+        .iter()
+        .enumerate()
+        .map(|(k, &(a, f))| {
+            let nominal = LineKinematics::paper_line(a, f).expect("Table I conditions are valid");
+            let xs: Vec<f64> = (0..2500).map(|i| i as f64 * 0.048).collect();
+            let mut ws = model.predict(&nominal, &xs).expect("the synthetic model predicts its own conditions");
+            for (i, w) in ws.iter_mut().enumerate() {
+                *w = scale * (*w + bump * ((i * 13 + k * 5) as f64).sin());
+            }
+            MeasuredLine::new(nominal, xs, ws).expect("finite, sorted samples")
+        })
+        .collect()
 }

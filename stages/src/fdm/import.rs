@@ -5,6 +5,7 @@
 //! Table II (see `datasets::fsu`), each file verified against its published SHA-256.
 
 use datasets::fsu::{self, FsuPrinter, ImportOptions};
+use pipeline::params::{Names, OneOf};
 use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
@@ -23,14 +24,11 @@ pipeline::choice! {
     }
 }
 
-pipeline::choice! {
-    /// The printer folders of the FSU release.
-    pub enum FsuPrinterName {
-        /// The Lulzbot Taz 5.
-        Taz5 = "taz5",
-        /// The Lulzbot Taz 6.
-        Taz6 = "taz6",
-    }
+/// The printer folders of the FSU release.
+pub struct FsuPrinters;
+
+impl Names for FsuPrinters {
+    const NAMES: &'static [&'static str] = &FsuPrinter::NAMES;
 }
 
 pipeline::params! {
@@ -39,7 +37,7 @@ pipeline::params! {
         /// Layout of the raw data: `fsu-linewidth` = S{a}F{F mm/min}_{tag}120.csv files per printer folder.
         pub source_format: SourceFormat = SourceFormat::FsuLinewidth,
         /// Which printer folder to import.
-        pub printer: FsuPrinterName,
+        pub printer: OneOf<FsuPrinters>,
         /// Check every file against the published release's SHA-256 (off only for your own data in the same layout).
         pub verify_sha256: bool = true,
     }
@@ -62,10 +60,7 @@ impl Stage for ImportStage {
     const WRITES: &'static [&'static Table] = &[&widths::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &ImportParams) -> Result<(), StageError> {
-        let printer = match p.printer {
-            FsuPrinterName::Taz5 => FsuPrinter::Taz5,
-            FsuPrinterName::Taz6 => FsuPrinter::Taz6,
-        };
+        let printer = FsuPrinter::parse(p.printer.as_str()).expect("the planner checked the name");
         let opts = ImportOptions { verify_sha256: p.verify_sha256 };
         let dataset = fsu::read_printer(&ctx.input(&RAW).dir, printer, opts).map_err(StageError::domain)?;
         dataset.write(ctx.output_dir()).map_err(StageError::domain)?;
