@@ -10,6 +10,7 @@ export AMREPRO_PYTHON := $(VENV)/bin/python
 OUT ?= out
 BIN := $(CARGO_TARGET_DIR)/release/amrepro
 SPECS := $(sort $(wildcard specs/*.toml))
+STUDY_SPECS := $(sort $(wildcard specs/studies/*.toml))
 
 .PHONY: run build test check lint bench docs fuzz clean
 
@@ -20,7 +21,7 @@ run: build
 	@echo "open the report:  $(OUT)/report/index.html"
 
 build:
-	cargo build --release --bin amrepro
+	cargo build --release --workspace --bin amrepro
 
 ## test: format and lint checks, then every test (installs duckdb/polars for Python first)
 test: $(VENV)/.installed lint
@@ -46,9 +47,10 @@ fuzz:
 	cd fuzz && for t in $(FUZZ_TARGETS); do \
 		cargo +nightly fuzz run -O $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) || exit 1; done
 
-## docs: regenerate docs/STAGES.md from the registry
+## docs: regenerate docs/STAGES.md (the registry) and docs/COLUMNS.md (the published tables' declared columns)
 docs: build
 	$(BIN) stages --markdown > docs/STAGES.md
+	$(BIN) outputs --markdown $(SPECS) $(STUDY_SPECS) > docs/COLUMNS.md
 
 clean:
 	rm -rf $(OUT)

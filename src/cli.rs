@@ -23,6 +23,8 @@ pub enum Command {
     Graph(GraphArgs),
     /// List every registered stage kind with its parameters.
     Stages(StagesArgs),
+    /// List the tables specs publish: path, writing stage and declared columns.
+    Outputs(OutputsArgs),
     /// Import or inspect datasets.
     #[command(subcommand)]
     Datasets(DatasetsCommand),
@@ -169,6 +171,17 @@ pub struct StagesArgs {
     /// Print Markdown (as in docs/STAGES.md) instead of plain text.
     #[arg(long)]
     pub markdown: bool,
+}
+
+/// `amrepro outputs`.
+#[derive(Debug, Args)]
+pub struct OutputsArgs {
+    /// Print Markdown (as in docs/COLUMNS.md) instead of plain text.
+    #[arg(long)]
+    pub markdown: bool,
+    /// The spec files whose `publish` lists to read.
+    #[arg(required = true)]
+    pub specs: Vec<PathBuf>,
 }
 
 /// `amrepro datasets ...`.

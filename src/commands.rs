@@ -33,6 +33,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Run(args) => run(args),
         Command::Graph(args) => graph(args),
         Command::Stages(args) => list_stages(args),
+        Command::Outputs(args) => crate::outputs::list(args),
         Command::Datasets(DatasetsCommand::Import(ImportCommand::FsuLinewidth(args))) => import_fsu(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Fdm(args))) => generate_fdm(args),
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Inkjet(args))) => generate_inkjet(args),

@@ -6,6 +6,7 @@
 mod cli;
 mod commands;
 mod nightly_run;
+mod outputs;
 mod scale;
 
 use std::process::ExitCode;

@@ -9,7 +9,7 @@ use std::path::{Component, Path, PathBuf};
 
 use crate::error::SpecError;
 use crate::params::Params;
-use crate::schema::Reads;
+use crate::schema::{Reads, Table};
 use crate::spec::{expand_path, read_spec, RawSpec, RawStage};
 use crate::stage::{Count, Input, Output, Registry, Source};
 
@@ -143,6 +143,22 @@ impl Plan {
     /// Index of the stage called `name`.
     pub fn stage_index(&self, name: &str) -> Option<usize> {
         self.stages.iter().position(|s| s.name == name)
+    }
+
+    /// The declaration of the table `name` (`name.parquet`) stage `stage` writes: its
+    /// kind's own ([`crate::stage::Stage::WRITES`]), or for a kind that writes what its
+    /// inputs write (`table.concat`), the first input stage's. `None` when no
+    /// declaration covers it.
+    pub fn declared_table(&self, stage: usize, name: &str, registry: &Registry) -> Option<&'static Table> {
+        let planned = &self.stages[stage];
+        let kind = registry.get(planned.kind)?;
+        if kind.info().output != Output::LikeInputs {
+            return kind.writes().iter().copied().find(|t| t.name == name);
+        }
+        planned.inputs.iter().find_map(|input| match *input {
+            InputRef::Stage(i) => self.declared_table(i, name, registry),
+            InputRef::Dataset(_) => None,
+        })
     }
 
     /// Human name of an input.

@@ -273,11 +273,19 @@ impl StageContext {
         &self.out_dir
     }
 
-    /// Writes `df` as Parquet `name.parquet` with the run's key/value metadata. A table
-    /// the kind declares ([`Stage::WRITES`]) must match its declaration exactly.
+    /// Writes `df` as Parquet `name.parquet` with the run's key/value metadata. A kind
+    /// that declares its tables ([`Stage::WRITES`]) declares every table it writes, and
+    /// each must match its declaration exactly.
     pub fn write_table(&mut self, name: &str, df: &mut DataFrame) -> Result<PathBuf, StageError> {
-        if let Some(table) = self.writes.iter().find(|t| t.name == name) {
-            table.check_frame(df).map_err(StageError::Declaration)?;
+        match self.writes.iter().find(|t| t.name == name) {
+            Some(table) => table.check_frame(df).map_err(StageError::Declaration)?,
+            None if !self.writes.is_empty() => {
+                return Err(StageError::Declaration(format!(
+                    "{name}.parquet is not among the tables the kind declares ({})",
+                    self.writes.iter().map(|t| t.file()).collect::<Vec<_>>().join(", ")
+                )))
+            }
+            None => {}
         }
         let path = self.output_path(&format!("{name}.parquet"))?;
         let meta = artifact::TableMeta {
@@ -398,5 +406,49 @@ impl Registry {
     /// All kind names, sorted.
     pub fn names(&self) -> Vec<&'static str> {
         self.kinds.keys().copied().collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use polars::prelude::df;
+
+    use super::*;
+
+    crate::table! {
+        /// A test table.
+        mod samples = "samples" {
+            /// Where.
+            x_mm: Float64 "mm",
+        }
+    }
+
+    fn context(out_dir: &Path, writes: &'static [&'static Table]) -> StageContext {
+        StageContext {
+            stage: "s".into(),
+            params: Params::default(),
+            inputs: Vec::new(),
+            seed: 0,
+            stage_hash: "0".into(),
+            params_hash: "0".into(),
+            out_dir: out_dir.to_path_buf(),
+            rows: 0,
+            progress: None,
+            writes,
+        }
+    }
+
+    #[test]
+    fn a_kind_that_declares_its_tables_writes_only_those_and_as_declared() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut declared = context(dir.path(), &[&samples::TABLE]);
+        declared.write_table("samples", &mut df!("x_mm" => [1.0]).unwrap()).unwrap();
+        let wrong = declared.write_table("samples", &mut df!("y_mm" => [1.0]).unwrap()).unwrap_err();
+        assert!(wrong.to_string().contains("samples.parquet declares [x_mm: f64]"), "{wrong}");
+        let undeclared = declared.write_table("other", &mut df!("x_mm" => [1.0]).unwrap()).unwrap_err();
+        assert!(undeclared.to_string().contains("other.parquet is not among"), "{undeclared}");
+        assert!(!dir.path().join("other.parquet").exists());
+        let mut undeclaring = context(dir.path(), &[]);
+        undeclaring.write_table("other", &mut df!("y_mm" => [1.0]).unwrap()).unwrap();
     }
 }

@@ -161,3 +161,15 @@ pipeline::table! {
         coverage: Int64 "1",
     }
 }
+
+/// Every table of this module.
+pub const ALL: &[&pipeline::schema::Table] = &[
+    &line_summary::TABLE,
+    &widths::TABLE,
+    &kinematics::TABLE,
+    &loo::TABLE,
+    &loo_predictions::TABLE,
+    &r_surface::TABLE,
+    &infill::TABLE,
+    &infill_map::TABLE,
+];

@@ -5,7 +5,9 @@
 //! vertex by intersecting the two bead ridges ([`vertex`]), estimate each frame's homography
 //! (eq. 27, [`homography`]), localize the frame in time (eqs 29-30, [`localize`]) and
 //! extract the left/right deposited half-widths along the deposition directions
-//! (Sec. 2.4, [`widths`]); [`pipeline`] runs one frame end to end.
+//! (Sec. 2.4, [`widths`]); [`pipeline`] runs one frame end to end, and
+//! [`sequence_widths`] reads every sample of a localised sequence in one frame at one
+//! bead age, at a threshold T_t calibrated per layer on straight samples.
 //!
 //! Our extension of Sec. 2.3: the camera is rigid on a head that only translates, so one
 //! mount homography fitted to the whole sequence ([`mount`]) and one translation per
@@ -34,6 +36,7 @@ pub mod matching;
 pub mod mount;
 pub mod pipeline;
 pub mod rigid;
+pub mod sequence_widths;
 pub mod synth;
 pub mod vertex;
 pub mod widths;

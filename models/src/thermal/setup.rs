@@ -106,6 +106,18 @@ impl PrintSetup {
     pub fn conventional_command(&self, trajectory: &super::Trajectory) -> Vec<f64> {
         trajectory.speed_mm_s().iter().map(|v| self.nominal_deposition_velocity_mm_s(*v)).collect()
     }
+
+    /// The samples of `trajectory` where the nominal deposition dynamics (eq. 34 with
+    /// this setup's τ) have settled: the conventional command through G(s) is within
+    /// `tolerance` × the steady command at the feed. After each corner the head
+    /// accelerates while the flow still lags, so a short leg is thinner than the nominal
+    /// bead along most of its length; only settled samples show the nominal bead.
+    pub fn settled_samples(&self, trajectory: &super::Trajectory, tolerance: f64) -> Vec<bool> {
+        let command = self.conventional_command(trajectory);
+        let steady = self.nominal_deposition_velocity_mm_s(self.feed_mm_s);
+        let excess = super::dynamics::lag_excess(&command, trajectory.dt_s, self.tau_s);
+        excess.iter().map(|e| e.abs() <= tolerance * steady).collect()
+    }
 }
 
 /// Height of each tooth of the test path's zig-zags (mm).
@@ -195,6 +207,27 @@ mod tests {
             assert_eq!(*v_e, expected);
         }
         assert!(command.iter().any(|v| *v > 0.0));
+    }
+
+    #[test]
+    fn a_steady_feed_settles_once_the_lag_has_decayed_to_the_tolerance() {
+        // Constant speed at the feed from rest: the excess is −exp(−t/τ) of the steady
+        // command at t = (k+1)·dt, so a sample is settled from t = τ·ln(1/tolerance) on.
+        let setup = PrintSetup::paper_defaults();
+        let dt = setup.sample_period_s;
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * dt).collect();
+        let x: Vec<f64> = t.iter().map(|t| setup.feed_mm_s * t).collect();
+        let trajectory = super::super::Trajectory::from_samples(&t, &x, &vec![0.0; t.len()]).unwrap();
+        let speeds = trajectory.speed_mm_s();
+        let settled = setup.settled_samples(&trajectory, 0.02);
+        let settle_s = setup.tau_s * (1.0_f64 / 0.02).ln();
+        for (k, s) in settled.iter().enumerate().filter(|(k, _)| (speeds[*k] - setup.feed_mm_s).abs() < 1e-9) {
+            let t_s = (k + 1) as f64 * dt;
+            if (t_s - settle_s).abs() > 2.0 * dt {
+                assert_eq!(*s, t_s > settle_s, "sample {k} at {t_s} s");
+            }
+        }
+        assert!(settled[..10].iter().all(|s| !s) && settled[900..].iter().all(|s| *s));
     }
 
     #[test]

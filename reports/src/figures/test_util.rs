@@ -6,7 +6,7 @@ use std::path::Path;
 
 use pipeline::artifact::{write_parquet, TableMeta};
 use pipeline::schema::Table;
-use polars::prelude::DataFrame;
+use polars::prelude::{Column, DataFrame};
 
 /// A blank 1400×700 PNG compresses to a few kB; a drawn figure with text and data is
 /// well above this.
@@ -26,6 +26,25 @@ pub fn write_declared(dir: &Path, table: &Table, df: DataFrame) {
         panic!("the fixture does not match its declaration: {e}");
     }
     write_table(dir, table.name, df);
+}
+
+/// The fixture `df` as the declared table `table`: its columns in declared order, each
+/// cast to its declared type (a fixture may write `i32` ids), every declared column the
+/// fixture does not set null. Panics on a column `table` does not declare, so a fixture
+/// cannot hold a stale name.
+pub fn declared(table: &Table, df: DataFrame) -> DataFrame {
+    for name in df.get_column_names() {
+        assert!(table.column(name).is_some(), "{} declares no column `{name}`", table.file());
+    }
+    let columns: Vec<Column> = table
+        .columns
+        .iter()
+        .map(|c| match df.column(c.name) {
+            Ok(given) => given.strict_cast(&c.dtype.polars()).expect("the fixture's column casts to its declared type"),
+            Err(_) => Column::full_null(c.name.into(), df.height(), &c.dtype.polars()),
+        })
+        .collect();
+    DataFrame::new(df.height(), columns).expect("columns of equal length")
 }
 
 /// Asserts `<stem>.png` and `<stem>.svg` exist and the PNG holds more than a blank

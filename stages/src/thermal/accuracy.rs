@@ -39,6 +39,7 @@ use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::thermal::DepositGrid;
 use pipeline::params::ParamError;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use vision::camera::Undistorter;
@@ -48,6 +49,9 @@ use vision::homography::Homography;
 use super::common::{camera_model, f64s, ints, open_sequence, read_table};
 use crate::roles;
 use crate::table::{f64_col, frame, i64_col, if_present, opt_bools, opt_strs, str_col};
+use tables::thermal::{
+    accuracy, detections, directions, frames, mount, vertices, widths, FRAME_HOMOGRAPHY, MOUNT_HOMOGRAPHY,
+};
 
 /// The `thermal.accuracy_evaluate` stage kind.
 pub struct AccuracyEvaluateStage;
@@ -57,7 +61,22 @@ pub const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "the sequence's monitor: its frames, detections, mount, vertices and widths tables",
-);
+)
+.reading(&[
+    Reads {
+        table: &frames::TABLE,
+        columns: &[frames::layer, frames::frame, frames::recorded_time_s, frames::estimated_time_s],
+    },
+    Reads {
+        table: &detections::TABLE,
+        columns: &[detections::layer, detections::frame, detections::raw_u_px, detections::raw_v_px],
+    },
+    Reads {
+        table: &widths::TABLE,
+        columns: &[widths::layer, widths::sample, widths::x_mm, widths::y_mm, widths::w_left_mm, widths::w_right_mm],
+    },
+    Reads { table: &directions::TABLE, columns: &[directions::dep_x, directions::dep_y] },
+]);
 
 pipeline::params! {
     /// The parameters of `thermal.accuracy_evaluate`.
@@ -81,6 +100,7 @@ impl Stage for AccuracyEvaluateStage {
         inputs: &[roles::THERMAL_SEQUENCE, MONITOR],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&accuracy::TABLE];
 
     fn check(p: &AccuracyParams) -> Result<(), ParamError> {
         if p.band_low_c > p.band_high_c {
@@ -135,7 +155,7 @@ impl Stage for AccuracyEvaluateStage {
             skipped,
             "bad, out-of-order or corner-poor frames (see frames.parquet skip_reason)",
         );
-        ctx.write_table("accuracy", &mut metrics.into_frame()?)?;
+        ctx.write_table(accuracy::TABLE.name, &mut metrics.into_frame()?)?;
         Ok(())
     }
 }
@@ -161,11 +181,11 @@ impl Metrics {
 
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            str_col("metric", self.metric),
-            f64_col("value", self.value),
-            str_col("unit", self.unit),
-            i64_col("n", self.n),
-            str_col("note", self.note),
+            str_col(accuracy::metric, self.metric),
+            f64_col(accuracy::value, self.value),
+            str_col(accuracy::unit, self.unit),
+            i64_col(accuracy::n, self.n),
+            str_col(accuracy::note, self.note),
         ])
     }
 }
@@ -200,11 +220,10 @@ impl FrameRows {
     }
 
     fn read(dir: &Path) -> Result<Self, StageError> {
-        let file = dir.join("frames.parquet");
-        let df = read_table(dir, "frames.parquet")?;
-        let h: Vec<Vec<f64>> =
-            (0..9).map(|i| f64s(&df, &format!("h{}{}", i / 3 + 1, i % 3 + 1), &file)).collect::<Result<_, _>>()?;
-        let estimated_s = f64s(&df, "estimated_time_s", &file)?;
+        let file = dir.join(frames::TABLE.file());
+        let df = read_table(dir, &frames::TABLE.file())?;
+        let h: Vec<Vec<f64>> = FRAME_HOMOGRAPHY.iter().map(|name| f64s(&df, name, &file)).collect::<Result<_, _>>()?;
+        let estimated_s = f64s(&df, frames::estimated_time_s, &file)?;
         let homography = (0..estimated_s.len())
             .map(|r| {
                 let m = [[h[0][r], h[1][r], h[2][r]], [h[3][r], h[4][r], h[5][r]], [h[6][r], h[7][r], h[8][r]]];
@@ -213,26 +232,26 @@ impl FrameRows {
             .collect();
         let optional = |name: &str| if_present(&df, name, &file, f64s);
         let mut estimators = Vec::new();
-        for prefix in ["dlt", "rigid_mount"] {
-            if let Some(t) = optional(&format!("{prefix}_time_s"))? {
+        for (prefix, column) in [("dlt", frames::dlt_time_s), ("rigid_mount", frames::rigid_mount_time_s)] {
+            if let Some(t) = optional(column)? {
                 estimators.push((prefix, t));
             }
         }
-        let nozzle_mm = match (optional("nozzle_x_mm")?, optional("nozzle_y_mm")?) {
+        let nozzle_mm = match (optional(frames::nozzle_x_mm)?, optional(frames::nozzle_y_mm)?) {
             (Some(x), Some(y)) => Some(x.iter().zip(&y).map(|(x, y)| [*x, *y]).collect()),
             _ => None,
         };
         let n = estimated_s.len();
-        let placed_by = if_present(&df, "placed_by", &file, opt_strs)?.unwrap_or_else(|| vec![None; n]);
+        let placed_by = if_present(&df, frames::placed_by, &file, opt_strs)?.unwrap_or_else(|| vec![None; n]);
         let placed = |how: &str| -> Vec<bool> { placed_by.iter().map(|p| p.as_deref() == Some(how)).collect() };
-        let repeated = if_present(&df, "repeat_of_frame", &file, ints)?
+        let repeated = if_present(&df, frames::repeat_of_frame, &file, ints)?
             .map_or_else(|| vec![false; n], |r| r.iter().map(|r| *r >= 0).collect());
-        let at_window_edge = if_present(&df, "at_window_edge", &file, opt_bools)?
+        let at_window_edge = if_present(&df, frames::at_window_edge, &file, opt_bools)?
             .map_or_else(|| vec![false; n], |e| e.iter().map(|v| *v == Some(true)).collect());
         Ok(Self {
-            layer: ints(&df, "layer", &file)?,
-            frame: ints(&df, "frame", &file)?,
-            recorded_s: f64s(&df, "recorded_time_s", &file)?,
+            layer: ints(&df, frames::layer, &file)?,
+            frame: ints(&df, frames::frame, &file)?,
+            recorded_s: f64s(&df, frames::recorded_time_s, &file)?,
             used: estimated_s.iter().map(|t| t.is_finite()).collect(),
             by_recorded_time: placed("recorded_time"),
             parked: placed("parked"),
@@ -371,14 +390,13 @@ fn mount_metrics(
     undistorter: &Undistorter,
     metrics: &mut Metrics,
 ) -> Result<Option<Mounts>, StageError> {
-    if !monitor.join("mount.parquet").is_file() {
+    if !monitor.join(mount::TABLE.file()).is_file() {
         return Ok(None);
     }
-    let file = monitor.join("mount.parquet");
-    let df = read_table(monitor, "mount.parquet")?;
-    let h: Vec<Vec<f64>> =
-        (0..9).map(|i| f64s(&df, &format!("h{}{}", i / 3 + 1, i % 3 + 1), &file)).collect::<Result<_, _>>()?;
-    let applied = opt_bools(&df, "applied", &file)?;
+    let file = monitor.join(mount::TABLE.file());
+    let df = read_table(monitor, &mount::TABLE.file())?;
+    let h: Vec<Vec<f64>> = MOUNT_HOMOGRAPHY.iter().map(|name| f64s(&df, name, &file)).collect::<Result<_, _>>()?;
+    let applied = opt_bools(&df, mount::applied, &file)?;
     let Some(last) = applied.iter().position(|a| *a == Some(true)) else { return Ok(None) };
     let fitted = Homography {
         m: [
@@ -438,15 +456,15 @@ fn vertex_metrics(
     mounts: Option<&Mounts>,
     metrics: &mut Metrics,
 ) -> Result<(), StageError> {
-    if !monitor.join("vertices.parquet").is_file() {
+    if !monitor.join(vertices::TABLE.file()).is_file() {
         return Ok(());
     }
-    let file = monitor.join("vertices.parquet");
-    let df = read_table(monitor, "vertices.parquet")?;
+    let file = monitor.join(vertices::TABLE.file());
+    let df = read_table(monitor, &vertices::TABLE.file())?;
     let (layer, frame_no, vertex) =
-        (ints(&df, "layer", &file)?, ints(&df, "frame", &file)?, ints(&df, "vertex", &file)?);
-    let (u, v) = (f64s(&df, "raw_u_px", &file)?, f64s(&df, "raw_v_px", &file)?);
-    let used: Vec<bool> = opt_bools(&df, "used", &file)?.into_iter().map(|b| b == Some(true)).collect();
+        (ints(&df, vertices::layer, &file)?, ints(&df, vertices::frame, &file)?, ints(&df, vertices::vertex, &file)?);
+    let (u, v) = (f64s(&df, vertices::raw_u_px, &file)?, f64s(&df, vertices::raw_v_px, &file)?);
+    let used: Vec<bool> = opt_bools(&df, vertices::used, &file)?.into_iter().map(|b| b == Some(true)).collect();
     let true_corner = |i: usize| {
         truth
             .corners
@@ -541,15 +559,15 @@ fn homography_metrics(
 }
 
 fn width_metrics(monitor: &Path, truth: &ThermalTruth, metrics: &mut Metrics) -> Result<(), StageError> {
-    let file = monitor.join("widths.parquet");
-    let df = read_table(monitor, "widths.parquet")?;
-    let dirs_file = monitor.join("directions.parquet");
-    let dirs = read_table(monitor, "directions.parquet")?;
-    let (dep_x, dep_y) = (f64s(&dirs, "dep_x", &dirs_file)?, f64s(&dirs, "dep_y", &dirs_file)?);
-    let layer = ints(&df, "layer", &file)?;
-    let sample = ints(&df, "sample", &file)?;
-    let (x, y) = (f64s(&df, "x_mm", &file)?, f64s(&df, "y_mm", &file)?);
-    let (wl, wr) = (f64s(&df, "w_left_mm", &file)?, f64s(&df, "w_right_mm", &file)?);
+    let file = monitor.join(widths::TABLE.file());
+    let df = read_table(monitor, &widths::TABLE.file())?;
+    let dirs_file = monitor.join(directions::TABLE.file());
+    let dirs = read_table(monitor, &directions::TABLE.file())?;
+    let (dep_x, dep_y) = (f64s(&dirs, directions::dep_x, &dirs_file)?, f64s(&dirs, directions::dep_y, &dirs_file)?);
+    let layer = ints(&df, widths::layer, &file)?;
+    let sample = ints(&df, widths::sample, &file)?;
+    let (x, y) = (f64s(&df, widths::x_mm, &file)?, f64s(&df, widths::y_mm, &file)?);
+    let (wl, wr) = (f64s(&df, widths::w_left_mm, &file)?, f64s(&df, widths::w_right_mm, &file)?);
     let mut deposits: Vec<Option<DepositGrid>> = Vec::new();
     let (mut abs_err, mut signed) = (Vec::new(), Vec::new());
     for i in (0..layer.len()).filter(|&i| wl[i].is_finite() && wr[i].is_finite()) {
@@ -588,10 +606,10 @@ fn detection_metrics(
     radius_px: f64,
     metrics: &mut Metrics,
 ) -> Result<(), StageError> {
-    let file = monitor.join("detections.parquet");
-    let df = read_table(monitor, "detections.parquet")?;
-    let (layer, frame_no) = (ints(&df, "layer", &file)?, ints(&df, "frame", &file)?);
-    let (u, v) = (f64s(&df, "raw_u_px", &file)?, f64s(&df, "raw_v_px", &file)?);
+    let file = monitor.join(detections::TABLE.file());
+    let df = read_table(monitor, &detections::TABLE.file())?;
+    let (layer, frame_no) = (ints(&df, detections::layer, &file)?, ints(&df, detections::frame, &file)?);
+    let (u, v) = (f64s(&df, detections::raw_u_px, &file)?, f64s(&df, detections::raw_v_px, &file)?);
     let repeats = frames.repeats();
     let mut keys: Vec<(i64, i64)> =
         truth.frames.iter().map(|f| (f.layer as i64, f.frame as i64)).filter(|key| !repeats.contains(key)).collect();

@@ -73,6 +73,7 @@ use models::thermal::dynamics::lag_excess;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
 use pipeline::params::StageParams;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
@@ -81,6 +82,7 @@ use super::common::{f64s, ints, open_sequence, read_table, sample_index, traject
 use crate::roles;
 use crate::table::{f64_col, frame, i64_col};
 use models::thermal::setup::interior_angles_deg;
+use tables::thermal::{detections, directions, widths};
 
 /// The temperature band over which the paper identified K_e (Sec. 3.2): its corners are
 /// measured at 140-150 °C, so K_e runs from 1 to 1.67. A corner measured outside the band
@@ -96,14 +98,34 @@ pub const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "the sequence's monitor: its widths.parquet, directions.parquet and detections.parquet",
-);
+)
+.reading(&[
+    WIDTHS_READ,
+    Reads {
+        table: &directions::TABLE,
+        columns: &[
+            directions::sample,
+            directions::dep_x,
+            directions::dep_y,
+            directions::psi_rad,
+            directions::kappa_eff_per_mm,
+            directions::speed_mm_s,
+        ],
+    },
+    Reads { table: &detections::TABLE, columns: &[detections::matched_vertex, detections::temp_c] },
+]);
+
+/// What the compensation reads of a widths table (the monitor's, or one in its place).
+const WIDTHS_READ: Reads =
+    Reads { table: &widths::TABLE, columns: &[widths::layer, widths::sample, widths::w_left_mm, widths::w_right_mm] };
 
 /// Widths read otherwise, in place of the monitor's.
 pub const WIDTHS: Input = Input::optional(
     "widths",
     &[Source::Stage("thermal.true_widths_evaluate"), Source::Stage("thermal.monitor")],
     "a widths.parquet with the monitor's columns used in place of the monitor's: `thermal.true_widths_evaluate`, the printer's true widths (an evaluation of the method with a perfect camera)",
-);
+)
+.reading(&[WIDTHS_READ]);
 
 pipeline::choice! {
     /// What the compensation cancels.
@@ -203,9 +225,9 @@ impl Stage for CompensateStage {
         let tables = MonitorInputs {
             dir: &monitor_dir,
             widths_dir: &widths_dir,
-            widths: &read_table(&widths_dir, "widths.parquet")?,
-            directions: &read_table(&monitor_dir, "directions.parquet")?,
-            detections: &read_table(&monitor_dir, "detections.parquet")?,
+            widths: &read_table(&widths_dir, &widths::TABLE.file())?,
+            directions: &read_table(&monitor_dir, &directions::TABLE.file())?,
+            detections: &read_table(&monitor_dir, &detections::TABLE.file())?,
         };
         let tau_s = seq.process.print_setup().tau_s;
         let c = compensate(&seq, &tables, p, tau_s)?;
@@ -278,11 +300,11 @@ pub fn compensate(
     let trajectory = trajectory_of(seq)?;
     let layers = params.layer..params.layer + params.layers;
     let measured =
-        MeasuredWidths::read(tables.widths, &tables.widths_dir.join("widths.parquet"), layers, trajectory.len())?;
+        MeasuredWidths::read(tables.widths, &tables.widths_dir.join(widths::TABLE.file()), layers, trajectory.len())?;
     let frame_geometry =
-        DepositionFrame::read(tables.directions, &tables.dir.join("directions.parquet"), trajectory.len())?;
+        DepositionFrame::read(tables.directions, &tables.dir.join(directions::TABLE.file()), trajectory.len())?;
     let corner_temps_c =
-        corner_temperatures(tables.detections, &tables.dir.join("detections.parquet"), seq.path_mm.len())?;
+        corner_temperatures(tables.detections, &tables.dir.join(detections::TABLE.file()), seq.path_mm.len())?;
     let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
     let desired = match params.desired_width {
         DesiredWidth::Eq31 => frame_geometry.eq31_desired(setup.bead_width_mm / 2.0),
@@ -355,10 +377,10 @@ struct MeasuredWidths {
 
 impl MeasuredWidths {
     fn read(df: &DataFrame, file: &Path, layers: std::ops::Range<i64>, samples: usize) -> Result<Self, StageError> {
-        let layer = ints(df, "layer", file)?;
-        let sample = ints(df, "sample", file)?;
-        let left = f64s(df, "w_left_mm", file)?;
-        let right = f64s(df, "w_right_mm", file)?;
+        let layer = ints(df, widths::layer, file)?;
+        let sample = ints(df, widths::sample, file)?;
+        let left = f64s(df, widths::w_left_mm, file)?;
+        let right = f64s(df, widths::w_right_mm, file)?;
         let mut readings: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); samples];
         let mut found = 0;
         for i in (0..layer.len()).filter(|&i| layers.contains(&layer[i])) {
@@ -388,10 +410,15 @@ struct DepositionFrame {
 
 impl DepositionFrame {
     fn read(df: &DataFrame, file: &Path, samples: usize) -> Result<Self, StageError> {
-        let sample = ints(df, "sample", file)?;
+        let sample = ints(df, directions::sample, file)?;
         let col = |name: &str| f64s(df, name, file);
-        let (dep_x, dep_y, psi, kappa, speed) =
-            (col("dep_x")?, col("dep_y")?, col("psi_rad")?, col("kappa_eff_per_mm")?, col("speed_mm_s")?);
+        let (dep_x, dep_y, psi, kappa, speed) = (
+            col(directions::dep_x)?,
+            col(directions::dep_y)?,
+            col(directions::psi_rad)?,
+            col(directions::kappa_eff_per_mm)?,
+            col(directions::speed_mm_s)?,
+        );
         let zero = SweepSample { speed_mm_s: 0.0, psi_rad: 0.0, kappa_eff_per_mm: 0.0 };
         let mut out =
             Self { left_dir: vec![[0.0, 1.0]; samples], psi_rad: vec![0.0; samples], sweep: vec![zero; samples] };
@@ -423,8 +450,8 @@ impl DepositionFrame {
 
 /// Median temperature of each CAD corner's matched detections (NaN: never detected).
 fn corner_temperatures(df: &DataFrame, file: &Path, vertices: usize) -> Result<Vec<f64>, StageError> {
-    let vertex = ints(df, "matched_vertex", file)?;
-    let temp = f64s(df, "temp_c", file)?;
+    let vertex = ints(df, detections::matched_vertex, file)?;
+    let temp = f64s(df, detections::temp_c, file)?;
     Ok((0..vertices)
         .map(|v| {
             let mut t: Vec<f64> = (0..vertex.len()).filter(|&i| vertex[i] == v as i64).map(|i| temp[i]).collect();

@@ -22,6 +22,7 @@ use models::thermal::discrepancy::{
     ThermalRecord, WidthObservation,
 };
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
@@ -30,6 +31,7 @@ use polars::prelude::DataFrame;
 use super::common::{bools, f64s, ints, open_sequence, read_table, trajectory_of};
 use crate::discrepancy_tables::{DiscrepancyTables, Domain, EngineParams};
 use crate::parts::{data_set_units, merge_tables};
+use tables::thermal::{frames, widths};
 
 /// The thermal tables' names: one discovery per dataset, residuals in noise std's.
 const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
@@ -44,7 +46,34 @@ pub const PRINTS: Input = Input::many(
     2,
     &[Source::Dataset("thermal-sequence"), Source::Stage("thermal.monitor")],
     "filmed prints as (sequence, monitor) pairs in turn: a `thermal-sequence` and its `thermal.monitor`, whose frames.parquet and widths.parquet it reads (the pairing is checked when the stage runs)",
-);
+)
+.reading(MONITOR_READS);
+
+/// What the model reads of a print's monitor.
+pub const MONITOR_READS: &[Reads] = &[
+    Reads {
+        table: &frames::TABLE,
+        columns: &[
+            frames::layer,
+            frames::recorded_time_s,
+            frames::estimated_time_s,
+            frames::repeat_of_frame,
+            frames::at_window_edge,
+        ],
+    },
+    Reads {
+        table: &widths::TABLE,
+        columns: &[
+            widths::layer,
+            widths::sample,
+            widths::t_s,
+            widths::frame_index,
+            widths::w_left_mm,
+            widths::w_right_mm,
+            widths::temp_c,
+        ],
+    },
+];
 
 pipeline::params! {
     /// How far from every CAD vertex a bead width must be read to enter the model
@@ -139,8 +168,8 @@ impl Split for DiscrepancyStage {
 /// least `clearance_mm` from every vertex.
 pub fn record_of(sequence_dir: &Path, monitor_dir: &Path, clearance_mm: f64) -> Result<ThermalRecord, StageError> {
     let seq = open_sequence(sequence_dir)?;
-    let frames = read_table(monitor_dir, "frames.parquet")?;
-    let widths = read_table(monitor_dir, "widths.parquet")?;
+    let frames = read_table(monitor_dir, &frames::TABLE.file())?;
+    let widths = read_table(monitor_dir, &widths::TABLE.file())?;
     record_from_tables(&seq, &frames, &widths, monitor_dir, clearance_mm)
 }
 
@@ -154,8 +183,8 @@ pub fn record_from_tables(
 ) -> Result<ThermalRecord, StageError> {
     let trajectory = trajectory_of(seq)?;
     let setup = seq.process.print_setup();
-    let (frame_file, width_file) = (monitor_dir.join("frames.parquet"), monitor_dir.join("widths.parquet"));
-    let estimated = f64s(frames, "estimated_time_s", &frame_file)?;
+    let (frame_file, width_file) = (monitor_dir.join(frames::TABLE.file()), monitor_dir.join(widths::TABLE.file()));
+    let estimated = f64s(frames, frames::estimated_time_s, &frame_file)?;
     let straight = straight_run_samples(&trajectory, &seq.path_mm, setup.feed_mm_s, clearance_mm);
     let bead_widths = straight_run_widths(widths, &width_file, &straight, &estimated)?;
     let frames = frame_offsets(frames, &frame_file)?;
@@ -187,9 +216,12 @@ pub fn record_from_tables(
 
 /// Localised, uncensored, non-repeated frames with a capture-time estimate.
 fn frame_offsets(df: &DataFrame, file: &Path) -> Result<Vec<FrameObservation>, StageError> {
-    let (layer, repeat, edge) =
-        (ints(df, "layer", file)?, ints(df, "repeat_of_frame", file)?, bools(df, "at_window_edge", file)?);
-    let (recorded, estimated) = (f64s(df, "recorded_time_s", file)?, f64s(df, "estimated_time_s", file)?);
+    let (layer, repeat, edge) = (
+        ints(df, frames::layer, file)?,
+        ints(df, frames::repeat_of_frame, file)?,
+        bools(df, frames::at_window_edge, file)?,
+    );
+    let (recorded, estimated) = (f64s(df, frames::recorded_time_s, file)?, f64s(df, frames::estimated_time_s, file)?);
     Ok((0..df.height())
         .filter(|&i| estimated[i].is_finite() && repeat[i] < 0 && !edge[i] && layer[i] >= 0)
         .map(|i| FrameObservation {
@@ -208,8 +240,9 @@ fn straight_run_widths(
     straight: &[bool],
     estimated_time_s: &[f64],
 ) -> Result<Vec<WidthObservation>, StageError> {
-    let (layer, sample, frame) = (ints(df, "layer", file)?, ints(df, "sample", file)?, ints(df, "frame_index", file)?);
-    let (left, right) = (f64s(df, "w_left_mm", file)?, f64s(df, "w_right_mm", file)?);
+    let (layer, sample, frame) =
+        (ints(df, widths::layer, file)?, ints(df, widths::sample, file)?, ints(df, widths::frame_index, file)?);
+    let (left, right) = (f64s(df, widths::w_left_mm, file)?, f64s(df, widths::w_right_mm, file)?);
     let timed = |f: i64| usize::try_from(f).ok().and_then(|f| estimated_time_s.get(f)).is_some_and(|t| t.is_finite());
     let mut out = Vec::new();
     for i in 0..df.height() {
@@ -224,8 +257,8 @@ fn straight_run_widths(
 
 /// Every sample's finite centre temperature.
 fn centre_temperatures(df: &DataFrame, file: &Path) -> Result<Vec<TemperatureObservation>, StageError> {
-    let (layer, sample) = (ints(df, "layer", file)?, ints(df, "sample", file)?);
-    let (t, temp) = (f64s(df, "t_s", file)?, f64s(df, "temp_c", file)?);
+    let (layer, sample) = (ints(df, widths::layer, file)?, ints(df, widths::sample, file)?);
+    let (t, temp) = (f64s(df, widths::t_s, file)?, f64s(df, widths::temp_c, file)?);
     Ok((0..df.height())
         .filter(|&i| temp[i].is_finite() && layer[i] >= 0 && sample[i] >= 0)
         .map(|i| TemperatureObservation {

@@ -42,10 +42,8 @@
 
 use datasets::thermal::sequence::ThermalSequence;
 use models::progress::Progress;
-use models::stats::finite_median;
 use models::thermal::compensation::{desired_half_width_mm, width_error_mm};
 use models::thermal::dda::DepositionDirections;
-use models::thermal::dynamics::lag_excess;
 use models::thermal::geometry::half_widths_mm;
 use models::thermal::{PrintSetup, Trajectory};
 use pipeline::params::{ParamError, StageParams};
@@ -54,7 +52,8 @@ use pipeline::{StageContext, StageError};
 use vision::camera::Undistorter;
 use vision::localiser::{DetectionRow, Estimator, FrameOutcome, Localiser, LocaliserParams, Located, MountRow};
 use vision::pipeline::PipelineParams;
-use vision::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
+use vision::sequence_widths::{FrameView, LayerWidths, Reading, SequenceWidths, Threshold};
+use vision::widths::{bilinear, WidthQuery};
 
 use super::common::{
     camera_model, deposition_directions, filmed_sequence, left_directions, open_sequence, trajectory_of, DatasetFrames,
@@ -62,6 +61,11 @@ use super::common::{
 use crate::progress::StageProgress;
 use crate::roles;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
+use pipeline::schema::Table;
+use tables::thermal::{
+    detections, detections_example, directions, frame_example, frame_example_meta, frames, mosaic, mount, vertices,
+    widths, FRAME_HOMOGRAPHY, MOUNT_HOMOGRAPHY,
+};
 
 /// The `thermal.monitor` stage kind.
 pub struct MonitorStage;
@@ -122,6 +126,18 @@ impl Stage for MonitorStage {
         inputs: &[roles::THERMAL_SEQUENCE],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[
+        &directions::TABLE,
+        &widths::TABLE,
+        &frames::TABLE,
+        &detections::TABLE,
+        &mount::TABLE,
+        &vertices::TABLE,
+        &frame_example::TABLE,
+        &detections_example::TABLE,
+        &frame_example_meta::TABLE,
+        &mosaic::TABLE,
+    ];
 
     fn check(p: &MonitorParams) -> Result<(), ParamError> {
         if p.band_low_c > p.band_high_c {
@@ -142,14 +158,14 @@ impl Stage for MonitorStage {
         let trajectory = trajectory_of(&seq)?;
         let (with_dda, without_dda) = deposition_directions(&seq, &trajectory, &setup)?;
         let mut directions = directions_frame(&trajectory, &with_dda, &without_dda, &setup)?;
-        ctx.write_table("directions", &mut directions)?;
+        ctx.write_table(directions::TABLE.name, &mut directions)?;
         let analysis = Analysis::new(&seq, &trajectory, &with_dda, &setup, p)?;
         let (frames, mounts) = analysis.localise(ctx.seed, p.localisation, &StageProgress::new(ctx))?;
         let widths = analysis.widths(&frames);
         write_frame_tables(ctx, &analysis.localiser.undistorter, &frames, p.localisation)?;
         write_mount_tables(ctx, &analysis.localiser.undistorter, &frames, &mounts)?;
         let mut table = widths_frame(&trajectory, &with_dda, &setup, &widths)?;
-        ctx.write_table("widths", &mut table)?;
+        ctx.write_table(widths::TABLE.name, &mut table)?;
         write_figure_tables(ctx, &seq, &analysis, &frames)
     }
 }
@@ -250,7 +266,7 @@ impl<'a> Analysis<'a> {
             .map(|k| WidthQuery { p_mm: [trajectory.x_mm[k], trajectory.y_mm[k]], n_left: left[k] })
             .collect();
         let corners: Vec<(u32, [f64; 2])> = seq.path_mm.iter().enumerate().map(|(i, p)| (i as u32, *p)).collect();
-        let settled = settled_flow(setup, trajectory);
+        let settled = setup.settled_samples(trajectory, SETTLED_FLOW_TOLERANCE);
         let straight = (0..trajectory.len())
             .map(|k| {
                 let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
@@ -288,122 +304,42 @@ impl<'a> Analysis<'a> {
         self.localiser.run(seed, method.estimator(), progress).map_err(StageError::domain)
     }
 
-    /// For each trajectory sample, the used frame in which its bead is closest to the
-    /// measuring age (within half a frame period).
-    fn frame_of_samples(&self, frames: &[FrameOutcome], layer: usize) -> Vec<Option<usize>> {
-        let half_period = 0.5 * self.seq.camera.frame_period_s;
-        let mut best: Vec<Option<(usize, f64)>> = vec![None; self.trajectory.len()];
-        for (i, f, loc) in frames.iter().enumerate().filter_map(|(i, f)| f.located().map(|l| (i, f, l))) {
-            if f.entry.layer != layer {
-                continue;
-            }
-            for (k, slot) in best.iter_mut().enumerate() {
-                let miss = (loc.t_s - self.trajectory.t_s[k] - self.settings.measure_age_s).abs();
-                if miss <= half_period && slot.is_none_or(|(_, m)| miss < m) {
-                    *slot = Some((i, miss));
-                }
-            }
-        }
-        best.into_iter().map(|b| b.map(|(i, _)| i)).collect()
-    }
-
-    /// Widths of every layer's samples at the (calibrated) threshold.
+    /// Widths of every layer's samples at the (calibrated) threshold
+    /// (`vision::sequence_widths`).
     fn widths(&self, frames: &[FrameOutcome]) -> Vec<LayerWidths> {
-        let layers = frames.iter().map(|f| f.entry.layer).max().map_or(0, |l| l + 1);
-        (0..layers)
-            .map(|layer| {
-                let owner = self.frame_of_samples(frames, layer);
-                let threshold_c = if self.settings.calibrate_threshold {
-                    self.calibrated_threshold(frames, &owner)
-                } else {
-                    self.settings.threshold_c
-                };
-                let measured = self.read_widths(frames, &owner, threshold_c);
-                LayerWidths { layer, threshold_c, owner, measured }
-            })
-            .collect()
-    }
-
-    /// Half widths and centre temperature of every sample at `threshold_c`.
-    fn read_widths(&self, frames: &[FrameOutcome], owner: &[Option<usize>], threshold_c: f64) -> Vec<Measured> {
-        let params = WidthParams { threshold_c, ..self.localiser.params.widths };
-        let mut out = Vec::with_capacity(1);
-        owner
-            .iter()
-            .zip(&self.queries)
-            .map(|(frame, query)| {
-                let Some(f) = frame.map(|i| &frames[i]) else { return Measured::default() };
-                let (Some(image), Some(h)) = (&f.undistorted, f.located().map(|l| &l.plane_to_px)) else {
-                    return Measured::default();
-                };
-                extract_widths_into(image, h, std::slice::from_ref(query), &params, &mut out);
-                let px = h.apply(query.p_mm);
-                let temp_c = bilinear(image, px[0], px[1]).unwrap_or(f64::NAN);
-                let (left, right) = out[0].unwrap_or((f64::NAN, f64::NAN));
-                Measured { left_mm: left, right_mm: right, temp_c }
-            })
-            .collect()
-    }
-
-    /// T_t at which the median straight-bead width equals the nominal width (bisection:
-    /// the contour narrows as the threshold rises).
-    fn calibrated_threshold(&self, frames: &[FrameOutcome], owner: &[Option<usize>]) -> f64 {
-        let straight_owner: Vec<Option<usize>> =
-            owner.iter().zip(&self.straight).map(|(o, s)| if *s { *o } else { None }).collect();
-        let median_width = |t: f64| -> f64 {
-            finite_median(self.read_widths(frames, &straight_owner, t).iter().map(|m| m.left_mm + m.right_mm))
-        };
-        let (mut lo, mut hi) = (self.seq.process.bed_temp_c + 1.0, self.seq.process.nozzle_temp_c);
-        for _ in 0..30 {
-            let mid = 0.5 * (lo + hi);
-            let w = median_width(mid);
-            if !w.is_finite() || w < self.bead_width_mm {
-                hi = mid;
-            } else {
-                lo = mid;
+        let threshold = if self.settings.calibrate_threshold {
+            Threshold::Calibrated {
+                low_c: self.seq.process.bed_temp_c + 1.0,
+                high_c: self.seq.process.nozzle_temp_c,
+                nominal_width_mm: self.bead_width_mm,
             }
-        }
-        0.5 * (lo + hi)
-    }
-}
-
-/// The widths read on one layer.
-struct LayerWidths {
-    layer: usize,
-    threshold_c: f64,
-    owner: Vec<Option<usize>>,
-    measured: Vec<Measured>,
-}
-
-/// One sample's reading.
-#[derive(Debug, Clone, Copy)]
-struct Measured {
-    left_mm: f64,
-    right_mm: f64,
-    temp_c: f64,
-}
-
-impl Default for Measured {
-    fn default() -> Self {
-        Self { left_mm: f64::NAN, right_mm: f64::NAN, temp_c: f64::NAN }
+        } else {
+            Threshold::Fixed(self.settings.threshold_c)
+        };
+        let reading = Reading {
+            measure_age_s: self.settings.measure_age_s,
+            frame_period_s: self.seq.camera.frame_period_s,
+            widths: self.localiser.params.widths,
+            threshold,
+        };
+        let views: Vec<FrameView> = frames
+            .iter()
+            .map(|f| FrameView {
+                layer: f.entry.layer,
+                placed: f.located().map(|l| (l.t_s, &l.plane_to_px)),
+                image: f.undistorted.as_ref(),
+            })
+            .collect();
+        SequenceWidths { t_s: &self.trajectory.t_s, queries: &self.queries, straight: &self.straight, reading }
+            .layers(&views)
     }
 }
 
 /// Largest relative gap between the lagged and the commanded flow at which a sample's
-/// bead counts as settled for the T_t calibration.
+/// bead counts as settled for the T_t calibration (`PrintSetup::settled_samples`: after
+/// each corner the head accelerates while the flow still lags, so a short leg is thinner
+/// than the nominal bead along most of its length).
 const SETTLED_FLOW_TOLERANCE: f64 = 0.02;
-
-/// Samples where the nominal deposition dynamics (eq. 34 with the nominal τ) have
-/// settled: the lagged conventional command is within [`SETTLED_FLOW_TOLERANCE`] of the
-/// command. After each corner the head accelerates while the flow still lags, so a short
-/// leg of the test path is thinner than the nominal bead along most of its length; only
-/// settled samples may calibrate T_t to the nominal width.
-fn settled_flow(setup: &PrintSetup, trajectory: &Trajectory) -> Vec<bool> {
-    let command = setup.conventional_command(trajectory);
-    let steady = setup.nominal_deposition_velocity_mm_s(setup.feed_mm_s);
-    let excess = lag_excess(&command, trajectory.dt_s, setup.tau_s);
-    excess.iter().map(|e| e.abs() <= SETTLED_FLOW_TOLERANCE * steady).collect()
-}
 
 /// The skip reasons of `frames`, counted: "12 × too few corners: …; 3 × …".
 fn skip_summary(frames: &[FrameOutcome]) -> String {
@@ -470,24 +406,24 @@ fn directions_frame(
         wr0[k] = if slender { plain.right_mm } else { f64::NAN };
     }
     frame(vec![
-        i64_col("sample", (0..n as i64).collect()),
-        f64_col("t_s", trajectory.t_s.clone()),
-        f64_col("x_mm", trajectory.x_mm.clone()),
-        f64_col("y_mm", trajectory.y_mm.clone()),
-        f64_col("speed_mm_s", speed),
-        f64_col("kappa_per_mm", with.curvature_per_mm.clone()),
-        f64_col("kappa_eff_per_mm", with.effective_curvature_per_mm.clone()),
-        f64_col("psi_rad", with.psi_rad.clone()),
-        f64_col("slender_before", with.slender_before.clone()),
-        f64_col("slender_after", with.slender_after.clone()),
-        f64_col("normal_x", normal.iter().map(|d| d[0]).collect()),
-        f64_col("normal_y", normal.iter().map(|d| d[1]).collect()),
-        f64_col("dep_x", left.iter().map(|d| d[0]).collect()),
-        f64_col("dep_y", left.iter().map(|d| d[1]).collect()),
-        f64_col("w_left_mm", wl),
-        f64_col("w_right_mm", wr),
-        f64_col("w_left_no_dda_mm", wl0),
-        f64_col("w_right_no_dda_mm", wr0),
+        i64_col(directions::sample, (0..n as i64).collect()),
+        f64_col(directions::t_s, trajectory.t_s.clone()),
+        f64_col(directions::x_mm, trajectory.x_mm.clone()),
+        f64_col(directions::y_mm, trajectory.y_mm.clone()),
+        f64_col(directions::speed_mm_s, speed),
+        f64_col(directions::kappa_per_mm, with.curvature_per_mm.clone()),
+        f64_col(directions::kappa_eff_per_mm, with.effective_curvature_per_mm.clone()),
+        f64_col(directions::psi_rad, with.psi_rad.clone()),
+        f64_col(directions::slender_before, with.slender_before.clone()),
+        f64_col(directions::slender_after, with.slender_after.clone()),
+        f64_col(directions::normal_x, normal.iter().map(|d| d[0]).collect()),
+        f64_col(directions::normal_y, normal.iter().map(|d| d[1]).collect()),
+        f64_col(directions::dep_x, left.iter().map(|d| d[0]).collect()),
+        f64_col(directions::dep_y, left.iter().map(|d| d[1]).collect()),
+        f64_col(directions::w_left_mm, wl),
+        f64_col(directions::w_right_mm, wr),
+        f64_col(directions::w_left_no_dda_mm, wl0),
+        f64_col(directions::w_right_no_dda_mm, wr0),
     ])
 }
 
@@ -528,18 +464,18 @@ fn widths_frame(
     }
     let [t, x, y, temp, wl, wr, wd, dw, tt] = cols;
     frame(vec![
-        i64_col("layer", layer_col),
-        i64_col("sample", sample_col),
-        f64_col("t_s", t),
-        f64_col("x_mm", x),
-        f64_col("y_mm", y),
-        f64_col("temp_c", temp),
-        f64_col("w_left_mm", wl),
-        f64_col("w_right_mm", wr),
-        f64_col("w_desired_mm", wd),
-        f64_col("dw_mm", dw),
-        i64_col("frame_index", frame_col),
-        f64_col("threshold_c", tt),
+        i64_col(widths::layer, layer_col),
+        i64_col(widths::sample, sample_col),
+        f64_col(widths::t_s, t),
+        f64_col(widths::x_mm, x),
+        f64_col(widths::y_mm, y),
+        f64_col(widths::temp_c, temp),
+        f64_col(widths::w_left_mm, wl),
+        f64_col(widths::w_right_mm, wr),
+        f64_col(widths::w_desired_mm, wd),
+        f64_col(widths::dw_mm, dw),
+        i64_col(widths::frame_index, frame_col),
+        f64_col(widths::threshold_c, tt),
     ])
 }
 
@@ -550,7 +486,7 @@ fn frames_frame(frames: &[FrameOutcome], method: Localisation) -> Result<polars:
         .map(|i| {
             let values =
                 frames.iter().map(|f| located(f).map_or(f64::NAN, |l| l.px_to_plane.m[i / 3][i % 3])).collect();
-            f64_col(&format!("h{}{}", i / 3 + 1, i % 3 + 1), values)
+            f64_col(FRAME_HOMOGRAPHY[i], values)
         })
         .collect();
     let of = |g: fn(&Located) -> f64| -> Vec<f64> {
@@ -558,30 +494,30 @@ fn frames_frame(frames: &[FrameOutcome], method: Localisation) -> Result<polars:
     };
     let time_of = |r: &Result<Located, String>| r.as_ref().map_or(f64::NAN, |l| l.estimated_time_s());
     let mut columns = vec![
-        i64_col("layer", frames.iter().map(|f| f.entry.layer as i64).collect()),
-        i64_col("frame", frames.iter().map(|f| f.entry.frame as i64).collect()),
-        f64_col("recorded_time_s", frames.iter().map(|f| f.entry.recorded_time_s).collect()),
-        f64_col("estimated_time_s", of(|l| l.estimated_time_s())),
-        i64_col("corners_found", frames.iter().map(|f| f.corners_found as i64).collect()),
-        i64_col("corners_matched", frames.iter().map(|f| f.matched as i64).collect()),
-        f64_col("reproj_err_mm", of(|l| l.fit_err_mm)),
-        bool_col("used", frames.iter().map(FrameOutcome::localised).collect()),
+        i64_col(frames::layer, frames.iter().map(|f| f.entry.layer as i64).collect()),
+        i64_col(frames::frame, frames.iter().map(|f| f.entry.frame as i64).collect()),
+        f64_col(frames::recorded_time_s, frames.iter().map(|f| f.entry.recorded_time_s).collect()),
+        f64_col(frames::estimated_time_s, of(|l| l.estimated_time_s())),
+        i64_col(frames::corners_found, frames.iter().map(|f| f.corners_found as i64).collect()),
+        i64_col(frames::corners_matched, frames.iter().map(|f| f.matched as i64).collect()),
+        f64_col(frames::reproj_err_mm, of(|l| l.fit_err_mm)),
+        bool_col(frames::used, frames.iter().map(FrameOutcome::localised).collect()),
         str_col(
-            "placed_by",
+            frames::placed_by,
             frames.iter().map(|f| located(f).map_or("", |l| l.placed_by.name()).to_string()).collect(),
         ),
-        bool_col("at_window_edge", frames.iter().map(|f| located(f).is_some_and(|l| l.at_window_edge)).collect()),
-        str_col("skip_reason", frames.iter().map(|f| f.skip_reason().unwrap_or_default().to_string()).collect()),
-        i64_col("repeat_of_frame", frames.iter().map(|f| f.repeat_of.map_or(-1, |r| r as i64)).collect()),
+        bool_col(frames::at_window_edge, frames.iter().map(|f| located(f).is_some_and(|l| l.at_window_edge)).collect()),
+        str_col(frames::skip_reason, frames.iter().map(|f| f.skip_reason().unwrap_or_default().to_string()).collect()),
+        i64_col(frames::repeat_of_frame, frames.iter().map(|f| f.repeat_of.map_or(-1, |r| r as i64)).collect()),
     ];
     columns.extend(homography_cols);
     columns.extend([
-        str_col("localisation", vec![method.name().to_string(); frames.len()]),
-        i64_col("corners_used", frames.iter().map(|f| located(f).map_or(0, |l| l.pairs as i64)).collect()),
-        f64_col("nozzle_x_mm", of(|l| l.nozzle_mm[0])),
-        f64_col("nozzle_y_mm", of(|l| l.nozzle_mm[1])),
-        f64_col("dlt_time_s", frames.iter().map(|f| time_of(&f.dlt)).collect()),
-        f64_col("rigid_mount_time_s", frames.iter().map(|f| time_of(&f.rigid)).collect()),
+        str_col(frames::localisation, vec![method.name().to_string(); frames.len()]),
+        i64_col(frames::corners_used, frames.iter().map(|f| located(f).map_or(0, |l| l.pairs as i64)).collect()),
+        f64_col(frames::nozzle_x_mm, of(|l| l.nozzle_mm[0])),
+        f64_col(frames::nozzle_y_mm, of(|l| l.nozzle_mm[1])),
+        f64_col(frames::dlt_time_s, frames.iter().map(|f| time_of(&f.dlt)).collect()),
+        f64_col(frames::rigid_mount_time_s, frames.iter().map(|f| time_of(&f.rigid)).collect()),
     ]);
     frame(columns)
 }
@@ -593,8 +529,8 @@ fn write_frame_tables(
     frames: &[FrameOutcome],
     method: Localisation,
 ) -> Result<(), StageError> {
-    ctx.write_table("frames", &mut frames_frame(frames, method)?)?;
-    ctx.write_table("detections", &mut detections_frame(undistorter, frames)?)?;
+    ctx.write_table(frames::TABLE.name, &mut frames_frame(frames, method)?)?;
+    ctx.write_table(detections::TABLE.name, &mut detections_frame(undistorter, frames)?)?;
     Ok(())
 }
 
@@ -607,14 +543,14 @@ fn detections_frame(
         frames.iter().flat_map(|f| f.detections.iter().map(move |d| (f, d))).collect();
     let raw: Vec<[f64; 2]> = rows.iter().map(|(_, d)| undistorter.distort_px(d.1)).collect();
     frame(vec![
-        i64_col("layer", rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
-        i64_col("frame", rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
-        f64_col("u_px", rows.iter().map(|(_, d)| d.1[0]).collect()),
-        f64_col("v_px", rows.iter().map(|(_, d)| d.1[1]).collect()),
-        f64_col("raw_u_px", raw.iter().map(|p| p[0]).collect()),
-        f64_col("raw_v_px", raw.iter().map(|p| p[1]).collect()),
-        f64_col("temp_c", rows.iter().map(|(_, d)| d.2).collect()),
-        i64_col("matched_vertex", rows.iter().map(|(_, d)| d.0).collect()),
+        i64_col(detections::layer, rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
+        i64_col(detections::frame, rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
+        f64_col(detections::u_px, rows.iter().map(|(_, d)| d.1[0]).collect()),
+        f64_col(detections::v_px, rows.iter().map(|(_, d)| d.1[1]).collect()),
+        f64_col(detections::raw_u_px, raw.iter().map(|p| p[0]).collect()),
+        f64_col(detections::raw_v_px, raw.iter().map(|p| p[1]).collect()),
+        f64_col(detections::temp_c, rows.iter().map(|(_, d)| d.2).collect()),
+        i64_col(detections::matched_vertex, rows.iter().map(|(_, d)| d.0).collect()),
     ])
 }
 
@@ -629,34 +565,36 @@ fn write_mount_tables(
     mounts: &[MountRow],
 ) -> Result<(), StageError> {
     let fit_value = |m: &MountRow, g: &dyn Fn(&vision::mount::MountFit) -> f64| m.fit.as_ref().map_or(f64::NAN, g);
-    let mut columns = vec![i64_col("pass", mounts.iter().map(|m| m.pass).collect())];
-    for i in 0..9 {
-        let name = format!("h{}{}", i / 3 + 1, i % 3 + 1);
-        columns.push(f64_col(&name, mounts.iter().map(|m| fit_value(m, &|f| f.mount.m[i / 3][i % 3])).collect()));
+    let mut columns = vec![i64_col(mount::pass, mounts.iter().map(|m| m.pass).collect())];
+    for (i, name) in MOUNT_HOMOGRAPHY.iter().enumerate() {
+        columns.push(f64_col(name, mounts.iter().map(|m| fit_value(m, &|f| f.mount.m[i / 3][i % 3])).collect()));
     }
     columns.extend([
-        i64_col("pairs_used", mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.pairs_used as i64)).collect()),
-        i64_col("frames_used", mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.frames_used as i64)).collect()),
-        f64_col("rms_mm", mounts.iter().map(|m| fit_value(m, &|f| f.rms_mm)).collect()),
-        bool_col("applied", mounts.iter().map(|m| m.applied).collect()),
-        str_col("error", mounts.iter().map(|m| m.fit.as_ref().err().cloned().unwrap_or_default()).collect()),
+        i64_col(mount::pairs_used, mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.pairs_used as i64)).collect()),
+        i64_col(
+            mount::frames_used,
+            mounts.iter().map(|m| m.fit.as_ref().map_or(0, |f| f.frames_used as i64)).collect(),
+        ),
+        f64_col(mount::rms_mm, mounts.iter().map(|m| fit_value(m, &|f| f.rms_mm)).collect()),
+        bool_col(mount::applied, mounts.iter().map(|m| m.applied).collect()),
+        str_col(mount::error, mounts.iter().map(|m| m.fit.as_ref().err().cloned().unwrap_or_default()).collect()),
     ]);
-    ctx.write_table("mount", &mut frame(columns)?)?;
+    ctx.write_table(mount::TABLE.name, &mut frame(columns)?)?;
     let rows: Vec<(&FrameOutcome, usize)> =
         frames.iter().flat_map(|f| (0..f.pairs.len()).map(move |k| (f, k))).collect();
     let px = |(f, k): &(&FrameOutcome, usize)| f.pairs.image_px[*k];
     let raw: Vec<[f64; 2]> = rows.iter().map(|r| undistorter.distort_px(px(r))).collect();
     let mut vertices = frame(vec![
-        i64_col("layer", rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
-        i64_col("frame", rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
-        i64_col("vertex", rows.iter().map(|(f, k)| i64::from(f.pairs.ids[*k])).collect()),
-        f64_col("u_px", rows.iter().map(|r| px(r)[0]).collect()),
-        f64_col("v_px", rows.iter().map(|r| px(r)[1]).collect()),
-        f64_col("raw_u_px", raw.iter().map(|p| p[0]).collect()),
-        f64_col("raw_v_px", raw.iter().map(|p| p[1]).collect()),
-        bool_col("used", rows.iter().map(|(f, k)| f.pair_used.get(*k).copied().unwrap_or(false)).collect()),
+        i64_col(vertices::layer, rows.iter().map(|(f, _)| f.entry.layer as i64).collect()),
+        i64_col(vertices::frame, rows.iter().map(|(f, _)| f.entry.frame as i64).collect()),
+        i64_col(vertices::vertex, rows.iter().map(|(f, k)| i64::from(f.pairs.ids[*k])).collect()),
+        f64_col(vertices::u_px, rows.iter().map(|r| px(r)[0]).collect()),
+        f64_col(vertices::v_px, rows.iter().map(|r| px(r)[1]).collect()),
+        f64_col(vertices::raw_u_px, raw.iter().map(|p| p[0]).collect()),
+        f64_col(vertices::raw_v_px, raw.iter().map(|p| p[1]).collect()),
+        bool_col(vertices::used, rows.iter().map(|(f, k)| f.pair_used.get(*k).copied().unwrap_or(false)).collect()),
     ])?;
-    ctx.write_table("vertices", &mut vertices)?;
+    ctx.write_table(vertices::TABLE.name, &mut vertices)?;
     Ok(())
 }
 
@@ -688,25 +626,32 @@ fn write_figure_tables(
             t.push(f64::from(image.at(col, row)));
         }
     }
-    ctx.write_table("frame_example", &mut frame(vec![i64_col("u_px", u), i64_col("v_px", v), f64_col("temp_c", t)])?)?;
+    ctx.write_table(
+        frame_example::TABLE.name,
+        &mut frame(vec![
+            i64_col(frame_example::u_px, u),
+            i64_col(frame_example::v_px, v),
+            f64_col(frame_example::temp_c, t),
+        ])?,
+    )?;
     let d = &best.detections;
     let mut det = frame(vec![
-        f64_col("u_px", d.iter().map(|x| x.1[0]).collect()),
-        f64_col("v_px", d.iter().map(|x| x.1[1]).collect()),
-        f64_col("temp_c", d.iter().map(|x| x.2).collect()),
-        i64_col("matched_vertex", d.iter().map(|x| x.0).collect()),
+        f64_col(detections_example::u_px, d.iter().map(|x| x.1[0]).collect()),
+        f64_col(detections_example::v_px, d.iter().map(|x| x.1[1]).collect()),
+        f64_col(detections_example::temp_c, d.iter().map(|x| x.2).collect()),
+        i64_col(detections_example::matched_vertex, d.iter().map(|x| x.0).collect()),
     ])?;
-    ctx.write_table("detections_example", &mut det)?;
+    ctx.write_table(detections_example::TABLE.name, &mut det)?;
     let nozzle = analysis.localiser.undistorter.undistort_px(seq.camera.nozzle_px);
     let mut meta = frame(vec![
-        i64_col("layer", vec![best.entry.layer as i64]),
-        i64_col("frame", vec![best.entry.frame as i64]),
-        f64_col("nozzle_u_px", vec![nozzle[0]]),
-        f64_col("nozzle_v_px", vec![nozzle[1]]),
+        i64_col(frame_example_meta::layer, vec![best.entry.layer as i64]),
+        i64_col(frame_example_meta::frame, vec![best.entry.frame as i64]),
+        f64_col(frame_example_meta::nozzle_u_px, vec![nozzle[0]]),
+        f64_col(frame_example_meta::nozzle_v_px, vec![nozzle[1]]),
     ])?;
-    ctx.write_table("frame_example_meta", &mut meta)?;
+    ctx.write_table(frame_example_meta::TABLE.name, &mut meta)?;
     let mut mosaic = mosaic_frame(analysis, frames, best.entry.layer)?;
-    ctx.write_table("mosaic", &mut mosaic)?;
+    ctx.write_table(mosaic::TABLE.name, &mut mosaic)?;
     Ok(())
 }
 
@@ -739,9 +684,9 @@ fn mosaic_frame(
     }
     let keep: Vec<usize> = (0..nx * ny).filter(|&i| temp[i].is_finite()).collect();
     frame(vec![
-        f64_col("x_mm", keep.iter().map(|&i| x0 + ((i % nx) as f64 + 0.5) * MOSAIC_CELL_MM).collect()),
-        f64_col("y_mm", keep.iter().map(|&i| y0 + ((i / nx) as f64 + 0.5) * MOSAIC_CELL_MM).collect()),
-        f64_col("temp_c", keep.iter().map(|&i| temp[i]).collect()),
+        f64_col(mosaic::x_mm, keep.iter().map(|&i| x0 + ((i % nx) as f64 + 0.5) * MOSAIC_CELL_MM).collect()),
+        f64_col(mosaic::y_mm, keep.iter().map(|&i| y0 + ((i / nx) as f64 + 0.5) * MOSAIC_CELL_MM).collect()),
+        f64_col(mosaic::temp_c, keep.iter().map(|&i| temp[i]).collect()),
     ])
 }
 

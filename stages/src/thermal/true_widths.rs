@@ -22,6 +22,7 @@ use datasets::thermal::deposition::edge_distance_mm;
 use datasets::thermal::sequence::ThermalTruth;
 use models::stats::{finite_median, nearest_rank_quantile};
 use models::thermal::DepositGrid;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use rayon::prelude::*;
@@ -29,6 +30,7 @@ use rayon::prelude::*;
 use super::common::{f64s, ints, open_sequence, read_table, sample_index, trajectory_of};
 use crate::roles;
 use crate::table::{f64_col, frame, i64_col, str_col};
+use tables::thermal::{directions, true_widths, width_errors, widths};
 
 /// The `thermal.true_widths_evaluate` stage kind.
 pub struct TrueWidthsStage;
@@ -38,7 +40,11 @@ pub const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "the sequence's monitor: its deposition directions (directions.parquet) and readings (widths.parquet)",
-);
+)
+.reading(&[
+    Reads { table: &directions::TABLE, columns: &[directions::sample, directions::dep_x, directions::dep_y] },
+    Reads { table: &widths::TABLE, columns: &[widths::layer, widths::sample, widths::w_left_mm, widths::w_right_mm] },
+]);
 
 pipeline::params! {
     /// The parameters of `thermal.true_widths_evaluate`.
@@ -58,6 +64,7 @@ impl Stage for TrueWidthsStage {
         inputs: &[roles::THERMAL_SEQUENCE, MONITOR],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&true_widths::TABLE, &width_errors::TABLE];
 
     fn run(&self, ctx: &mut StageContext, params: &TrueWidthsParams) -> Result<(), StageError> {
         let sequence_dir = &ctx.input(&roles::THERMAL_SEQUENCE).dir;
@@ -80,8 +87,8 @@ impl Stage for TrueWidthsStage {
             errors.push_layer(layer, &monitor.read_width_errors_mm(layer, &true_mm), &near_corner);
             widths.push_layer(layer, &trajectory.t_s, &points_mm, &true_mm);
         }
-        ctx.write_table("widths", &mut widths.into_frame()?)?;
-        ctx.write_table("width_errors", &mut errors.into_frame()?)?;
+        ctx.write_table(true_widths::TABLE.name, &mut widths.into_frame()?)?;
+        ctx.write_table(width_errors::TABLE.name, &mut errors.into_frame()?)?;
         Ok(())
     }
 }
@@ -109,10 +116,10 @@ struct Monitored {
 
 impl Monitored {
     fn read(dir: &Path, samples: usize) -> Result<Self, StageError> {
-        let dirs_file = dir.join("directions.parquet");
-        let dirs = read_table(dir, "directions.parquet")?;
-        let sample = ints(&dirs, "sample", &dirs_file)?;
-        let (dep_x, dep_y) = (f64s(&dirs, "dep_x", &dirs_file)?, f64s(&dirs, "dep_y", &dirs_file)?);
+        let dirs_file = dir.join(directions::TABLE.file());
+        let dirs = read_table(dir, &directions::TABLE.file())?;
+        let sample = ints(&dirs, directions::sample, &dirs_file)?;
+        let (dep_x, dep_y) = (f64s(&dirs, directions::dep_x, &dirs_file)?, f64s(&dirs, directions::dep_y, &dirs_file)?);
         let mut left_dirs = vec![[f64::NAN; 2]; samples];
         for (row, &k) in sample.iter().enumerate() {
             left_dirs[sample_index(&dirs_file, row, k, samples)?] = [dep_x[row], dep_y[row]];
@@ -124,10 +131,10 @@ impl Monitored {
                 expected: "a finite deposition direction (dep_x, dep_y) for every trajectory sample".into(),
             });
         }
-        let file = dir.join("widths.parquet");
-        let df = read_table(dir, "widths.parquet")?;
-        let (layer, sample) = (ints(&df, "layer", &file)?, ints(&df, "sample", &file)?);
-        let (wl, wr) = (f64s(&df, "w_left_mm", &file)?, f64s(&df, "w_right_mm", &file)?);
+        let file = dir.join(widths::TABLE.file());
+        let df = read_table(dir, &widths::TABLE.file())?;
+        let (layer, sample) = (ints(&df, widths::layer, &file)?, ints(&df, widths::sample, &file)?);
+        let (wl, wr) = (f64s(&df, widths::w_left_mm, &file)?, f64s(&df, widths::w_right_mm, &file)?);
         let mut readings = Vec::with_capacity(layer.len());
         for row in 0..layer.len() {
             readings.push((layer[row], sample_index(&file, row, sample[row], samples)?, wl[row] + wr[row]));
@@ -183,13 +190,13 @@ impl WidthRows {
 
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            i64_col("layer", self.layer),
-            i64_col("sample", self.sample),
-            f64_col("t_s", self.t_s),
-            f64_col("x_mm", self.x_mm),
-            f64_col("y_mm", self.y_mm),
-            f64_col("w_left_mm", self.w_left_mm),
-            f64_col("w_right_mm", self.w_right_mm),
+            i64_col(true_widths::layer, self.layer),
+            i64_col(true_widths::sample, self.sample),
+            f64_col(true_widths::t_s, self.t_s),
+            f64_col(true_widths::x_mm, self.x_mm),
+            f64_col(true_widths::y_mm, self.y_mm),
+            f64_col(true_widths::w_left_mm, self.w_left_mm),
+            f64_col(true_widths::w_right_mm, self.w_right_mm),
         ])
     }
 }
@@ -219,11 +226,11 @@ impl ErrorRows {
 
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            i64_col("layer", self.layer),
-            str_col("region", self.region),
-            i64_col("n", self.n),
-            f64_col("median_abs_err_mm", self.median_abs_err_mm),
-            f64_col("p90_abs_err_mm", self.p90_abs_err_mm),
+            i64_col(width_errors::layer, self.layer),
+            str_col(width_errors::region, self.region),
+            i64_col(width_errors::n, self.n),
+            f64_col(width_errors::median_abs_err_mm, self.median_abs_err_mm),
+            f64_col(width_errors::p90_abs_err_mm, self.p90_abs_err_mm),
         ])
     }
 }

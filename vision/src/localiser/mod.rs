@@ -182,7 +182,8 @@ pub struct Localiser<'a, S> {
     path_corners: Vec<PathCorner>,
     /// When the trajectory passes each CAD vertex (s), by vertex index.
     passage_s: Vec<f64>,
-    /// From when each path corner's arms can be read (s), in the order of `path_corners`.
+    /// From when each CAD vertex's arms can be read (s), by vertex index (+∞ for a
+    /// vertex that is no corner).
     ready_s: Vec<f64>,
     max_age_s: f64,
     place_cornerless: bool,
@@ -196,18 +197,7 @@ impl<'a, S: FrameSource> Localiser<'a, S> {
         let path_corners = PathCorner::of_closed_path(seq.path_mm);
         let passage_s = passage_times_s(seq.path_mm, trajectory);
         let vertex = params.pipeline.vertex.unwrap_or_else(VertexParams::defaults);
-        let ready_s = path_corners
-            .iter()
-            .map(|c| {
-                let cos = c.arm_dirs[0][0] * c.arm_dirs[1][0] + c.arm_dirs[0][1] * c.arm_dirs[1][1];
-                ready_time_s(
-                    trajectory,
-                    c.vertex_mm,
-                    passage_s[c.id as usize],
-                    vertex.arm_reach_mm(cos) + READY_MARGIN_MM,
-                )
-            })
-            .collect();
+        let ready_s = ready_times_s(trajectory, seq.path_mm.len(), &path_corners, &passage_s, vertex);
         let h0 = undistorter.camera().nominal_homography();
         Self {
             seq,
@@ -273,6 +263,25 @@ impl<S> Localiser<'_, S> {
 /// Time at which the trajectory passes closest to each CAD vertex (s).
 fn passage_times_s(path_mm: &[[f64; 2]], trajectory: &Trajectory) -> Vec<f64> {
     path_mm.iter().map(|v| trajectory.t_s[trajectory.nearest_sample(*v)]).collect()
+}
+
+/// From when each corner's arms can be read (s), by vertex index like `passage_s`: a
+/// vertex [`PathCorner::of_closed_path`] skips (a repeated point has no arm) is never
+/// ready, and the corners after it keep their own times.
+fn ready_times_s(
+    trajectory: &Trajectory,
+    vertices: usize,
+    path_corners: &[PathCorner],
+    passage_s: &[f64],
+    vertex: VertexParams,
+) -> Vec<f64> {
+    let mut ready_s = vec![f64::INFINITY; vertices];
+    for c in path_corners {
+        let cos = c.arm_dirs[0][0] * c.arm_dirs[1][0] + c.arm_dirs[0][1] * c.arm_dirs[1][1];
+        let id = c.id as usize;
+        ready_s[id] = ready_time_s(trajectory, c.vertex_mm, passage_s[id], vertex.arm_reach_mm(cos) + READY_MARGIN_MM);
+    }
+    ready_s
 }
 
 /// First time after `passage_s` at which the trajectory is `reach_mm` from `vertex_mm`

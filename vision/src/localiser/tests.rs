@@ -250,3 +250,23 @@ fn a_corner_is_ready_once_the_nozzle_is_its_reach_away() {
     assert!((ready - 0.175).abs() < 1e-9, "{ready}");
     assert_eq!(ready_time_s(&traj, [2.0, 0.0], 0.1, 100.0), f64::INFINITY);
 }
+
+#[test]
+fn a_repeated_cad_point_leaves_the_other_corners_their_own_ready_times() {
+    // The zigzag with its second vertex repeated: that vertex and its twin are no
+    // corners (a zero-length arm), and every corner after them keeps its own time.
+    let mut path: Vec<[f64; 2]> = PATH_MM.to_vec();
+    path.insert(1, PATH_MM[1]);
+    let traj = trajectory();
+    let corners = PathCorner::of_closed_path(&path);
+    assert_eq!(corners.len(), path.len() - 2, "the repeated point and its twin are skipped");
+    let passage = passage_times_s(&path, &traj);
+    let vertex = VertexParams::defaults();
+    let ready = ready_times_s(&traj, path.len(), &corners, &passage, vertex);
+    assert_eq!((ready[1], ready[2]), (f64::INFINITY, f64::INFINITY));
+    for c in &corners {
+        let cos = c.arm_dirs[0][0] * c.arm_dirs[1][0] + c.arm_dirs[0][1] * c.arm_dirs[1][1];
+        let own = ready_time_s(&traj, c.vertex_mm, passage[c.id as usize], vertex.arm_reach_mm(cos) + READY_MARGIN_MM);
+        assert_eq!(ready[c.id as usize], own, "corner {}", c.id);
+    }
+}

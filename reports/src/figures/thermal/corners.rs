@@ -23,8 +23,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::ParamError;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::thermal::widths;
 
 use crate::figures::thermal::common::finite_range;
 use crate::figures::thermal::directions::parse_vertices;
@@ -65,7 +67,8 @@ const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "the temperature at the path per sample (`widths.parquet`)",
-);
+)
+.reading(&[Reads { table: &widths::TABLE, columns: &[widths::layer, widths::t_s, widths::temp_c] }]);
 
 /// The compensation drawn.
 const COMPENSATE: Input = Input::one(
@@ -164,7 +167,7 @@ impl Stage for ThermalCornersFigure {
     }
 
     fn run(&self, ctx: &mut StageContext, p: &CornersParams) -> Result<(), StageError> {
-        let widths = load_widths(&ctx.input(&MONITOR).dir.join("widths.parquet"))?;
+        let widths = load_widths(&ctx.input(&MONITOR).dir.join(widths::TABLE.file()))?;
         let wanted = parse_vertices(&p.spans, "spans").map_err(|e| StageError::params(ctx, e))?;
         let rows = load_spans(&ctx.input(&COMPENSATE).dir, &wanted)?;
         let plot = Plot {
@@ -191,10 +194,13 @@ pub fn figure_size_px(rows: usize) -> (u32, u32) {
 /// Reads `widths.parquet`.
 pub fn load_widths(path: &Path) -> Result<Widths, StageError> {
     let df = read_parquet(path)?;
-    let widths =
-        Widths { layer: ints(&df, "layer", path)?, t_s: f64s(&df, "t_s", path)?, temp_c: f64s(&df, "temp_c", path)? };
+    let widths = Widths {
+        layer: ints(&df, widths::layer, path)?,
+        t_s: f64s(&df, widths::t_s, path)?,
+        temp_c: f64s(&df, widths::temp_c, path)?,
+    };
     if widths.t_s.is_empty() {
-        return Err(no_rows(path, "t_s", "one row per monitored sample"));
+        return Err(no_rows(path, widths::t_s, "one row per monitored sample"));
     }
     Ok(widths)
 }
@@ -462,7 +468,7 @@ fn finish<'a, DB: DrawingBackend + 'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, write_table};
+    use crate::figures::test_util::{assert_drawn, write_declared, write_table};
     use crate::figures::thermal::test_data::{corner_path, widths, write_compensate};
 
     #[test]
@@ -495,7 +501,7 @@ mod tests {
     fn draws_one_row_per_span() {
         let dir = tempfile::tempdir().expect("tempdir");
         write_compensate(dir.path());
-        write_table(dir.path(), "widths", widths(&corner_path()));
+        write_declared(dir.path(), &tables::thermal::widths::TABLE, widths(&corner_path()));
         let rows = load_spans(dir.path(), &[]).expect("loads");
         assert_eq!(rows.len(), 4);
         assert!(rows.iter().all(|(_, q)| q.t_s.len() == 361));

@@ -26,8 +26,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::ParamError;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::thermal::directions;
 
 use crate::figures::thermal::common::{
     clip_polyline, closed_outline, draw_key, finite_range, interior_angle_deg, load_polygon, plane_chart, KeySwatch,
@@ -72,7 +74,23 @@ const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "the deposition directions and half widths per sample (`directions.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &directions::TABLE,
+    columns: &[
+        directions::x_mm,
+        directions::y_mm,
+        directions::kappa_per_mm,
+        directions::normal_x,
+        directions::normal_y,
+        directions::dep_x,
+        directions::dep_y,
+        directions::w_left_mm,
+        directions::w_right_mm,
+        directions::w_left_no_dda_mm,
+        directions::w_right_no_dda_mm,
+    ],
+}]);
 
 /// The CAD polygon, when given; without it the zoom centres on the sample of largest
 /// path curvature.
@@ -199,20 +217,20 @@ impl Stage for ThermalDirectionsFigure {
 
 /// Reads `<dir>/directions.parquet`.
 pub fn load(dir: &Path) -> Result<Directions, StageError> {
-    let path = dir.join("directions.parquet");
+    let path = dir.join(directions::TABLE.file());
     let df = read_parquet(&path)?;
     let col = |name: &str| f64s(&df, name, &path);
     let zip = |a: Vec<f64>, b: Vec<f64>| a.into_iter().zip(b).collect::<Vec<(f64, f64)>>();
     let directions = Directions {
-        xy_mm: zip(col("x_mm")?, col("y_mm")?),
-        kappa_per_mm: col("kappa_per_mm")?,
-        normal: zip(col("normal_x")?, col("normal_y")?),
-        dep: zip(col("dep_x")?, col("dep_y")?),
-        w_dda_mm: zip(col("w_left_mm")?, col("w_right_mm")?),
-        w_no_dda_mm: zip(col("w_left_no_dda_mm")?, col("w_right_no_dda_mm")?),
+        xy_mm: zip(col(directions::x_mm)?, col(directions::y_mm)?),
+        kappa_per_mm: col(directions::kappa_per_mm)?,
+        normal: zip(col(directions::normal_x)?, col(directions::normal_y)?),
+        dep: zip(col(directions::dep_x)?, col(directions::dep_y)?),
+        w_dda_mm: zip(col(directions::w_left_mm)?, col(directions::w_right_mm)?),
+        w_no_dda_mm: zip(col(directions::w_left_no_dda_mm)?, col(directions::w_right_no_dda_mm)?),
     };
     if directions.len() == 0 {
-        return Err(no_rows(&path, "x_mm", "one row per trajectory sample"));
+        return Err(no_rows(&path, directions::x_mm, "one row per trajectory sample"));
     }
     Ok(directions)
 }

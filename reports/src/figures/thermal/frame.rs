@@ -23,8 +23,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::ParamError;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::thermal::{detections_example, frame_example, frame_example_meta, mosaic};
 
 use crate::figures::thermal::common::{
     closed_outline, colour_level, draw_key, draw_runs, equal_aspect_chart, finite_range, level_colour, load_polygon,
@@ -68,7 +70,24 @@ const MONITOR: Input = Input::one(
     "monitor",
     &[Source::Stage("thermal.monitor")],
     "an example frame, its detections and the mosaic (`frame_example.parquet`, `detections_example.parquet`, `frame_example_meta.parquet`, `mosaic.parquet`)",
-);
+)
+.reading(&[
+    Reads { table: &frame_example::TABLE, columns: &[frame_example::u_px, frame_example::v_px, frame_example::temp_c] },
+    Reads { table: &mosaic::TABLE, columns: &[mosaic::x_mm, mosaic::y_mm, mosaic::temp_c] },
+    Reads {
+        table: &detections_example::TABLE,
+        columns: &[detections_example::u_px, detections_example::v_px, detections_example::matched_vertex],
+    },
+    Reads {
+        table: &frame_example_meta::TABLE,
+        columns: &[
+            frame_example_meta::layer,
+            frame_example_meta::frame,
+            frame_example_meta::nozzle_u_px,
+            frame_example_meta::nozzle_v_px,
+        ],
+    },
+]);
 
 /// The CAD polygon overlaid on the mosaic, when given.
 const POLYGON: Input = Input::optional(
@@ -150,17 +169,19 @@ impl Stage for ThermalFrameFigure {
     }
 }
 
-fn cells(dir: &Path, file: &str, x: &str, y: &str) -> Result<Vec<Cell>, StageError> {
-    let path = dir.join(file);
+/// The cells of `table` (columns `x`, `y` and `temp`) with a finite temperature.
+fn cells(dir: &Path, table: &Table, [x, y, temp]: [&str; 3]) -> Result<Vec<Cell>, StageError> {
+    let path = dir.join(table.file());
     let df = read_parquet(&path)?;
-    let temp = f64s(&df, "temp_c", &path)?;
+    let temp_col = temp;
+    let temp = f64s(&df, temp_col, &path)?;
     let (xs, ys) = (coords(&df, x, &path)?, coords(&df, y, &path)?);
     let cells: Vec<Cell> = (0..df.height())
         .filter(|&i| temp[i].is_finite())
         .map(|i| Cell { x: xs[i], y: ys[i], temp_c: temp[i] })
         .collect();
     if cells.is_empty() {
-        return Err(no_rows(&path, "temp_c", "a finite temperature"));
+        return Err(no_rows(&path, temp_col, "a finite temperature"));
     }
     Ok(cells)
 }
@@ -175,22 +196,27 @@ fn coords(df: &DataFrame, name: &str, path: &Path) -> Result<Vec<f64>, StageErro
 
 /// Reads the example frame, its detections and meta, and the mosaic from `dir`.
 pub fn load(dir: &Path, band_c: (f64, f64)) -> Result<FrameData, StageError> {
-    let frame = cells(dir, "frame_example.parquet", "u_px", "v_px")?;
-    let mosaic = cells(dir, "mosaic.parquet", "x_mm", "y_mm")?;
-    let path = dir.join("detections_example.parquet");
+    let frame = cells(dir, &frame_example::TABLE, [frame_example::u_px, frame_example::v_px, frame_example::temp_c])?;
+    let mosaic = cells(dir, &mosaic::TABLE, [mosaic::x_mm, mosaic::y_mm, mosaic::temp_c])?;
+    let path = dir.join(detections_example::TABLE.file());
     let df = read_parquet(&path)?;
-    let (u, v, matched) =
-        (coords(&df, "u_px", &path)?, coords(&df, "v_px", &path)?, ints(&df, "matched_vertex", &path)?);
+    let (u, v, matched) = (
+        coords(&df, detections_example::u_px, &path)?,
+        coords(&df, detections_example::v_px, &path)?,
+        ints(&df, detections_example::matched_vertex, &path)?,
+    );
     let detections = (0..df.height())
         .map(|i| Detection { u_px: u[i], v_px: v[i], vertex: (matched[i] >= 0).then_some(matched[i]) })
         .collect();
-    let path = dir.join("frame_example_meta.parquet");
+    let path = dir.join(frame_example_meta::TABLE.file());
     let df = read_parquet(&path)?;
     if df.height() == 0 {
-        return Err(no_rows(&path, "layer", "one row"));
+        return Err(no_rows(&path, frame_example_meta::layer, "one row"));
     }
-    let (layer, frame_no) = (ints(&df, "layer", &path)?[0], ints(&df, "frame", &path)?[0]);
-    let nozzle_px = (f64s(&df, "nozzle_u_px", &path)?[0], f64s(&df, "nozzle_v_px", &path)?[0]);
+    let (layer, frame_no) =
+        (ints(&df, frame_example_meta::layer, &path)?[0], ints(&df, frame_example_meta::frame, &path)?[0]);
+    let nozzle_px =
+        (f64s(&df, frame_example_meta::nozzle_u_px, &path)?[0], f64s(&df, frame_example_meta::nozzle_v_px, &path)?[0]);
     Ok(FrameData { frame, detections, layer_frame: (layer, frame_no), nozzle_px, mosaic, polygon: Vec::new(), band_c })
 }
 

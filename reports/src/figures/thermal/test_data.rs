@@ -10,7 +10,9 @@ use std::path::Path;
 use polars::df;
 use polars::prelude::DataFrame;
 
-use crate::figures::test_util::{noise, write_table};
+use tables::thermal::{detections_example, directions, frame_example, frame_example_meta, frames, mosaic, widths};
+
+use crate::figures::test_util::{declared, noise, write_declared, write_table};
 
 /// Nominal half width w0 (mm): half of the 0.45 mm bead.
 pub const W0_MM: f64 = 0.225;
@@ -110,21 +112,24 @@ pub fn directions(poly: &[(f64, f64)]) -> DataFrame {
             r
         }
     };
-    df!(
-        "sample" => (0..n as i32).collect::<Vec<i32>>(),
-        "t_s" => col(&|x| x.t_s), "x_mm" => col(&|x| x.xy.0), "y_mm" => col(&|x| x.xy.1),
-        "speed_mm_s" => col(&|x| x.speed_mm_s),
-        "kappa_per_mm" => col(&|x| (-x.to_vertex_mm / 0.05).exp() * 20.0),
-        "kappa_eff_per_mm" => col(&|x| (-x.to_vertex_mm / 0.3).exp() * 2.0),
-        "psi_rad" => col(&|x| 0.6 * (-x.to_vertex_mm / 0.3).exp()),
-        "slender_before" => col(&|x| 2.0 * (-x.to_vertex_mm / 0.1).exp()),
-        "slender_after" => col(&|x| 0.9 * (-x.to_vertex_mm / 0.1).exp()),
-        "normal_x" => col(&|x| x.normal.0), "normal_y" => col(&|x| x.normal.1),
-        "dep_x" => col(&|x| dep(x).0), "dep_y" => col(&|x| dep(x).1),
-        "w_left_mm" => col(&|x| half_widths(x).0), "w_right_mm" => col(&|x| half_widths(x).1),
-        "w_left_no_dda_mm" => col(&|x| no_dda(x, true)), "w_right_no_dda_mm" => col(&|x| no_dda(x, false))
+    declared(
+        &directions::TABLE,
+        df!(
+            directions::sample => (0..n as i32).collect::<Vec<i32>>(),
+            directions::t_s => col(&|x| x.t_s), directions::x_mm => col(&|x| x.xy.0), directions::y_mm => col(&|x| x.xy.1),
+            directions::speed_mm_s => col(&|x| x.speed_mm_s),
+            directions::kappa_per_mm => col(&|x| (-x.to_vertex_mm / 0.05).exp() * 20.0),
+            directions::kappa_eff_per_mm => col(&|x| (-x.to_vertex_mm / 0.3).exp() * 2.0),
+            directions::psi_rad => col(&|x| 0.6 * (-x.to_vertex_mm / 0.3).exp()),
+            directions::slender_before => col(&|x| 2.0 * (-x.to_vertex_mm / 0.1).exp()),
+            directions::slender_after => col(&|x| 0.9 * (-x.to_vertex_mm / 0.1).exp()),
+            directions::normal_x => col(&|x| x.normal.0), directions::normal_y => col(&|x| x.normal.1),
+            directions::dep_x => col(&|x| dep(x).0), directions::dep_y => col(&|x| dep(x).1),
+            directions::w_left_mm => col(&|x| half_widths(x).0), directions::w_right_mm => col(&|x| half_widths(x).1),
+            directions::w_left_no_dda_mm => col(&|x| no_dda(x, true)), directions::w_right_no_dda_mm => col(&|x| no_dda(x, false))
+        )
+        .expect("frame"),
     )
-    .expect("frame")
 }
 
 /// `path.parquet`.
@@ -148,14 +153,18 @@ pub fn angle_deg(poly: &[(f64, f64)], k: usize) -> f64 {
 /// Writes every `thermal.monitor` table into `dir`.
 pub fn write_monitor(dir: &Path) {
     let poly = corner_path();
-    write_table(dir, "directions", directions(&poly));
-    write_table(dir, "frames", frames());
     let (frame, detections, meta) = frame_example();
-    write_table(dir, "frame_example", frame);
-    write_table(dir, "detections_example", detections);
-    write_table(dir, "frame_example_meta", meta);
-    write_table(dir, "mosaic", mosaic(&poly));
-    write_table(dir, "widths", widths(&poly));
+    for (table, df) in [
+        (&directions::TABLE, directions(&poly)),
+        (&frames::TABLE, frames()),
+        (&frame_example::TABLE, frame),
+        (&detections_example::TABLE, detections),
+        (&frame_example_meta::TABLE, meta),
+        (&mosaic::TABLE, mosaic(&poly)),
+        (&widths::TABLE, widths(&poly)),
+    ] {
+        write_declared(dir, table, df);
+    }
 }
 
 /// `frames.parquet`: 40 frames of two layers, every fifth skipped.
@@ -185,17 +194,20 @@ pub fn frames() -> DataFrame {
     let estimated: Vec<f64> = (0..n)
         .map(|i| if placed_by[i] == "corners" { recorded[i] + 0.004 * noise(i) - 0.003 } else { f64::NAN })
         .collect();
-    df!(
-        "layer" => (0..n).map(|i| (i / 20) as i32).collect::<Vec<i32>>(),
-        "frame" => (0..n as i32).collect::<Vec<i32>>(),
-        "recorded_time_s" => recorded, "estimated_time_s" => estimated,
-        "corners_found" => (0..n).map(|i| if used[i] { 5 } else { 2 }).collect::<Vec<i32>>(),
-        "corners_matched" => (0..n).map(|i| if used[i] { 4 } else { 1 }).collect::<Vec<i32>>(),
-        "reproj_err_mm" => (0..n).map(|i| if used[i] { 0.03 + 0.01 * noise(i) } else { f64::NAN }).collect::<Vec<f64>>(),
-        "used" => used, "placed_by" => placed_by, "skip_reason" => reason,
-        "repeat_of_frame" => (0..n).map(|i| if i % 10 == 4 { i as i64 - 1 } else { -1 }).collect::<Vec<i64>>()
+    declared(
+        &frames::TABLE,
+        df!(
+            frames::layer => (0..n).map(|i| (i / 20) as i32).collect::<Vec<i32>>(),
+            frames::frame => (0..n as i32).collect::<Vec<i32>>(),
+            frames::recorded_time_s => recorded, frames::estimated_time_s => estimated,
+            frames::corners_found => (0..n).map(|i| if used[i] { 5 } else { 2 }).collect::<Vec<i32>>(),
+            frames::corners_matched => (0..n).map(|i| if used[i] { 4 } else { 1 }).collect::<Vec<i32>>(),
+            frames::reproj_err_mm => (0..n).map(|i| if used[i] { 0.03 + 0.01 * noise(i) } else { f64::NAN }).collect::<Vec<f64>>(),
+            frames::used => used, frames::placed_by => placed_by, frames::skip_reason => reason,
+            frames::repeat_of_frame => (0..n).map(|i| if i % 10 == 4 { i as i64 - 1 } else { -1 }).collect::<Vec<i64>>()
+        )
+        .expect("frame"),
     )
-    .expect("frame")
 }
 
 /// `frame_example.parquet` (160 × 120 px: a hot V-shaped track below the nozzle),
@@ -217,14 +229,22 @@ pub fn frame_example() -> (DataFrame, DataFrame, DataFrame) {
             );
         }
     }
-    let frame = df!("u_px" => u, "v_px" => v, "temp_c" => temp).expect("frame");
-    let detections = df!(
-        "u_px" => [60.0, 100.0, 140.0, 20.0, 80.0], "v_px" => [40.0, 100.0, 40.0, 100.0, 70.0],
-        "temp_c" => [182.0, 181.0, 179.0, 178.0, 120.0], "matched_vertex" => [7i32, 6, 5, 8, -1]
-    )
-    .expect("frame");
-    let meta =
-        df!("layer" => [0i32], "frame" => [12i32], "nozzle_u_px" => [140.0], "nozzle_v_px" => [40.0]).expect("frame");
+    let frame = declared(
+        &frame_example::TABLE,
+        df!(frame_example::u_px => u, frame_example::v_px => v, frame_example::temp_c => temp).expect("frame"),
+    );
+    let detections = declared(
+        &detections_example::TABLE,
+        df!(
+        detections_example::u_px => [60.0, 100.0, 140.0, 20.0, 80.0], detections_example::v_px => [40.0, 100.0, 40.0, 100.0, 70.0],
+        detections_example::temp_c => [182.0, 181.0, 179.0, 178.0, 120.0], detections_example::matched_vertex => [7i32, 6, 5, 8, -1]
+        )
+        .expect("frame"),
+    );
+    let meta = declared(
+        &frame_example_meta::TABLE,
+        df!(frame_example_meta::layer => [0i32], frame_example_meta::frame => [12i32], frame_example_meta::nozzle_u_px => [140.0], frame_example_meta::nozzle_v_px => [40.0]).expect("frame"),
+    );
     (frame, detections, meta)
 }
 
@@ -241,7 +261,7 @@ pub fn mosaic(poly: &[(f64, f64)]) -> DataFrame {
             temp.push(50.0 + 100.0 * (-d / 0.4).exp() + 40.0 * (-dv / 0.6).exp() - 20.0 * p.0 / 38.0);
         }
     }
-    df!("x_mm" => x, "y_mm" => y, "temp_c" => temp).expect("frame")
+    declared(&mosaic::TABLE, df!(mosaic::x_mm => x, mosaic::y_mm => y, mosaic::temp_c => temp).expect("frame"))
 }
 
 /// `widths.parquet`: two layers of measured half widths (NaN where not measured).
@@ -273,11 +293,15 @@ pub fn widths(poly: &[(f64, f64)]) -> DataFrame {
             frame.push((q.t_s / 0.125) as i32);
         }
     }
-    df!(
-        "layer" => layer, "sample" => sample, "t_s" => t, "x_mm" => x, "y_mm" => y, "temp_c" => temp,
-        "w_left_mm" => wl, "w_right_mm" => wr, "w_desired_mm" => wd, "dw_mm" => dw, "frame" => frame
+    declared(
+        &widths::TABLE,
+        df!(
+            widths::layer => layer, widths::sample => sample, widths::t_s => t, widths::x_mm => x, widths::y_mm => y,
+            widths::temp_c => temp, widths::w_left_mm => wl, widths::w_right_mm => wr, widths::w_desired_mm => wd,
+            widths::dw_mm => dw, widths::frame_index => frame
+        )
+        .expect("frame"),
     )
-    .expect("frame")
 }
 
 /// The time at which the path passes vertex `k` (the first sample within 0.02 mm).
