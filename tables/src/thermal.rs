@@ -1,7 +1,8 @@
 //! Paper 003's tables (Chen et al. 2024): what the thermal monitor measures (the
 //! deposition directions of Sec. 2.2, the frames' localisation of eqs 27-30, the widths
 //! of Sec. 2.4 and eqs 31-32, and the example frame of Fig. 4) and the evaluation's true
-//! widths. Not declared yet: the compensation's, the re-print's and the studies' tables.
+//! widths, the compensation (eqs 33-39) and the re-print's scores (eqs 40-41). Not declared
+//! yet: the studies' tables (`thermal.control_gain`, the discovery power).
 
 use pipeline::schema::Table;
 
@@ -332,6 +333,192 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `thermal.compensate`: one row per trajectory sample, the conventional and the
+    /// compensated command (eqs 36-39).
+    pub mod command = "command" {
+        /// Trajectory sample: row of `trajectory.csv` (0-based).
+        sample: Int64 "1",
+        /// Its commanded time.
+        t_s: Float64 "s",
+        /// The conventional deposition (extruder) velocity v_e, of filament.
+        v_e_mm_s: Float64 "mm/s",
+        /// The compensated command v_ef = v_e − Δv_er.
+        v_ef_mm_s: Float64 "mm/s",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.compensate`: one row per compensated width-error span.
+    pub mod spans = "spans" {
+        /// Span index, in time order.
+        span: Int64 "1",
+        /// CAD vertex nearest the span's largest error.
+        vertex: Int64 "1",
+        /// Interior angle of the CAD polygon there.
+        angle_deg: Float64 "°",
+        /// First sample with Δw ≥ ε.
+        t_start_s: Float64 "s",
+        /// Last sample with Δw ≥ ε.
+        t_end_s: Float64 "s",
+        /// Start of the extended window, clipped to the layer.
+        t_ext_start_s: Float64 "s",
+        /// End of the extended window.
+        t_ext_end_s: Float64 "s",
+        /// T_p: median temperature of the monitor's detections matched to the vertex; NaN if never detected.
+        corner_temp_c: Float64 "°C",
+        /// The deposition gain K_e used.
+        gain_ke: Float64 "1",
+        /// Largest Δw in the span.
+        max_dw_mm: Float64 "mm",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.compensate`: one row per sample of each span's extended window.
+    pub mod compensation = "compensation" {
+        /// Span index, as in `spans.parquet`.
+        span: Int64 "1",
+        /// CAD vertex, as in `spans.parquet`.
+        vertex: Int64 "1",
+        /// Sample time.
+        t_s: Float64 "s",
+        /// Δw used there, after the clamp; NaN where not measured (left out of the fit, eq. 39).
+        dw_mm: Float64 "mm",
+        /// Measured width w_l + w_r there.
+        w_measured_mm: Float64 "mm",
+        /// Desired width 2·w_d there.
+        w_desired_mm: Float64 "mm",
+        /// Desired change of the deposition velocity (eq. 33), of filament.
+        dv_desired_mm_s: Float64 "mm/s",
+        /// What the solved input achieves through G(s) (eq. 38).
+        dv_output_mm_s: Float64 "mm/s",
+        /// The B-spline input Δv_er (eq. 36).
+        dv_input_mm_s: Float64 "mm/s",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per CAD corner, over-deposition O_E (eq. 40)
+    /// of the conventional and the compensated re-print.
+    pub mod corners = "corners" {
+        /// The corner's CAD vertex (row of `path.csv`).
+        corner: Int64 "1",
+        /// Interior angle θ.
+        angle_deg: Float64 "°",
+        /// O_E = 100·A_o/A_c, conventional.
+        oe_before_pct: Float64 "%",
+        /// O_E, compensated.
+        oe_after_pct: Float64 "%",
+        /// A_c, the corner polytope W²/sin θ.
+        a_c_mm2: Float64 "mm²",
+        /// A_o, deposited area in the window outside the ideal bead, conventional.
+        a_o_before_mm2: Float64 "mm²",
+        /// A_o, compensated.
+        a_o_after_mm2: Float64 "mm²",
+        /// Ideal bead area in the window left unfilled, conventional.
+        a_u_before_mm2: Float64 "mm²",
+        /// The same, compensated.
+        a_u_after_mm2: Float64 "mm²",
+        /// Ideal bead area in the window.
+        window_ideal_mm2: Float64 "mm²",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per variant, the contour error of eq. 41
+    /// over all points and layers (Table 3).
+    pub mod contour = "contour" {
+        /// `conventional` or `compensated`.
+        variant: Str "",
+        /// Largest contour error.
+        max_mm: Float64 "mm",
+        /// RMS contour error.
+        rms_mm: Float64 "mm",
+        /// Contour points × layers.
+        points: Int64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per (variant, layer, CAD contour point), its
+    /// error e_t of eq. 41 (Fig. 11).
+    pub mod contour_points = "contour_points" {
+        /// `conventional` or `compensated`.
+        variant: Str "",
+        /// The layer.
+        layer: Int64 "1",
+        /// CAD contour point, x.
+        x_mm: Float64 "mm",
+        /// CAD contour point, y.
+        y_mm: Float64 "mm",
+        /// e_t: distance to the printed footprint's boundary.
+        error_mm: Float64 "mm",
+        /// The print covers the CAD point (its edge bulges beyond it).
+        covered: Bool "",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per region of the contour (each corner, the
+    /// seam, the straight runs), eq. 41 before and after.
+    pub mod contour_regions = "contour_regions" {
+        /// `corner`, `seam` or `straight`.
+        region: Str "",
+        /// CAD vertex of a corner region; −1 otherwise.
+        corner: Int64 "1",
+        /// Interior angle there; NaN for the seam and straight runs.
+        angle_deg: Float64 "°",
+        /// `apex`, `valley`, `seam` or `straight`.
+        kind: Str "",
+        /// Contour points × layers in the region.
+        points: Int64 "1",
+        /// Largest e_t, conventional.
+        max_before_mm: Float64 "mm",
+        /// Largest e_t, compensated.
+        max_after_mm: Float64 "mm",
+        /// The print falls short of the CAD point of the largest e_t, conventional.
+        max_before_short: Bool "",
+        /// The same, compensated.
+        max_after_short: Bool "",
+        /// RMS of e_t in the region, conventional.
+        rms_before_mm: Float64 "mm",
+        /// RMS, compensated.
+        rms_after_mm: Float64 "mm",
+        /// The region's share of the whole contour's sum of e_t², conventional.
+        sq_share_before: Float64 "1",
+        /// The same, compensated.
+        sq_share_after: Float64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per cell of the first layer near a corner,
+    /// classed against the ideal bead (Figs 9-10).
+    pub mod deposit_regions = "deposit_regions" {
+        /// `conventional` or `compensated`.
+        variant: Str "",
+        /// Cell centre, x.
+        x_mm: Float64 "mm",
+        /// Cell centre, y.
+        y_mm: Float64 "mm",
+        /// `desired` (filled, in the ideal bead), `over` (filled, outside) or `under` (unfilled, inside).
+        class: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.reprint_evaluate`: one row per vertex of the CAD path.
+    pub mod path = "path" {
+        /// The vertex (row of `path.csv`).
+        vertex: Int64 "1",
+        /// Its position, x.
+        x_mm: Float64 "mm",
+        /// Its position, y.
+        y_mm: Float64 "mm",
+    }
+}
+
 /// The homography columns of `frames.parquet`, row-major.
 pub const FRAME_HOMOGRAPHY: [&str; 9] = [
     frames::h11,
@@ -364,4 +551,13 @@ pub const ALL: &[&Table] = &[
     &true_widths::TABLE,
     &width_errors::TABLE,
     &accuracy::TABLE,
+    &command::TABLE,
+    &spans::TABLE,
+    &compensation::TABLE,
+    &corners::TABLE,
+    &contour::TABLE,
+    &contour_points::TABLE,
+    &contour_regions::TABLE,
+    &deposit_regions::TABLE,
+    &path::TABLE,
 ];

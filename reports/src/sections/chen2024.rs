@@ -27,6 +27,7 @@ use std::path::Path;
 use pipeline::params::{NoParams, ParamValue};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{InputArtifact, StageContext, StageError};
+use tables::thermal::{accuracy, contour, contour_regions, corners, frames, spans, width_errors};
 
 use super::chen2024_variants::{read_variants, variants_frame, Variant};
 use super::{comparison_frame, Row};
@@ -184,10 +185,11 @@ pub struct WidthErrors {
 
 impl WidthErrors {
     fn read(input: &InputArtifact) -> Result<Self, StageError> {
-        let path = input.dir.join("width_errors.parquet");
+        let path = input.dir.join(width_errors::TABLE.file());
         let df = read_parquet(&path)?;
-        let region = strs(&df, "region", &path)?;
-        let (median, p90) = (f64s(&df, "median_abs_err_mm", &path)?, f64s(&df, "p90_abs_err_mm", &path)?);
+        let region = strs(&df, width_errors::region, &path)?;
+        let (median, p90) =
+            (f64s(&df, width_errors::median_abs_err_mm, &path)?, f64s(&df, width_errors::p90_abs_err_mm, &path)?);
         let mut by_region: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
         for i in 0..df.height() {
             by_region.entry(region[i].clone()).or_default().push((median[i], p90[i]));
@@ -195,7 +197,7 @@ impl WidthErrors {
         Ok(Self {
             by_region,
             corner_radius_mm: recorded_f64(input, "corner_radius_mm"),
-            source: source(input, "width_errors.parquet"),
+            source: source(input, &width_errors::TABLE.file()),
         })
     }
 
@@ -272,13 +274,13 @@ impl RegionError {
 impl Reprint {
     pub(crate) fn read(reprint: &InputArtifact) -> Result<Self, StageError> {
         Ok(Self {
-            corners: read_corners(&reprint.dir.join("corners.parquet"))?,
-            contour_mm: read_contour(&reprint.dir.join("contour.parquet"))?,
-            regions: read_regions(&reprint.dir.join("contour_regions.parquet"))?,
+            corners: read_corners(&reprint.dir.join(corners::TABLE.file()))?,
+            contour_mm: read_contour(&reprint.dir.join(contour::TABLE.file()))?,
+            regions: read_regions(&reprint.dir.join(contour_regions::TABLE.file()))?,
             sources: [
-                source(reprint, "corners.parquet"),
-                source(reprint, "contour.parquet"),
-                source(reprint, "contour_regions.parquet"),
+                source(reprint, &corners::TABLE.file()),
+                source(reprint, &contour::TABLE.file()),
+                source(reprint, &contour_regions::TABLE.file()),
             ],
         })
     }
@@ -320,19 +322,19 @@ impl Ours {
         let named = |name: &str| inputs.iter().filter(|i| i.role == NAMED.role).find(|i| i.name == name);
         let (compensate, reprint) = (input_of(inputs, &COMPENSATE), input_of(inputs, &REPRINT));
         let (accuracy, monitor) = (input_of(inputs, &ACCURACY), input_of(inputs, &MONITOR));
-        let frames = read_frames(&monitor.dir.join("frames.parquet"))?;
+        let frames = read_frames(&monitor.dir.join(frames::TABLE.file()))?;
         Ok(Self {
             reprint: Reprint::read(reprint)?,
-            spans: read_parquet(&compensate.dir.join("spans.parquet"))?.height(),
-            accuracy: read_accuracy(&accuracy.dir.join("accuracy.parquet"))?,
+            spans: read_parquet(&compensate.dir.join(spans::TABLE.file()))?.height(),
+            accuracy: read_accuracy(&accuracy.dir.join(accuracy::TABLE.file()))?,
             frames_used: frames.used,
             frames_by_recorded_time: frames.by_recorded_time,
             frames_parked: frames.parked,
             skipped: frames.skipped,
             sources: [
-                source(compensate, "spans.parquet"),
-                source(accuracy, "accuracy.parquet"),
-                source(monitor, "frames.parquet"),
+                source(compensate, &spans::TABLE.file()),
+                source(accuracy, &accuracy::TABLE.file()),
+                source(monitor, &frames::TABLE.file()),
             ],
             extension: named("reprint_lag").map(Reprint::read).transpose()?,
             variants: read_variants(inputs)?,
@@ -354,31 +356,39 @@ impl Ours {
 
 fn read_corners(path: &Path) -> Result<Vec<CornerOe>, StageError> {
     let df = read_parquet(path)?;
-    let (vertex, angle) = (ints(&df, "corner", path)?, f64s(&df, "angle_deg", path)?);
-    let (before, after) = (f64s(&df, "oe_before_pct", path)?, f64s(&df, "oe_after_pct", path)?);
+    let (vertex, angle) = (ints(&df, corners::corner, path)?, f64s(&df, corners::angle_deg, path)?);
+    let (before, after) = (f64s(&df, corners::oe_before_pct, path)?, f64s(&df, corners::oe_after_pct, path)?);
     let corners: Vec<CornerOe> = (0..df.height())
         .map(|i| CornerOe { vertex: vertex[i], angle_deg: angle[i], oe_pct: (before[i], after[i]) })
         .collect();
     if corners.is_empty() {
-        return Err(no_rows(path, "corner", "one row per evaluated corner"));
+        return Err(no_rows(path, corners::corner, "one row per evaluated corner"));
     }
     Ok(corners)
 }
 
 fn read_contour(path: &Path) -> Result<[(f64, f64); 2], StageError> {
     let df = read_parquet(path)?;
-    let variant = strs(&df, "variant", path)?;
-    let (max, rms) = (f64s(&df, "max_mm", path)?, f64s(&df, "rms_mm", path)?);
+    let variant = strs(&df, contour::variant, path)?;
+    let (max, rms) = (f64s(&df, contour::max_mm, path)?, f64s(&df, contour::rms_mm, path)?);
     let row = |name: &str| {
-        variant.iter().position(|v| v == name).map(|i| (max[i], rms[i])).ok_or_else(|| no_rows(path, "variant", name))
+        variant
+            .iter()
+            .position(|v| v == name)
+            .map(|i| (max[i], rms[i]))
+            .ok_or_else(|| no_rows(path, contour::variant, name))
     };
     Ok([row("conventional")?, row("compensated")?])
 }
 
 fn read_regions(path: &Path) -> Result<Vec<RegionError>, StageError> {
     let df = read_parquet(path)?;
-    let (region, corner, kind) = (strs(&df, "region", path)?, ints(&df, "corner", path)?, strs(&df, "kind", path)?);
-    let points = ints(&df, "points", path)?;
+    let (region, corner, kind) = (
+        strs(&df, contour_regions::region, path)?,
+        ints(&df, contour_regions::corner, path)?,
+        strs(&df, contour_regions::kind, path)?,
+    );
+    let points = ints(&df, contour_regions::points, path)?;
     let pair = |a: &str, b: &str| -> Result<Vec<(f64, f64)>, StageError> {
         Ok(f64s(&df, a, path)?.into_iter().zip(f64s(&df, b, path)?).collect())
     };
@@ -387,8 +397,10 @@ fn read_regions(path: &Path) -> Result<Vec<RegionError>, StageError> {
         pair("rms_before_mm", "rms_after_mm")?,
         pair("sq_share_before", "sq_share_after")?,
     );
-    let short: Vec<(bool, bool)> =
-        bools(&df, "max_before_short", path)?.into_iter().zip(bools(&df, "max_after_short", path)?).collect();
+    let short: Vec<(bool, bool)> = bools(&df, contour_regions::max_before_short, path)?
+        .into_iter()
+        .zip(bools(&df, contour_regions::max_after_short, path)?)
+        .collect();
     let rows: Vec<RegionError> = (0..df.height())
         .map(|i| RegionError {
             region: region[i].clone(),
@@ -402,15 +414,16 @@ fn read_regions(path: &Path) -> Result<Vec<RegionError>, StageError> {
         })
         .collect();
     if rows.is_empty() {
-        return Err(no_rows(path, "region", "one row per region of the contour"));
+        return Err(no_rows(path, contour_regions::region, "one row per region of the contour"));
     }
     Ok(rows)
 }
 
 fn read_accuracy(path: &Path) -> Result<BTreeMap<String, AccuracyRow>, StageError> {
     let df = read_parquet(path)?;
-    let (metric, value) = (strs(&df, "metric", path)?, f64s(&df, "value", path)?);
-    let (unit, n, note) = (strs(&df, "unit", path)?, ints(&df, "n", path)?, strs(&df, "note", path)?);
+    let (metric, value) = (strs(&df, accuracy::metric, path)?, f64s(&df, accuracy::value, path)?);
+    let (unit, n, note) =
+        (strs(&df, accuracy::unit, path)?, ints(&df, accuracy::n, path)?, strs(&df, accuracy::note, path)?);
     Ok((0..df.height()).map(|i| (metric[i].clone(), (value[i], unit[i].clone(), n[i], note[i].clone()))).collect())
 }
 
@@ -426,15 +439,15 @@ struct FrameCounts {
 /// (`placed_by`, absent in tables of older monitors) and skipped by reason.
 fn read_frames(path: &Path) -> Result<FrameCounts, StageError> {
     let df = read_parquet(path)?;
-    let (used, reason) = (bools(&df, "used", path)?, strs(&df, "skip_reason", path)?);
-    let placed_by: Vec<String> = match df.column("placed_by") {
-        Ok(_) => strs(&df, "placed_by", path)?,
+    let (used, reason) = (bools(&df, frames::used, path)?, strs(&df, frames::skip_reason, path)?);
+    let placed_by: Vec<String> = match df.column(frames::placed_by) {
+        Ok(_) => strs(&df, frames::placed_by, path)?,
         Err(_) => vec![String::new(); used.len()],
     };
     let dead_reckoned: Vec<bool> = placed_by.iter().map(|p| p == "recorded_time").collect();
     let parked: Vec<bool> = placed_by.iter().map(|p| p == "parked").collect();
-    let repeated: Vec<bool> = match df.column("repeat_of_frame") {
-        Ok(_) => ints(&df, "repeat_of_frame", path)?.iter().map(|r| *r >= 0).collect(),
+    let repeated: Vec<bool> = match df.column(frames::repeat_of_frame) {
+        Ok(_) => ints(&df, frames::repeat_of_frame, path)?.iter().map(|r| *r >= 0).collect(),
         Err(_) => vec![false; used.len()],
     };
     let mut skipped: BTreeMap<String, usize> = BTreeMap::new();
@@ -1213,7 +1226,7 @@ mod tests {
     fn missing_table_or_column_is_named() {
         let root = tempfile::tempdir().expect("tempdir");
         let inputs = inputs(root.path());
-        std::fs::remove_file(inputs[2].dir.join("accuracy.parquet")).expect("removes");
+        std::fs::remove_file(inputs[2].dir.join(accuracy::TABLE.file())).expect("removes");
         let err = Ours::read(&inputs).expect_err("no accuracy").to_string();
         assert!(err.contains("accuracy.parquet"), "{err}");
         write_table(&inputs[2].dir, "accuracy", accuracy().drop("unit").expect("drops"));

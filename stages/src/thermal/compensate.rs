@@ -73,7 +73,7 @@ use models::thermal::dynamics::lag_excess;
 use models::thermal::metrics::IdealBead;
 use models::thermal::Trajectory;
 use pipeline::params::StageParams;
-use pipeline::schema::Reads;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
@@ -82,7 +82,7 @@ use super::common::{f64s, ints, open_sequence, read_table, sample_index, traject
 use crate::roles;
 use crate::table::{f64_col, frame, i64_col};
 use models::thermal::setup::interior_angles_deg;
-use tables::thermal::{detections, directions, widths};
+use tables::thermal::{command, compensation, detections, directions, spans, widths};
 
 /// The temperature band over which the paper identified K_e (Sec. 3.2): its corners are
 /// measured at 140-150 °C, so K_e runs from 1 to 1.67. A corner measured outside the band
@@ -217,6 +217,7 @@ impl Stage for CompensateStage {
         inputs: &[roles::THERMAL_SEQUENCE, MONITOR, WIDTHS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&command::TABLE, &spans::TABLE, &compensation::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &CompensateParams) -> Result<(), StageError> {
         let seq = open_sequence(&ctx.input(&roles::THERMAL_SEQUENCE).dir)?;
@@ -242,12 +243,12 @@ impl Stage for CompensateStage {
         }
         rows.write(ctx)?;
         let mut table = frame(vec![
-            i64_col("sample", (0..c.trajectory.len() as i64).collect()),
-            f64_col("t_s", t_s.clone()),
-            f64_col("v_e_mm_s", c.nominal_mm_s),
-            f64_col("v_ef_mm_s", c.command_mm_s),
+            i64_col(command::sample, (0..c.trajectory.len() as i64).collect()),
+            f64_col(command::t_s, t_s.clone()),
+            f64_col(command::v_e_mm_s, c.nominal_mm_s),
+            f64_col(command::v_ef_mm_s, c.command_mm_s),
         ])?;
-        ctx.write_table("command", &mut table)?;
+        ctx.write_table(command::TABLE.name, &mut table)?;
         Ok(())
     }
 }
@@ -547,30 +548,30 @@ impl Rows {
 
     fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
         let mut spans = frame(vec![
-            i64_col("span", self.span),
-            i64_col("vertex", self.vertex),
-            f64_col("angle_deg", self.angle_deg),
-            f64_col("t_start_s", self.t_start_s),
-            f64_col("t_end_s", self.t_end_s),
-            f64_col("t_ext_start_s", self.t_ext_start_s),
-            f64_col("t_ext_end_s", self.t_ext_end_s),
-            f64_col("corner_temp_c", self.corner_temp_c),
-            f64_col("gain_ke", self.gain_ke),
-            f64_col("max_dw_mm", self.max_dw_mm),
+            i64_col(spans::span, self.span),
+            i64_col(spans::vertex, self.vertex),
+            f64_col(spans::angle_deg, self.angle_deg),
+            f64_col(spans::t_start_s, self.t_start_s),
+            f64_col(spans::t_end_s, self.t_end_s),
+            f64_col(spans::t_ext_start_s, self.t_ext_start_s),
+            f64_col(spans::t_ext_end_s, self.t_ext_end_s),
+            f64_col(spans::corner_temp_c, self.corner_temp_c),
+            f64_col(spans::gain_ke, self.gain_ke),
+            f64_col(spans::max_dw_mm, self.max_dw_mm),
         ])?;
-        ctx.write_table("spans", &mut spans)?;
+        ctx.write_table(spans::TABLE.name, &mut spans)?;
         let mut samples = frame(vec![
-            i64_col("span", self.s_span),
-            i64_col("vertex", self.s_vertex),
-            f64_col("t_s", self.s_t),
-            f64_col("dw_mm", self.s_dw),
-            f64_col("w_measured_mm", self.s_measured),
-            f64_col("w_desired_mm", self.s_wanted),
-            f64_col("dv_desired_mm_s", self.s_desired),
-            f64_col("dv_output_mm_s", self.s_output),
-            f64_col("dv_input_mm_s", self.s_input),
+            i64_col(compensation::span, self.s_span),
+            i64_col(compensation::vertex, self.s_vertex),
+            f64_col(compensation::t_s, self.s_t),
+            f64_col(compensation::dw_mm, self.s_dw),
+            f64_col(compensation::w_measured_mm, self.s_measured),
+            f64_col(compensation::w_desired_mm, self.s_wanted),
+            f64_col(compensation::dv_desired_mm_s, self.s_desired),
+            f64_col(compensation::dv_output_mm_s, self.s_output),
+            f64_col(compensation::dv_input_mm_s, self.s_input),
         ])?;
-        ctx.write_table("compensation", &mut samples)?;
+        ctx.write_table(compensation::TABLE.name, &mut samples)?;
         Ok(())
     }
 }

@@ -36,6 +36,7 @@ use models::thermal::metrics::{
     ContourPoint, ContourRegion, IdealBead, RegionSummary,
 };
 use models::thermal::{DepositGrid, PrintSetup};
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use rand::SeedableRng;
@@ -46,6 +47,7 @@ use crate::progress::StageProgress;
 use crate::roles;
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 use models::thermal::setup::{convex_vertices, interior_angles_deg};
+use tables::thermal::{command, contour, contour_points, contour_regions, corners, deposit_regions, path};
 
 /// The `thermal.reprint_evaluate` stage kind.
 pub struct ReprintEvaluateStage;
@@ -55,7 +57,8 @@ pub const COMPENSATION: Input = Input::one(
     "compensation",
     &[Source::Stage("thermal.compensate")],
     "the conventional and the compensated command of `thermal.compensate` (command.parquet)",
-);
+)
+.reading(&[Reads { table: &command::TABLE, columns: &[command::v_e_mm_s, command::v_ef_mm_s] }]);
 
 pipeline::params! {
     /// The parameters of `thermal.reprint_evaluate`.
@@ -82,6 +85,14 @@ impl Stage for ReprintEvaluateStage {
         inputs: &[roles::THERMAL_SEQUENCE, COMPENSATION],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[
+        &corners::TABLE,
+        &contour::TABLE,
+        &contour_points::TABLE,
+        &contour_regions::TABLE,
+        &deposit_regions::TABLE,
+        &path::TABLE,
+    ];
 
     fn run(&self, ctx: &mut StageContext, p: &ReprintParams) -> Result<(), StageError> {
         let seq = open_sequence(&ctx.input(&roles::THERMAL_SEQUENCE).dir)?;
@@ -105,29 +116,29 @@ impl Stage for ReprintEvaluateStage {
         let bead = IdealBead::new(&seq.path_mm, setup.bead_width_mm / 2.0).map_err(StageError::domain)?;
         let radius_mm = p.corner_radius_mm;
         let mut corners = corners_frame(&seq, &setup, &bead, radius_mm, &before[0], &after[0])?;
-        ctx.write_table("corners", &mut corners)?;
+        ctx.write_table(corners::TABLE.name, &mut corners)?;
         let cad = bead.contour_points(p.contour_spacing_mm, p.inner_face);
         let errors_before: Vec<Vec<ContourPoint>> = before.iter().map(|g| contour_errors(g, &cad)).collect();
         let errors_after: Vec<Vec<ContourPoint>> = after.iter().map(|g| contour_errors(g, &cad)).collect();
         let mut contour = contour_frame(&errors_before, &errors_after)?;
-        ctx.write_table("contour", &mut contour)?;
+        ctx.write_table(contour::TABLE.name, &mut contour)?;
         let mut points = contour_points_frame(&errors_before, &errors_after)?;
-        ctx.write_table("contour_points", &mut points)?;
+        ctx.write_table(contour_points::TABLE.name, &mut points)?;
         let seam_mm = [trajectory.x_mm[0], trajectory.y_mm[0]];
         let seam_radius_mm = setup.feed_mm_s * setup.tau_s;
         let regions: Vec<ContourRegion> =
             cad.iter().map(|p| contour_region(*p, &seq.path_mm, radius_mm, seam_mm, seam_radius_mm)).collect();
         let mut by_region = regions_summary_frame(&seq.path_mm, &errors_before, &errors_after, &regions)?;
-        ctx.write_table("contour_regions", &mut by_region)?;
+        ctx.write_table(contour_regions::TABLE.name, &mut by_region)?;
         let mut regions = regions_frame(&seq.path_mm, &bead, radius_mm, &before[0], &after[0])?;
-        ctx.write_table("deposit_regions", &mut regions)?;
+        ctx.write_table(deposit_regions::TABLE.name, &mut regions)?;
         let path = &seq.path_mm;
         let mut path_table = frame(vec![
-            i64_col("vertex", (0..path.len() as i64).collect()),
-            f64_col("x_mm", path.iter().map(|p| p[0]).collect()),
-            f64_col("y_mm", path.iter().map(|p| p[1]).collect()),
+            i64_col(path::vertex, (0..path.len() as i64).collect()),
+            f64_col(path::x_mm, path.iter().map(|p| p[0]).collect()),
+            f64_col(path::y_mm, path.iter().map(|p| p[1]).collect()),
         ])?;
-        ctx.write_table("path", &mut path_table)?;
+        ctx.write_table(path::TABLE.name, &mut path_table)?;
         Ok(())
     }
 }
@@ -152,9 +163,9 @@ const REPRINT_SEED_SALT: u64 = 0x5245_5052_494e_5421;
 
 /// The conventional and the compensated command (mm/s of filament) per sample.
 fn read_commands(dir: &std::path::Path, samples: usize) -> Result<(Vec<f64>, Vec<f64>), StageError> {
-    let file = dir.join("command.parquet");
-    let df = read_table(dir, "command.parquet")?;
-    let (v_e, v_ef) = (f64s(&df, "v_e_mm_s", &file)?, f64s(&df, "v_ef_mm_s", &file)?);
+    let file = dir.join(command::TABLE.file());
+    let df = read_table(dir, &command::TABLE.file())?;
+    let (v_e, v_ef) = (f64s(&df, command::v_e_mm_s, &file)?, f64s(&df, command::v_ef_mm_s, &file)?);
     if v_e.len() != samples {
         return Err(StageError::BadInput {
             file,
@@ -180,16 +191,16 @@ fn corners_frame(
     let b: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(before, bead, *v, radius_mm)).collect();
     let a: Vec<_> = seq.path_mm.iter().map(|v| corner_deposition(after, bead, *v, radius_mm)).collect();
     frame(vec![
-        i64_col("corner", (0..angles.len() as i64).collect()),
-        f64_col("angle_deg", angles),
-        f64_col("oe_before_pct", b.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
-        f64_col("oe_after_pct", a.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
-        f64_col("a_c_mm2", polytope.clone()),
-        f64_col("a_o_before_mm2", b.iter().map(|c| c.over_area_mm2).collect()),
-        f64_col("a_o_after_mm2", a.iter().map(|c| c.over_area_mm2).collect()),
-        f64_col("a_u_before_mm2", b.iter().map(|c| c.under_area_mm2).collect()),
-        f64_col("a_u_after_mm2", a.iter().map(|c| c.under_area_mm2).collect()),
-        f64_col("window_ideal_mm2", b.iter().map(|c| c.ideal_area_mm2).collect()),
+        i64_col(corners::corner, (0..angles.len() as i64).collect()),
+        f64_col(corners::angle_deg, angles),
+        f64_col(corners::oe_before_pct, b.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
+        f64_col(corners::oe_after_pct, a.iter().zip(&polytope).map(|(c, p)| 100.0 * c.over_area_mm2 / p).collect()),
+        f64_col(corners::a_c_mm2, polytope.clone()),
+        f64_col(corners::a_o_before_mm2, b.iter().map(|c| c.over_area_mm2).collect()),
+        f64_col(corners::a_o_after_mm2, a.iter().map(|c| c.over_area_mm2).collect()),
+        f64_col(corners::a_u_before_mm2, b.iter().map(|c| c.under_area_mm2).collect()),
+        f64_col(corners::a_u_after_mm2, a.iter().map(|c| c.under_area_mm2).collect()),
+        f64_col(corners::window_ideal_mm2, b.iter().map(|c| c.ideal_area_mm2).collect()),
     ])
 }
 
@@ -200,10 +211,10 @@ fn contour_frame(
 ) -> Result<polars::prelude::DataFrame, StageError> {
     let (b, a) = (summarize(before), summarize(after));
     frame(vec![
-        str_col("variant", vec!["conventional".into(), "compensated".into()]),
-        f64_col("max_mm", vec![b.max_mm, a.max_mm]),
-        f64_col("rms_mm", vec![b.rms_mm, a.rms_mm]),
-        i64_col("points", vec![b.points as i64, a.points as i64]),
+        str_col(contour::variant, vec!["conventional".into(), "compensated".into()]),
+        f64_col(contour::max_mm, vec![b.max_mm, a.max_mm]),
+        f64_col(contour::rms_mm, vec![b.rms_mm, a.rms_mm]),
+        i64_col(contour::points, vec![b.points as i64, a.points as i64]),
     ])
 }
 
@@ -226,12 +237,12 @@ fn contour_points_frame(
         }
     }
     frame(vec![
-        str_col("variant", cols.0),
-        i64_col("layer", cols.1),
-        f64_col("x_mm", cols.2),
-        f64_col("y_mm", cols.3),
-        f64_col("error_mm", cols.4),
-        bool_col("covered", cols.5),
+        str_col(contour_points::variant, cols.0),
+        i64_col(contour_points::layer, cols.1),
+        f64_col(contour_points::x_mm, cols.2),
+        f64_col(contour_points::y_mm, cols.3),
+        f64_col(contour_points::error_mm, cols.4),
+        bool_col(contour_points::covered, cols.5),
     ])
 }
 
@@ -271,19 +282,19 @@ fn regions_summary_frame(
     }
     let RegionColumns { region, corner, angle_deg, kind, points, before, after } = cols;
     frame(vec![
-        str_col("region", region),
-        i64_col("corner", corner),
-        f64_col("angle_deg", angle_deg),
-        str_col("kind", kind),
-        i64_col("points", points),
-        f64_col("max_before_mm", before.max_mm),
-        f64_col("max_after_mm", after.max_mm),
-        bool_col("max_before_short", before.max_short),
-        bool_col("max_after_short", after.max_short),
-        f64_col("rms_before_mm", before.rms_mm),
-        f64_col("rms_after_mm", after.rms_mm),
-        f64_col("sq_share_before", before.share),
-        f64_col("sq_share_after", after.share),
+        str_col(contour_regions::region, region),
+        i64_col(contour_regions::corner, corner),
+        f64_col(contour_regions::angle_deg, angle_deg),
+        str_col(contour_regions::kind, kind),
+        i64_col(contour_regions::points, points),
+        f64_col(contour_regions::max_before_mm, before.max_mm),
+        f64_col(contour_regions::max_after_mm, after.max_mm),
+        bool_col(contour_regions::max_before_short, before.max_short),
+        bool_col(contour_regions::max_after_short, after.max_short),
+        f64_col(contour_regions::rms_before_mm, before.rms_mm),
+        f64_col(contour_regions::rms_after_mm, after.rms_mm),
+        f64_col(contour_regions::sq_share_before, before.share),
+        f64_col(contour_regions::sq_share_after, after.share),
     ])
 }
 
@@ -340,5 +351,10 @@ fn regions_frame(
             }
         }
     }
-    frame(vec![str_col("variant", cols.0), f64_col("x_mm", cols.1), f64_col("y_mm", cols.2), str_col("class", cols.3)])
+    frame(vec![
+        str_col(deposit_regions::variant, cols.0),
+        f64_col(deposit_regions::x_mm, cols.1),
+        f64_col(deposit_regions::y_mm, cols.2),
+        str_col(deposit_regions::class, cols.3),
+    ])
 }

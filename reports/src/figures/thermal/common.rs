@@ -12,6 +12,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::StageError;
+use tables::thermal::path;
 
 use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet};
@@ -37,12 +38,12 @@ pub struct Vertex {
 
 /// Reads the CAD polygon from `<dir>/path.parquet`, sorted by vertex id.
 pub fn load_polygon(dir: &Path) -> Result<Vec<Vertex>, StageError> {
-    let path = dir.join("path.parquet");
+    let path = dir.join(path::TABLE.file());
     let df = read_parquet(&path)?;
-    let (id, x, y) = (ints(&df, "vertex", &path)?, f64s(&df, "x_mm", &path)?, f64s(&df, "y_mm", &path)?);
+    let (id, x, y) = (ints(&df, path::vertex, &path)?, f64s(&df, path::x_mm, &path)?, f64s(&df, path::y_mm, &path)?);
     let mut polygon: Vec<Vertex> = (0..df.height()).map(|i| Vertex { id: id[i], x_mm: x[i], y_mm: y[i] }).collect();
     if polygon.len() < 3 {
-        return Err(no_rows(&path, "vertex", "at least three polygon vertices"));
+        return Err(no_rows(&path, path::vertex, "at least three polygon vertices"));
     }
     polygon.sort_by_key(|v| v.id);
     Ok(polygon)

@@ -18,8 +18,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::thermal::{contour, contour_points, path};
 
 use crate::figures::thermal::common::{closed_outline, colour_level, level_colour, load_polygon, plane_chart, Vertex};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -51,7 +53,21 @@ const REPRINT: Input = Input::one(
     "reprint",
     &[Source::Stage("thermal.reprint_evaluate")],
     "the contour error per point and its summary, and the CAD polygon (`contour_points.parquet`, `contour.parquet`, `path.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &contour_points::TABLE,
+        columns: &[
+            contour_points::variant,
+            contour_points::layer,
+            contour_points::x_mm,
+            contour_points::y_mm,
+            contour_points::error_mm,
+        ],
+    },
+    Reads { table: &contour::TABLE, columns: &[contour::variant, contour::max_mm, contour::rms_mm] },
+    Reads { table: &path::TABLE, columns: &[path::vertex, path::x_mm, path::y_mm] },
+]);
 
 /// One contour point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,7 +108,7 @@ impl Stage for ThermalContourErrorFigure {
 
     fn run(&self, ctx: &mut StageContext, p: &ContourErrorParams) -> Result<(), StageError> {
         let dir = &ctx.input(&REPRINT).dir;
-        let points = load_points(&dir.join("contour_points.parquet"))?;
+        let points = load_points(&dir.join(contour_points::TABLE.file()))?;
         let layer = match p.layer {
             -2 => None,
             -1 => Some(worst_layer(&points)),
@@ -100,7 +116,7 @@ impl Stage for ThermalContourErrorFigure {
         };
         let plot = Plot {
             points,
-            summary_mm: load_summary(&dir.join("contour.parquet"))?,
+            summary_mm: load_summary(&dir.join(contour::TABLE.file()))?,
             polygon: load_polygon(dir)?,
             layer,
         };
@@ -115,8 +131,12 @@ impl Stage for ThermalContourErrorFigure {
 /// Reads `contour_points.parquet` into the conventional and compensated points.
 pub fn load_points(path: &Path) -> Result<[Vec<Point>; 2], StageError> {
     let df = read_parquet(path)?;
-    let (variant, layer) = (strs(&df, "variant", path)?, ints(&df, "layer", path)?);
-    let (x, y, e) = (f64s(&df, "x_mm", path)?, f64s(&df, "y_mm", path)?, f64s(&df, "error_mm", path)?);
+    let (variant, layer) = (strs(&df, contour_points::variant, path)?, ints(&df, contour_points::layer, path)?);
+    let (x, y, e) = (
+        f64s(&df, contour_points::x_mm, path)?,
+        f64s(&df, contour_points::y_mm, path)?,
+        f64s(&df, contour_points::error_mm, path)?,
+    );
     let mut points: [Vec<Point>; 2] = [Vec::new(), Vec::new()];
     for i in 0..df.height() {
         if let Some(k) = VARIANTS.iter().position(|v| *v == variant[i]) {
@@ -124,7 +144,7 @@ pub fn load_points(path: &Path) -> Result<[Vec<Point>; 2], StageError> {
         }
     }
     if points.iter().any(Vec::is_empty) {
-        return Err(no_rows(path, "variant", "points of both variants, conventional and compensated"));
+        return Err(no_rows(path, contour_points::variant, "points of both variants, conventional and compensated"));
     }
     Ok(points)
 }
@@ -132,10 +152,14 @@ pub fn load_points(path: &Path) -> Result<[Vec<Point>; 2], StageError> {
 /// Reads (max, RMS) per variant from `contour.parquet`.
 pub fn load_summary(path: &Path) -> Result<[(f64, f64); 2], StageError> {
     let df = read_parquet(path)?;
-    let variant = strs(&df, "variant", path)?;
-    let (max, rms) = (f64s(&df, "max_mm", path)?, f64s(&df, "rms_mm", path)?);
+    let variant = strs(&df, contour::variant, path)?;
+    let (max, rms) = (f64s(&df, contour::max_mm, path)?, f64s(&df, contour::rms_mm, path)?);
     let row = |name: &str| {
-        variant.iter().position(|v| v == name).map(|i| (max[i], rms[i])).ok_or_else(|| no_rows(path, "variant", name))
+        variant
+            .iter()
+            .position(|v| v == name)
+            .map(|i| (max[i], rms[i]))
+            .ok_or_else(|| no_rows(path, contour::variant, name))
     };
     Ok([row(VARIANTS[0])?, row(VARIANTS[1])?])
 }

@@ -26,7 +26,7 @@ use pipeline::params::ParamError;
 use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::thermal::widths;
+use tables::thermal::{compensation, spans, widths};
 
 use crate::figures::thermal::common::finite_range;
 use crate::figures::thermal::directions::parse_vertices;
@@ -75,7 +75,36 @@ const COMPENSATE: Input = Input::one(
     "compensate",
     &[Source::Stage("thermal.compensate")],
     "the compensated spans and their sequences (`spans.parquet`, `compensation.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &spans::TABLE,
+        columns: &[
+            spans::span,
+            spans::vertex,
+            spans::angle_deg,
+            spans::t_start_s,
+            spans::t_end_s,
+            spans::t_ext_start_s,
+            spans::t_ext_end_s,
+            spans::corner_temp_c,
+            spans::gain_ke,
+            spans::max_dw_mm,
+        ],
+    },
+    Reads {
+        table: &compensation::TABLE,
+        columns: &[
+            compensation::span,
+            compensation::t_s,
+            compensation::dv_desired_mm_s,
+            compensation::w_measured_mm,
+            compensation::w_desired_mm,
+            compensation::dv_input_mm_s,
+            compensation::dv_output_mm_s,
+        ],
+    },
+]);
 
 /// One compensated span (a row of `spans.parquet`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -208,13 +237,18 @@ pub fn load_widths(path: &Path) -> Result<Widths, StageError> {
 /// Reads `spans.parquet` and `compensation.parquet`; keeps the spans in `wanted`
 /// (all when empty). A wanted span that is absent is an error.
 pub fn load_spans(dir: &Path, wanted: &[i64]) -> Result<Vec<(Span, Sequence)>, StageError> {
-    let path = dir.join("spans.parquet");
+    let path = dir.join(spans::TABLE.file());
     let df = read_parquet(&path)?;
     let f = |name: &str| f64s(&df, name, &path);
-    let (span, vertex) = (ints(&df, "span", &path)?, ints(&df, "vertex", &path)?);
-    let (angle, t0, t1, e0, e1) =
-        (f("angle_deg")?, f("t_start_s")?, f("t_end_s")?, f("t_ext_start_s")?, f("t_ext_end_s")?);
-    let (temp, gain, dw) = (f("corner_temp_c")?, f("gain_ke")?, f("max_dw_mm")?);
+    let (span, vertex) = (ints(&df, spans::span, &path)?, ints(&df, spans::vertex, &path)?);
+    let (angle, t0, t1, e0, e1) = (
+        f(spans::angle_deg)?,
+        f(spans::t_start_s)?,
+        f(spans::t_end_s)?,
+        f(spans::t_ext_start_s)?,
+        f(spans::t_ext_end_s)?,
+    );
+    let (temp, gain, dw) = (f(spans::corner_temp_c)?, f(spans::gain_ke)?, f(spans::max_dw_mm)?);
     let spans: Vec<Span> = (0..df.height())
         .map(|i| Span {
             span: span[i],
@@ -229,21 +263,23 @@ pub fn load_spans(dir: &Path, wanted: &[i64]) -> Result<Vec<(Span, Sequence)>, S
         .filter(|s| wanted.is_empty() || wanted.contains(&s.span))
         .collect();
     if let Some(missing) = wanted.iter().find(|w| !spans.iter().any(|s| s.span == **w)) {
-        return Err(no_rows(&path, "span", &format!("span {missing}")));
+        return Err(no_rows(&path, spans::span, &format!("span {missing}")));
     }
     if spans.is_empty() {
-        return Err(no_rows(&path, "span", "one row per compensated span"));
+        return Err(no_rows(&path, spans::span, "one row per compensated span"));
     }
-    let sequences = load_sequences(&dir.join("compensation.parquet"), &spans)?;
+    let sequences = load_sequences(&dir.join(compensation::TABLE.file()), &spans)?;
     Ok(spans.into_iter().zip(sequences).collect())
 }
 
 fn load_sequences(path: &Path, spans: &[Span]) -> Result<Vec<Sequence>, StageError> {
     let df = read_parquet(path)?;
-    let id = ints(&df, "span", path)?;
-    let (t, want) = (f64s(&df, "t_s", path)?, f64s(&df, "dv_desired_mm_s", path)?);
-    let (measured, wanted) = (f64s(&df, "w_measured_mm", path)?, f64s(&df, "w_desired_mm", path)?);
-    let (input, output) = (f64s(&df, "dv_input_mm_s", path)?, f64s(&df, "dv_output_mm_s", path)?);
+    let id = ints(&df, compensation::span, path)?;
+    let (t, want) = (f64s(&df, compensation::t_s, path)?, f64s(&df, compensation::dv_desired_mm_s, path)?);
+    let (measured, wanted) =
+        (f64s(&df, compensation::w_measured_mm, path)?, f64s(&df, compensation::w_desired_mm, path)?);
+    let (input, output) =
+        (f64s(&df, compensation::dv_input_mm_s, path)?, f64s(&df, compensation::dv_output_mm_s, path)?);
     let mut sequences = vec![Sequence::default(); spans.len()];
     for i in 0..df.height() {
         if let Some(k) = spans.iter().position(|s| s.span == id[i]) {
@@ -257,7 +293,7 @@ fn load_sequences(path: &Path, spans: &[Span]) -> Result<Vec<Sequence>, StageErr
         }
     }
     if let Some(k) = sequences.iter().position(|q| q.t_s.is_empty()) {
-        return Err(no_rows(path, "span", &format!("the sequence of span {}", spans[k].span)));
+        return Err(no_rows(path, compensation::span, &format!("the sequence of span {}", spans[k].span)));
     }
     Ok(sequences)
 }

@@ -15,8 +15,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::ParamError;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::thermal::{corners, deposit_regions, path};
 
 use crate::figures::common::grid_step;
 use crate::figures::thermal::common::{
@@ -59,7 +61,18 @@ const REPRINT: Input = Input::one(
     "reprint",
     &[Source::Stage("thermal.reprint_evaluate")],
     "the corners' O_E, the deposit classes and the CAD polygon (`corners.parquet`, `deposit_regions.parquet`, `path.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &corners::TABLE,
+        columns: &[corners::corner, corners::angle_deg, corners::oe_before_pct, corners::oe_after_pct],
+    },
+    Reads {
+        table: &deposit_regions::TABLE,
+        columns: &[deposit_regions::variant, deposit_regions::class, deposit_regions::x_mm, deposit_regions::y_mm],
+    },
+    Reads { table: &path::TABLE, columns: &[path::vertex, path::x_mm, path::y_mm] },
+]);
 
 /// A deposit class of one grid cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -140,9 +153,9 @@ impl Stage for ThermalOverdepositionFigure {
     fn run(&self, ctx: &mut StageContext, p: &OverdepositionParams) -> Result<(), StageError> {
         let dir = &ctx.input(&REPRINT).dir;
         let wanted = parse_vertices(&p.vertices, "vertices").map_err(|e| StageError::params(ctx, e))?;
-        let (cells, step_mm) = load_cells(&dir.join("deposit_regions.parquet"))?;
+        let (cells, step_mm) = load_cells(&dir.join(deposit_regions::TABLE.file()))?;
         let plot = Plot {
-            corners: load_corners(&dir.join("corners.parquet"), &wanted)?,
+            corners: load_corners(&dir.join(corners::TABLE.file()), &wanted)?,
             cells,
             step_mm,
             polygon: load_polygon(dir)?,
@@ -183,17 +196,17 @@ pub fn figure_size_px(n: usize, per_row: usize) -> (u32, u32) {
 /// Reads `corners.parquet`, keeping the vertices in `wanted` (all when empty).
 pub fn load_corners(path: &Path, wanted: &[i64]) -> Result<Vec<Corner>, StageError> {
     let df = read_parquet(path)?;
-    let (vertex, angle) = (ints(&df, "corner", path)?, f64s(&df, "angle_deg", path)?);
-    let (before, after) = (f64s(&df, "oe_before_pct", path)?, f64s(&df, "oe_after_pct", path)?);
+    let (vertex, angle) = (ints(&df, corners::corner, path)?, f64s(&df, corners::angle_deg, path)?);
+    let (before, after) = (f64s(&df, corners::oe_before_pct, path)?, f64s(&df, corners::oe_after_pct, path)?);
     let corners: Vec<Corner> = (0..df.height())
         .map(|i| Corner { vertex: vertex[i], angle_deg: angle[i], oe_pct: (before[i], after[i]) })
         .filter(|c| wanted.is_empty() || wanted.contains(&c.vertex))
         .collect();
     if let Some(missing) = wanted.iter().find(|w| !corners.iter().any(|c| c.vertex == **w)) {
-        return Err(no_rows(path, "corner", &format!("corner {missing}")));
+        return Err(no_rows(path, corners::corner, &format!("corner {missing}")));
     }
     if corners.is_empty() {
-        return Err(no_rows(path, "corner", "one row per evaluated corner"));
+        return Err(no_rows(path, corners::corner, "one row per evaluated corner"));
     }
     Ok(corners)
 }
@@ -202,8 +215,8 @@ pub fn load_corners(path: &Path, wanted: &[i64]) -> Result<Vec<Corner>, StageErr
 /// the grid spacing. An unknown variant or class is an error naming the row.
 pub fn load_cells(path: &Path) -> Result<(Cells, f64), StageError> {
     let df = read_parquet(path)?;
-    let (variant, class) = (strs(&df, "variant", path)?, strs(&df, "class", path)?);
-    let (x, y) = (f64s(&df, "x_mm", path)?, f64s(&df, "y_mm", path)?);
+    let (variant, class) = (strs(&df, deposit_regions::variant, path)?, strs(&df, deposit_regions::class, path)?);
+    let (x, y) = (f64s(&df, deposit_regions::x_mm, path)?, f64s(&df, deposit_regions::y_mm, path)?);
     let mut cells: [Vec<(f64, f64, Class)>; 2] = [Vec::new(), Vec::new()];
     for i in 0..df.height() {
         let bad = |column: &str, expected: &str| StageError::BadInput {
@@ -220,7 +233,7 @@ pub fn load_cells(path: &Path) -> Result<(Cells, f64), StageError> {
         cells[k].push((x[i], y[i], c));
     }
     if cells.iter().any(Vec::is_empty) {
-        return Err(no_rows(path, "variant", "cells of both variants, conventional and compensated"));
+        return Err(no_rows(path, deposit_regions::variant, "cells of both variants, conventional and compensated"));
     }
     let step = grid_step(cells[0].iter().take(10_000).map(|c| c.0));
     Ok((cells, step))

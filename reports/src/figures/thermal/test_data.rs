@@ -10,9 +10,12 @@ use std::path::Path;
 use polars::df;
 use polars::prelude::DataFrame;
 
-use tables::thermal::{detections_example, directions, frame_example, frame_example_meta, frames, mosaic, widths};
+use tables::thermal::{
+    accuracy, compensation, contour, contour_points, contour_regions, corners, deposit_regions, detections_example,
+    directions, frame_example, frame_example_meta, frames, mosaic, path, spans, widths,
+};
 
-use crate::figures::test_util::{declared, noise, write_declared, write_table};
+use crate::figures::test_util::{declared, noise, write_declared};
 
 /// Nominal half width w0 (mm): half of the 0.45 mm bead.
 pub const W0_MM: f64 = 0.225;
@@ -135,9 +138,9 @@ pub fn directions(poly: &[(f64, f64)]) -> DataFrame {
 /// `path.parquet`.
 pub fn path_table(poly: &[(f64, f64)]) -> DataFrame {
     df!(
-        "vertex" => (0..poly.len() as i32).collect::<Vec<i32>>(),
-        "x_mm" => poly.iter().map(|p| p.0).collect::<Vec<f64>>(),
-        "y_mm" => poly.iter().map(|p| p.1).collect::<Vec<f64>>()
+        path::vertex => (0..poly.len() as i32).collect::<Vec<i32>>(),
+        path::x_mm => poly.iter().map(|p| p.0).collect::<Vec<f64>>(),
+        path::y_mm => poly.iter().map(|p| p.1).collect::<Vec<f64>>()
     )
     .expect("frame")
 }
@@ -353,34 +356,33 @@ pub fn write_compensate(dir: &Path) {
         }
     }
     let spans = df!(
-        "span" => span, "vertex" => vertex, "angle_deg" => angle, "t_start_s" => t0, "t_end_s" => t1,
-        "t_ext_start_s" => e0, "t_ext_end_s" => e1, "corner_temp_c" => temp, "gain_ke" => gain,
-        "max_dw_mm" => max_dw
+        spans::span => span, spans::vertex => vertex, spans::angle_deg => angle, spans::t_start_s => t0, spans::t_end_s => t1,
+        spans::t_ext_start_s => e0, spans::t_ext_end_s => e1, spans::corner_temp_c => temp, spans::gain_ke => gain,
+        spans::max_dw_mm => max_dw
     )
     .expect("frame");
     let comp = df!(
-        "span" => c_span, "vertex" => c_vertex, "t_s" => c_t, "dw_mm" => c_dw, "w_measured_mm" => c_measured,
-        "w_desired_mm" => c_wanted, "dv_desired_mm_s" => desired, "dv_output_mm_s" => output, "dv_input_mm_s" => input
+        compensation::span => c_span, compensation::vertex => c_vertex, compensation::t_s => c_t, compensation::dw_mm => c_dw, compensation::w_measured_mm => c_measured,
+        compensation::w_desired_mm => c_wanted, compensation::dv_desired_mm_s => desired, compensation::dv_output_mm_s => output, compensation::dv_input_mm_s => input
     )
     .expect("frame");
-    write_table(dir, "spans", spans);
-    write_table(dir, "compensation", comp);
+    write_declared(dir, &spans::TABLE, declared(&spans::TABLE, spans));
+    write_declared(dir, &compensation::TABLE, declared(&compensation::TABLE, comp));
 }
 
 /// Writes every `thermal.reprint` table into `dir`.
 pub fn write_reprint(dir: &Path) {
     let poly = corner_path();
-    write_table(dir, "path", path_table(&poly));
-    write_table(dir, "corners", corners(&poly));
-    write_table(
-        dir,
-        "contour",
-        df!("variant" => ["conventional", "compensated"], "max_mm" => [1.52, 0.27], "rms_mm" => [0.41, 0.19])
-            .expect("frame"),
-    );
-    write_table(dir, "contour_points", contour_points(&poly));
-    write_table(dir, "deposit_regions", deposit_regions(&poly));
-    write_table(dir, "contour_regions", contour_regions(&poly));
+    write_declared(dir, &path::TABLE, declared(&path::TABLE, path_table(&poly)));
+    write_declared(dir, &corners::TABLE, declared(&corners::TABLE, corners(&poly)));
+    let contour_summary = df!(
+        contour::variant => ["conventional", "compensated"], contour::max_mm => [1.52, 0.27], contour::rms_mm => [0.41, 0.19]
+    )
+    .expect("frame");
+    write_declared(dir, &contour::TABLE, declared(&contour::TABLE, contour_summary));
+    write_declared(dir, &contour_points::TABLE, declared(&contour_points::TABLE, contour_points(&poly)));
+    write_declared(dir, &deposit_regions::TABLE, declared(&deposit_regions::TABLE, deposit_regions(&poly)));
+    write_declared(dir, &contour_regions::TABLE, declared(&contour_regions::TABLE, contour_regions(&poly)));
 }
 
 /// `contour_regions.parquet`: one row per vertex (even vertices apexes, odd ones valleys),
@@ -400,13 +402,13 @@ pub fn contour_regions(poly: &[(f64, f64)]) -> DataFrame {
     let max_before: Vec<f64> = (0..rows).map(|k| if k == 1 { 1.52 } else { 0.5 + 0.1 * noise(k) }).collect();
     let max_after: Vec<f64> = (0..rows).map(|k| if k == 0 { 0.27 } else { 0.1 + 0.05 * noise(k + 7) }).collect();
     df!(
-        "region" => region, "corner" => corner, "angle_deg" => angle, "kind" => kind,
-        "points" => vec![100i64; rows],
-        "max_before_mm" => max_before, "max_after_mm" => max_after,
-        "max_before_short" => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
-        "max_after_short" => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
-        "rms_before_mm" => vec![0.41; rows], "rms_after_mm" => vec![0.19; rows],
-        "sq_share_before" => vec![1.0 / rows as f64; rows], "sq_share_after" => vec![1.0 / rows as f64; rows]
+        contour_regions::region => region, contour_regions::corner => corner, contour_regions::angle_deg => angle, contour_regions::kind => kind,
+        contour_regions::points => vec![100i64; rows],
+        contour_regions::max_before_mm => max_before, contour_regions::max_after_mm => max_after,
+        contour_regions::max_before_short => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
+        contour_regions::max_after_short => (0..rows).map(|k| k % 2 == 0).collect::<Vec<bool>>(),
+        contour_regions::rms_before_mm => vec![0.41; rows], contour_regions::rms_after_mm => vec![0.19; rows],
+        contour_regions::sq_share_before => vec![1.0 / rows as f64; rows], contour_regions::sq_share_after => vec![1.0 / rows as f64; rows]
     )
     .expect("frame")
 }
@@ -419,11 +421,11 @@ pub fn corners(poly: &[(f64, f64)]) -> DataFrame {
     let before: Vec<f64> = (0..n).map(|k| 100.0 + 10.0 * noise(k)).collect();
     let after: Vec<f64> = (0..n).map(|k| 30.0 + 10.0 * noise(k + 50)).collect();
     df!(
-        "corner" => (0..n as i32).collect::<Vec<i32>>(), "angle_deg" => angle,
-        "oe_before_pct" => before.clone(), "oe_after_pct" => after.clone(),
-        "a_c_mm2" => a_c.clone(),
-        "a_o_before_mm2" => a_c.iter().zip(&before).map(|(a, o)| a * o / 100.0).collect::<Vec<f64>>(),
-        "a_o_after_mm2" => a_c.iter().zip(&after).map(|(a, o)| a * o / 100.0).collect::<Vec<f64>>()
+        corners::corner => (0..n as i32).collect::<Vec<i32>>(), corners::angle_deg => angle,
+        corners::oe_before_pct => before.clone(), corners::oe_after_pct => after.clone(),
+        corners::a_c_mm2 => a_c.clone(),
+        corners::a_o_before_mm2 => a_c.iter().zip(&before).map(|(a, o)| a * o / 100.0).collect::<Vec<f64>>(),
+        corners::a_o_after_mm2 => a_c.iter().zip(&after).map(|(a, o)| a * o / 100.0).collect::<Vec<f64>>()
     )
     .expect("frame")
 }
@@ -444,7 +446,7 @@ pub fn contour_points(poly: &[(f64, f64)]) -> DataFrame {
             }
         }
     }
-    df!("variant" => variant, "layer" => layer, "x_mm" => x, "y_mm" => y, "error_mm" => err).expect("frame")
+    df!(contour_points::variant => variant, contour_points::layer => layer, contour_points::x_mm => x, contour_points::y_mm => y, contour_points::error_mm => err).expect("frame")
 }
 
 /// `deposit_regions.parquet` on a 0.02 mm grid: the ideal bead of half width w0 along
@@ -477,7 +479,7 @@ pub fn deposit_regions(poly: &[(f64, f64)]) -> DataFrame {
             }
         }
     }
-    df!("variant" => variant, "x_mm" => x, "y_mm" => y, "class" => class).expect("frame")
+    df!(deposit_regions::variant => variant, deposit_regions::x_mm => x, deposit_regions::y_mm => y, deposit_regions::class => class).expect("frame")
 }
 
 /// `accuracy.parquet`.
@@ -493,11 +495,11 @@ pub fn accuracy() -> DataFrame {
         ("frames_skipped", 8.0, "", 40, ""),
     ];
     df!(
-        "metric" => rows.iter().map(|r| r.0).collect::<Vec<_>>(),
-        "value" => rows.iter().map(|r| r.1).collect::<Vec<_>>(),
-        "unit" => rows.iter().map(|r| r.2).collect::<Vec<_>>(),
-        "n" => rows.iter().map(|r| r.3).collect::<Vec<_>>(),
-        "note" => rows.iter().map(|r| r.4).collect::<Vec<_>>()
+        accuracy::metric => rows.iter().map(|r| r.0).collect::<Vec<_>>(),
+        accuracy::value => rows.iter().map(|r| r.1).collect::<Vec<_>>(),
+        accuracy::unit => rows.iter().map(|r| r.2).collect::<Vec<_>>(),
+        accuracy::n => rows.iter().map(|r| r.3).collect::<Vec<_>>(),
+        accuracy::note => rows.iter().map(|r| r.4).collect::<Vec<_>>()
     )
     .expect("frame")
 }
