@@ -10,6 +10,7 @@ use std::path::Path;
 
 use common::*;
 use polars::prelude::{DataFrame, ParquetReader, SerReader};
+use tables::inkjet::{edge_deformation, recovery, scan_residuals, summary};
 
 fn read(path: &Path) -> DataFrame {
     ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
@@ -22,9 +23,9 @@ type Key = (String, String, i64, i64);
 fn summary(df: &DataFrame) -> BTreeMap<Key, (f64, f64, f64)> {
     let s = |n: &str| df.column(n).unwrap().str().unwrap().iter().map(|v| v.unwrap().to_string()).collect::<Vec<_>>();
     let f = |n: &str| df.column(n).unwrap().f64().unwrap().iter().map(|v| v.unwrap()).collect::<Vec<_>>();
-    let (scenario, controller, pct) = (s("scenario"), s("controller"), f("variation_pct"));
-    let (mean, std, rmsd) = (f("mean_err_um"), f("std_um"), f("rmsd_um"));
-    let layers: Vec<i64> = df.column("layers").unwrap().i64().unwrap().iter().map(|v| v.unwrap()).collect();
+    let (scenario, controller, pct) = (s(summary::scenario), s(summary::controller), f(summary::variation_pct));
+    let (mean, std, rmsd) = (f(summary::mean_err_um), f(summary::std_um), f(summary::rmsd_um));
+    let layers: Vec<i64> = df.column(summary::layers).unwrap().i64().unwrap().iter().map(|v| v.unwrap()).collect();
     // Closed-loop layer counts vary; key them as 0.
     (0..df.height())
         .map(|i| {
@@ -62,10 +63,12 @@ fn reproduces_the_cylinder_cuboid_and_recovery_targets() {
     assert!(closed_block < 2.0 && closed_block < open_block, "{closed_block} vs {open_block}");
     let edges = read(&tmp.path().join("out/inkjet/edge_deformation.parquet"));
     let rmse = |c: &str, r: &str| {
-        let (ctl, reg) =
-            (edges.column("controller").unwrap().str().unwrap(), edges.column("region").unwrap().str().unwrap());
+        let (ctl, reg) = (
+            edges.column(edge_deformation::controller).unwrap().str().unwrap(),
+            edges.column(edge_deformation::region).unwrap().str().unwrap(),
+        );
         let i = (0..edges.height()).find(|&i| ctl.get(i) == Some(c) && reg.get(i) == Some(r)).unwrap();
-        edges.column("rmse_um").unwrap().f64().unwrap().get(i).unwrap()
+        edges.column(edge_deformation::rmse_um).unwrap().f64().unwrap().get(i).unwrap()
     };
     for region in ["edge", "interior"] {
         assert!(rmse("closed_loop", region) < 0.6 * rmse("open_loop", region), "{region}");
@@ -74,8 +77,8 @@ fn reproduces_the_cylinder_cuboid_and_recovery_targets() {
     // curing shrinkage makes the model over-predict (negative bias) more than no effect.
     let residuals = read(&tmp.path().join("out/inkjet/scan_residuals.parquet"));
     assert_eq!(residuals.height(), 6 * 53);
-    let effects = residuals.column("effects").unwrap().str().unwrap();
-    let bias = residuals.column("bias_um").unwrap().f64().unwrap();
+    let effects = residuals.column(scan_residuals::effects).unwrap().str().unwrap();
+    let bias = residuals.column(scan_residuals::bias_um).unwrap().f64().unwrap();
     let mean_bias = |name: &str| {
         let idx: Vec<usize> = (0..residuals.height()).filter(|&i| effects.get(i) == Some(name)).collect();
         idx.iter().map(|&i| bias.get(i).unwrap()).sum::<f64>() / idx.len() as f64
@@ -83,7 +86,8 @@ fn reproduces_the_cylinder_cuboid_and_recovery_targets() {
     assert!(mean_bias("curing_shrinkage=0.05") < mean_bias("none") - 0.2);
     // Sec. IV-C: the exact pattern found in 50 of 50 trials.
     let recovery = read(&tmp.path().join("out/inkjet/recovery.parquet"));
-    let recovered = recovery.column("recovered").unwrap().bool().unwrap().iter().filter(|v| *v == Some(true)).count();
+    let recovered =
+        recovery.column(recovery::recovered).unwrap().bool().unwrap().iter().filter(|v| *v == Some(true)).count();
     assert_eq!((recovery.height(), recovered), (50, 50));
     let comparison = read(&tmp.path().join("out/inkjet/paper_comparison.parquet"));
     // 12 numbers of Figs 11-12 and Table II, the recovery count, Table II against the 3-

@@ -14,8 +14,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::{edge_deformation, recovery, scan_residuals, summary};
 
 use super::{comparison_frame, Row};
 use crate::read::{f64s, read_parquet, strs};
@@ -28,28 +30,63 @@ const SUMMARY: Input = Input::one(
     "summary",
     &[Source::Stage("inkjet.print_experiment")],
     "every experiment's mean error, std, average height and RMSD (`summary.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &summary::TABLE,
+    columns: &[
+        summary::scenario,
+        summary::controller,
+        summary::variation_pct,
+        summary::layers,
+        summary::mean_err_um,
+        summary::std_um,
+        summary::avg_height_um,
+        summary::rmsd_um,
+    ],
+}]);
 
 /// The exact-recovery check of Sec. IV-C.
 const RECOVERY: Input = Input::one(
     "recovery",
     &[Source::Stage("inkjet.recovery")],
     "the trials that recovered the applied pattern (`recovery.parquet`)",
-);
+)
+.reading(&[Reads { table: &recovery::TABLE, columns: &[recovery::flips_wrong] }]);
 
 /// The pipe junction's prints (a `table.concat` of them).
 const EDGE_DEFORMATION: Input = Input::one(
     "edge_deformation",
     &[Source::Stage("inkjet.print_experiment")],
     "the pipe junction's edge deformation per region (`edge_deformation.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &edge_deformation::TABLE,
+    columns: &[
+        edge_deformation::controller,
+        edge_deformation::region,
+        edge_deformation::cells,
+        edge_deformation::rmse_um,
+        edge_deformation::max_abs_um,
+        edge_deformation::mean_err_um,
+    ],
+}]);
 
 /// The model's residuals on virtual scans (a `table.concat` of them).
 const SCAN_RESIDUALS: Input = Input::one(
     "scan_residuals",
     &[Source::Stage("inkjet.scan_residuals")],
     "the layer-to-layer model's residuals per scan set (`scan_residuals.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &scan_residuals::TABLE,
+    columns: &[
+        scan_residuals::effects,
+        scan_residuals::layer,
+        scan_residuals::rmse_um,
+        scan_residuals::bias_um,
+        scan_residuals::max_abs_um,
+    ],
+}]);
 
 /// One experiment the paper reports: (scenario, controller, variation %, metric,
 /// paper value µm, where in the paper).
@@ -80,10 +117,10 @@ enum Metric {
 impl Metric {
     fn column(self) -> &'static str {
         match self {
-            Self::MeanError => "mean_err_um",
-            Self::Std => "std_um",
-            Self::Average => "avg_height_um",
-            Self::Rmsd => "rmsd_um",
+            Self::MeanError => summary::mean_err_um,
+            Self::Std => summary::std_um,
+            Self::Average => summary::avg_height_um,
+            Self::Rmsd => summary::rmsd_um,
         }
     }
 
@@ -109,8 +146,8 @@ impl Stage for Lu2015Section {
     };
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
-        let summary = Summary::read(&ctx.input(&SUMMARY).dir.join("summary.parquet"))?;
-        let (recovered, trials) = recovery(&ctx.input(&RECOVERY).dir.join("recovery.parquet"))?;
+        let summary = Summary::read(&ctx.input(&SUMMARY).dir.join(summary::TABLE.file()))?;
+        let (recovered, trials) = recovery(&ctx.input(&RECOVERY).dir.join(recovery::TABLE.file()))?;
         let (mut rows, mut html) = experiments(&summary);
         let _ = writeln!(
             html,
@@ -125,9 +162,12 @@ impl Stage for Lu2015Section {
             source: "out/inkjet/recovery.parquet (stage recovery, inkjet.recovery)".into(),
         });
         html += &cuboid_layers(&summary, &mut rows);
-        html +=
-            &pipe_junction(&summary, &ctx.input(&EDGE_DEFORMATION).dir.join("edge_deformation.parquet"), &mut rows)?;
-        html += &scan_residuals(&ctx.input(&SCAN_RESIDUALS).dir.join("scan_residuals.parquet"), &mut rows)?;
+        html += &pipe_junction(
+            &summary,
+            &ctx.input(&EDGE_DEFORMATION).dir.join(edge_deformation::TABLE.file()),
+            &mut rows,
+        )?;
+        html += &scan_residuals(&ctx.input(&SCAN_RESIDUALS).dir.join(scan_residuals::TABLE.file()), &mut rows)?;
         html += &discussion(&summary);
         html += &std_gap(&summary);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
@@ -147,10 +187,10 @@ struct Summary {
 impl Summary {
     fn read(path: &Path) -> Result<Self, StageError> {
         let df = read_parquet(path)?;
-        let (scenario, controller) = (strs(&df, "scenario", path)?, strs(&df, "controller", path)?);
-        let pct = f64s(&df, "variation_pct", path)?;
+        let (scenario, controller) = (strs(&df, summary::scenario, path)?, strs(&df, summary::controller, path)?);
+        let pct = f64s(&df, summary::variation_pct, path)?;
         let keys = scenario.into_iter().zip(controller).zip(pct).map(|((s, c), p)| (s, c, p)).collect();
-        let layers = crate::read::ints(&df, "layers", path)?;
+        let layers = crate::read::ints(&df, summary::layers, path)?;
         Ok(Self { keys, layers, path: path.to_path_buf(), df })
     }
 
@@ -222,7 +262,7 @@ fn figure_key(figure: &str) -> &'static str {
 
 fn recovery(path: &Path) -> Result<(usize, usize), StageError> {
     let df = read_parquet(path)?;
-    let flips = crate::read::ints(&df, "flips_wrong", path)?;
+    let flips = crate::read::ints(&df, recovery::flips_wrong, path)?;
     Ok((flips.iter().filter(|f| **f == 0).count(), flips.len()))
 }
 
@@ -292,10 +332,14 @@ fn cuboid_layers(summary: &Summary, rows: &mut Vec<Row>) -> String {
 /// Edge deformation of the pipe junction, open vs closed loop.
 fn pipe_junction(summary: &Summary, path: &Path, rows: &mut Vec<Row>) -> Result<String, StageError> {
     let df = read_parquet(path)?;
-    let (controller, region) = (strs(&df, "controller", path)?, strs(&df, "region", path)?);
-    let (rmse, max, mean) =
-        (f64s(&df, "rmse_um", path)?, f64s(&df, "max_abs_um", path)?, f64s(&df, "mean_err_um", path)?);
-    let cells = crate::read::ints(&df, "cells", path)?;
+    let (controller, region) =
+        (strs(&df, edge_deformation::controller, path)?, strs(&df, edge_deformation::region, path)?);
+    let (rmse, max, mean) = (
+        f64s(&df, edge_deformation::rmse_um, path)?,
+        f64s(&df, edge_deformation::max_abs_um, path)?,
+        f64s(&df, edge_deformation::mean_err_um, path)?,
+    );
+    let cells = crate::read::ints(&df, edge_deformation::cells, path)?;
     let mut html = String::from("<h4>Pipe junction (Figs 13-15): two materials, 100 × 100 grid, h_d = 200 µm, [0 20%]</h4>\n<p>Error of the printed part's top surface (the height after the last layer that deposited part material at a cell) against the desired top of the pipe walls; edge = part cells within 2 cells of the part's plan-view boundary. The paper shows this only as pictures (\u{201c}visible deformation near the edge\u{201d} open loop, \u{201c}no visible deformation\u{201d} closed loop), with no number.</p>\n<table><tr><th class=\"t\">controller</th><th class=\"t\">region</th><th>cells</th><th>RMS error (µm)</th><th>max |error| (µm)</th><th>mean error (µm)</th></tr>\n");
     for r in 0..df.height() {
         let _ = writeln!(
@@ -340,9 +384,13 @@ fn pipe_junction(summary: &Summary, path: &Path, rows: &mut Vec<Row>) -> Result<
 /// The model's one-layer residuals on the virtual scans, one row per effect.
 fn scan_residuals(path: &Path, rows: &mut Vec<Row>) -> Result<String, StageError> {
     let df = read_parquet(path)?;
-    let effects = strs(&df, "effects", path)?;
-    let layer = crate::read::ints(&df, "layer", path)?;
-    let (rmse, bias, max) = (f64s(&df, "rmse_um", path)?, f64s(&df, "bias_um", path)?, f64s(&df, "max_abs_um", path)?);
+    let effects = strs(&df, scan_residuals::effects, path)?;
+    let layer = crate::read::ints(&df, scan_residuals::layer, path)?;
+    let (rmse, bias, max) = (
+        f64s(&df, scan_residuals::rmse_um, path)?,
+        f64s(&df, scan_residuals::bias_um, path)?,
+        f64s(&df, scan_residuals::max_abs_um, path)?,
+    );
     let mut names: Vec<String> = effects.clone();
     names.dedup();
     let mut html = String::from("<h4>The layer-to-layer model on virtual scans (inkjet-scans datasets, one extra effect each)</h4>\n<p>Each dataset is an open-loop cylinder ([0 20%] shortfall, scans after every one of 53 layers) from the virtual printer with one extra effect switched on (DESIGN §5.2). The nominal model (eqs 2-7, Table I) predicts each scan from the previous scan and the printed pattern; residual = measured − predicted over the footprint. The paper has no such test (its Sec. V-D-1 compares one four-layer print by eye, Figs 21-22).</p>\n<table><tr><th class=\"t\">effects</th><th>layers</th><th>mean RMS residual (µm)</th><th>mean bias (µm)</th><th>bias, first layer</th><th>bias, last layer</th><th>largest |residual|</th></tr>\n");

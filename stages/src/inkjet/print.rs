@@ -13,11 +13,13 @@ use models::inkjet::experiments::{
 use models::inkjet::height_model::Material;
 use models::inkjet::pipe_junction::{desired_part_top, edge_deformation, RegionMetrics};
 use models::inkjet::HeightMap;
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use tables::inkjet::{edge_deformation, height_map, layers, part_top, summary};
 
 use super::{Controller, Part};
 use crate::progress::StageProgress;
@@ -52,6 +54,8 @@ impl Stage for PrintExperimentStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] =
+        &[&summary::TABLE, &height_map::TABLE, &edge_deformation::TABLE, &part_top::TABLE, &layers::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &PrintParams) -> Result<(), StageError> {
         let (scenario_name, controller) = (p.scenario.name(), p.controller.name());
@@ -71,18 +75,18 @@ impl Stage for PrintExperimentStage {
             .map_err(StageError::domain)?;
         drop(progress);
         let mut summary = summary_frame(scenario_name, controller, variation_pct, &outcome)?;
-        ctx.write_table("summary", &mut summary)?;
+        ctx.write_table(summary::TABLE.name, &mut summary)?;
         let mut map = height_map_frame(&outcome.final_heights)?;
-        ctx.write_table("height_map", &mut map)?;
+        ctx.write_table(height_map::TABLE.name, &mut map)?;
         if let Some(recording) = recording {
             let band = p.edge_band_cells as usize;
             let regions = edge_deformation(&scenario, &outcome, band).map_err(StageError::domain)?;
             let mut edges = edge_frame(scenario_name, controller, variation_pct, &regions)?;
-            ctx.write_table("edge_deformation", &mut edges)?;
+            ctx.write_table(edge_deformation::TABLE.name, &mut edges)?;
             let mut top = part_top_frame(&scenario, &outcome)?;
-            ctx.write_table("part_top", &mut top)?;
+            ctx.write_table(part_top::TABLE.name, &mut top)?;
             let mut layers = layers_frame(&recording)?;
-            ctx.write_table("layers", &mut layers)?;
+            ctx.write_table(layers::TABLE.name, &mut layers)?;
         }
         Ok(())
     }
@@ -97,14 +101,14 @@ pub fn edge_frame(
 ) -> Result<DataFrame, StageError> {
     let n = regions.len();
     frame(vec![
-        str_col("scenario", vec![scenario.to_string(); n]),
-        str_col("controller", vec![controller.to_string(); n]),
-        f64_col("variation_pct", vec![variation_pct; n]),
-        str_col("region", regions.iter().map(|r| r.region.name().to_string()).collect()),
-        i64_col("cells", regions.iter().map(|r| r.cells as i64).collect()),
-        f64_col("rmse_um", regions.iter().map(|r| r.rmse_um).collect()),
-        f64_col("max_abs_um", regions.iter().map(|r| r.max_abs_um).collect()),
-        f64_col("mean_err_um", regions.iter().map(|r| r.mean_err_um).collect()),
+        str_col(edge_deformation::scenario, vec![scenario.to_string(); n]),
+        str_col(edge_deformation::controller, vec![controller.to_string(); n]),
+        f64_col(edge_deformation::variation_pct, vec![variation_pct; n]),
+        str_col(edge_deformation::region, regions.iter().map(|r| r.region.name().to_string()).collect()),
+        i64_col(edge_deformation::cells, regions.iter().map(|r| r.cells as i64).collect()),
+        f64_col(edge_deformation::rmse_um, regions.iter().map(|r| r.rmse_um).collect()),
+        f64_col(edge_deformation::max_abs_um, regions.iter().map(|r| r.max_abs_um).collect()),
+        f64_col(edge_deformation::mean_err_um, regions.iter().map(|r| r.mean_err_um).collect()),
     ])
 }
 
@@ -115,10 +119,10 @@ fn part_top_frame(scenario: &Scenario, outcome: &PrintOutcome) -> Result<DataFra
     let (xi, yi): (Vec<i64>, Vec<i64>) =
         (0..grid.len()).map(|c| grid.coords(c)).map(|(i, j)| (i as i64, j as i64)).unzip();
     frame(vec![
-        i64_col("x_index", xi),
-        i64_col("y_index", yi),
-        Series::new("part_top_um".into(), outcome.part_top_um.clone()).into_column(),
-        Series::new("desired_top_um".into(), desired).into_column(),
+        i64_col(part_top::x_index, xi),
+        i64_col(part_top::y_index, yi),
+        Series::new(part_top::part_top_um.into(), outcome.part_top_um.clone()).into_column(),
+        Series::new(part_top::desired_top_um.into(), desired).into_column(),
     ])
 }
 
@@ -148,12 +152,12 @@ fn layers_frame(recording: &PrintRecording) -> Result<DataFrame, StageError> {
         before = &record.truth;
     }
     frame(vec![
-        i64_col("layer", layer),
-        i64_col("x_index", xi),
-        i64_col("y_index", yi),
-        f64_col("bottom_um", bottom),
-        f64_col("top_um", top),
-        str_col("material", material),
+        i64_col(layers::layer, layer),
+        i64_col(layers::x_index, xi),
+        i64_col(layers::y_index, yi),
+        f64_col(layers::bottom_um, bottom),
+        f64_col(layers::top_um, top),
+        str_col(layers::material, material),
     ])
 }
 
@@ -167,14 +171,14 @@ pub fn summary_frame(
 ) -> Result<DataFrame, StageError> {
     let m = &outcome.metrics;
     frame(vec![
-        str_col("scenario", vec![scenario.to_string()]),
-        str_col("controller", vec![controller.to_string()]),
-        f64_col("variation_pct", vec![variation_pct]),
-        i64_col("layers", vec![outcome.layers_printed as i64]),
-        f64_col("mean_err_um", vec![m.mean_error_um]),
-        f64_col("std_um", vec![m.std_um]),
-        f64_col("rmsd_um", vec![m.rmsd_um]),
-        f64_col("avg_height_um", vec![m.average_height_um]),
+        str_col(summary::scenario, vec![scenario.to_string()]),
+        str_col(summary::controller, vec![controller.to_string()]),
+        f64_col(summary::variation_pct, vec![variation_pct]),
+        i64_col(summary::layers, vec![outcome.layers_printed as i64]),
+        f64_col(summary::mean_err_um, vec![m.mean_error_um]),
+        f64_col(summary::std_um, vec![m.std_um]),
+        f64_col(summary::rmsd_um, vec![m.rmsd_um]),
+        f64_col(summary::avg_height_um, vec![m.average_height_um]),
     ])
 }
 
@@ -193,11 +197,11 @@ pub fn height_map_frame(map: &HeightMap) -> Result<DataFrame, StageError> {
         y.push(py);
     }
     frame(vec![
-        i64_col("x_index", xi),
-        i64_col("y_index", yi),
-        f64_col("x_um", x),
-        f64_col("y_um", y),
-        f64_col("height_um", map.height_um.clone()),
+        i64_col(height_map::x_index, xi),
+        i64_col(height_map::y_index, yi),
+        f64_col(height_map::x_um, x),
+        f64_col(height_map::y_um, y),
+        f64_col(height_map::height_um, map.height_um.clone()),
     ])
 }
 

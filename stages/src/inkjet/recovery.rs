@@ -4,9 +4,11 @@
 //! all-ones pattern (the paper: recovered in every trial).
 
 use models::inkjet::experiments::{recovery_study, RecoverySetup, RecoveryTrial};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, Series};
+use tables::inkjet::recovery;
 
 use crate::table::{f64_col, frame, i64_col};
 
@@ -31,12 +33,13 @@ impl Stage for RecoveryStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&recovery::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &RecoveryParams) -> Result<(), StageError> {
         let results =
             recovery_study(&RecoverySetup::paper(), p.trials as usize, ctx.seed).map_err(StageError::domain)?;
         let mut table = recovery_frame(&results)?;
-        ctx.write_table("recovery", &mut table)?;
+        ctx.write_table(recovery::TABLE.name, &mut table)?;
         Ok(())
     }
 }
@@ -46,11 +49,11 @@ impl Stage for RecoveryStage {
 pub fn recovery_frame(trials: &[RecoveryTrial]) -> Result<DataFrame, StageError> {
     let recovered: Vec<bool> = trials.iter().map(|t| t.flips_wrong == 0).collect();
     frame(vec![
-        i64_col("trial", (0..trials.len() as i64).collect()),
-        Series::new("recovered".into(), recovered).into_column(),
-        i64_col("flips_wrong", trials.iter().map(|t| t.flips_wrong as i64).collect()),
-        f64_col("objective_um", trials.iter().map(|t| t.objective_um).collect()),
-        i64_col("droplets_applied", trials.iter().map(|t| t.droplets_applied as i64).collect()),
+        i64_col(recovery::trial, (0..trials.len() as i64).collect()),
+        Series::new(recovery::recovered.into(), recovered).into_column(),
+        i64_col(recovery::flips_wrong, trials.iter().map(|t| t.flips_wrong as i64).collect()),
+        f64_col(recovery::objective_um, trials.iter().map(|t| t.objective_um).collect()),
+        i64_col(recovery::droplets_applied, trials.iter().map(|t| t.droplets_applied as i64).collect()),
     ])
 }
 

@@ -14,9 +14,11 @@ use models::inkjet::height_model::{deposit_layer_into, DropletCoeffs, Material};
 use models::inkjet::printer::Effects;
 use models::inkjet::Grid;
 use pipeline::params::{NoParams, ParamError};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
+use tables::inkjet::{profiles, scan_residuals};
 
 use super::{Controller, Part};
 use crate::roles;
@@ -85,15 +87,16 @@ impl Stage for ScanResidualsStage {
         inputs: &[roles::INKJET_SCANS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&scan_residuals::TABLE, &profiles::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let dataset = InkjetScans::read(&ctx.input(&roles::INKJET_SCANS).dir).map_err(StageError::domain)?;
         let residuals = layer_residuals(&dataset).map_err(StageError::domain)?;
         let mut table = residuals_frame(&dataset, &residuals)?;
-        ctx.write_table("scan_residuals", &mut table)?;
+        ctx.write_table(scan_residuals::TABLE.name, &mut table)?;
         let model = open_model_prediction(&dataset).map_err(StageError::domain)?;
         let mut profiles = profiles_frame(&dataset, &model)?;
-        ctx.write_table("profiles", &mut profiles)?;
+        ctx.write_table(profiles::TABLE.name, &mut profiles)?;
         Ok(())
     }
 }
@@ -180,14 +183,14 @@ pub fn effects_label(dataset: &InkjetScans) -> String {
 fn residuals_frame(dataset: &InkjetScans, rows: &[LayerResidual]) -> Result<DataFrame, StageError> {
     let n = rows.len();
     frame(vec![
-        str_col("scenario", vec![dataset.grid.scenario.clone(); n]),
-        str_col("controller", vec![dataset.grid.controller.clone(); n]),
-        str_col("effects", vec![effects_label(dataset); n]),
-        f64_col("variation_pct", vec![dataset.grid.variation_pct; n]),
-        i64_col("layer", rows.iter().map(|r| r.layer as i64).collect()),
-        f64_col("rmse_um", rows.iter().map(|r| r.rmse_um).collect()),
-        f64_col("bias_um", rows.iter().map(|r| r.bias_um).collect()),
-        f64_col("max_abs_um", rows.iter().map(|r| r.max_abs_um).collect()),
+        str_col(scan_residuals::scenario, vec![dataset.grid.scenario.clone(); n]),
+        str_col(scan_residuals::controller, vec![dataset.grid.controller.clone(); n]),
+        str_col(scan_residuals::effects, vec![effects_label(dataset); n]),
+        f64_col(scan_residuals::variation_pct, vec![dataset.grid.variation_pct; n]),
+        i64_col(scan_residuals::layer, rows.iter().map(|r| r.layer as i64).collect()),
+        f64_col(scan_residuals::rmse_um, rows.iter().map(|r| r.rmse_um).collect()),
+        f64_col(scan_residuals::bias_um, rows.iter().map(|r| r.bias_um).collect()),
+        f64_col(scan_residuals::max_abs_um, rows.iter().map(|r| r.max_abs_um).collect()),
     ])
 }
 
@@ -213,13 +216,13 @@ fn profiles_frame(dataset: &InkjetScans, model: &[Vec<f64>]) -> Result<DataFrame
         }
     }
     frame(vec![
-        i64_col("layer", layer),
-        i64_col("x_index", xi),
-        i64_col("y_index", yi),
-        f64_col("x_um", x),
-        f64_col("y_um", y),
-        f64_col("measured_um", measured),
-        f64_col("model_um", predicted),
+        i64_col(profiles::layer, layer),
+        i64_col(profiles::x_index, xi),
+        i64_col(profiles::y_index, yi),
+        f64_col(profiles::x_um, x),
+        f64_col(profiles::y_um, y),
+        f64_col(profiles::measured_um, measured),
+        f64_col(profiles::model_um, predicted),
     ])
 }
 

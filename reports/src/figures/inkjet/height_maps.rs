@@ -11,8 +11,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::{height_map, summary};
 
 use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -45,14 +47,34 @@ const OPEN_LOOP: Input = Input::one(
     "open_loop",
     &[Source::Stage("inkjet.print_experiment")],
     "the open-loop print (`height_map.parquet`, `summary.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &height_map::TABLE,
+        columns: &[height_map::x_index, height_map::y_index, height_map::x_um, height_map::y_um, height_map::height_um],
+    },
+    Reads {
+        table: &summary::TABLE,
+        columns: &[summary::controller, summary::layers, summary::mean_err_um, summary::std_um],
+    },
+]);
 
 /// The closed-loop print.
 const CLOSED_LOOP: Input = Input::one(
     "closed_loop",
     &[Source::Stage("inkjet.print_experiment")],
     "the closed-loop print (`height_map.parquet`, `summary.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &height_map::TABLE,
+        columns: &[height_map::x_index, height_map::y_index, height_map::x_um, height_map::y_um, height_map::height_um],
+    },
+    Reads {
+        table: &summary::TABLE,
+        columns: &[summary::controller, summary::layers, summary::mean_err_um, summary::std_um],
+    },
+]);
 
 /// One grid cell of a height map.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,26 +152,30 @@ impl Stage for InkjetHeightMapsFigure {
 
 /// Reads one print from `<dir>/height_map.parquet` and `<dir>/summary.parquet`.
 pub fn load(dir: &Path) -> Result<Print, StageError> {
-    let path = dir.join("height_map.parquet");
+    let path = dir.join(height_map::TABLE.file());
     let df = read_parquet(&path)?;
-    let (xi, yi) = (ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
-    let (x, y, h) = (f64s(&df, "x_um", &path)?, f64s(&df, "y_um", &path)?, f64s(&df, "height_um", &path)?);
+    let (xi, yi) = (ints(&df, height_map::x_index, &path)?, ints(&df, height_map::y_index, &path)?);
+    let (x, y, h) = (
+        f64s(&df, height_map::x_um, &path)?,
+        f64s(&df, height_map::y_um, &path)?,
+        f64s(&df, height_map::height_um, &path)?,
+    );
     let cells: Vec<Cell> = (0..df.height())
         .map(|i| Cell { x_index: xi[i], y_index: yi[i], x_um: x[i], y_um: y[i], height_um: h[i] })
         .collect();
     if cells.is_empty() {
-        return Err(no_rows(&path, "height_um", "one row per grid cell"));
+        return Err(no_rows(&path, height_map::height_um, "one row per grid cell"));
     }
-    let path = dir.join("summary.parquet");
+    let path = dir.join(summary::TABLE.file());
     let df = read_parquet(&path)?;
     if df.height() == 0 {
-        return Err(no_rows(&path, "controller", "one summary row"));
+        return Err(no_rows(&path, summary::controller, "one summary row"));
     }
     Ok(Print {
-        controller: strs(&df, "controller", &path)?.swap_remove(0),
-        layers: ints(&df, "layers", &path)?[0],
-        mean_err_um: f64s(&df, "mean_err_um", &path)?[0],
-        std_um: f64s(&df, "std_um", &path)?[0],
+        controller: strs(&df, summary::controller, &path)?.swap_remove(0),
+        layers: ints(&df, summary::layers, &path)?[0],
+        mean_err_um: f64s(&df, summary::mean_err_um, &path)?[0],
+        std_um: f64s(&df, summary::std_um, &path)?[0],
         cells,
     })
 }
@@ -322,7 +348,7 @@ fn draw_side_view<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use crate::figures::test_util::{assert_drawn, declared, noise, write_declared};
     use polars::df;
     use polars::prelude::DataFrame;
 
@@ -349,21 +375,25 @@ mod tests {
                 h.push(height);
             }
         }
-        df!("x_index" => xi, "y_index" => yi, "x_um" => x, "y_um" => y, "height_um" => h).expect("frame")
+        df!(height_map::x_index => xi, height_map::y_index => yi, height_map::x_um => x, height_map::y_um => y, height_map::height_um => h).expect("frame")
     }
 
     fn summary(controller: &str, layers: i64, mean_err: f64, std: f64) -> DataFrame {
         df!(
-            "scenario" => ["cylinder"], "controller" => [controller], "variation_pct" => [20.0],
-            "layers" => [layers], "mean_err_um" => [mean_err], "std_um" => [std], "rmsd_um" => [std],
-            "avg_height_um" => [400.0 + mean_err]
+            summary::scenario => ["cylinder"], summary::controller => [controller], summary::variation_pct => [20.0],
+            summary::layers => [layers], summary::mean_err_um => [mean_err], summary::std_um => [std], summary::rmsd_um => [std],
+            summary::avg_height_um => [400.0 + mean_err]
         )
         .expect("frame")
     }
 
     fn write_print(dir: &Path, controller: &str, dome_um: f64, noise_um: f64) {
-        write_table(dir, "height_map", height_map(dome_um, noise_um));
-        write_table(dir, "summary", summary(controller, 53, dome_um / 2.0, noise_um / 3.0));
+        write_declared(dir, &height_map::TABLE, declared(&height_map::TABLE, height_map(dome_um, noise_um)));
+        write_declared(
+            dir,
+            &summary::TABLE,
+            declared(&summary::TABLE, summary(controller, 53, dome_um / 2.0, noise_um / 3.0)),
+        );
     }
 
     #[test]

@@ -11,8 +11,10 @@
 use plotters::coord::Shift;
 use plotters::prelude::{DrawingArea, DrawingBackend};
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::profiles;
 
 use crate::figures::inkjet::height_maps::{draw, Cell, Print};
 use crate::read::{f64s, ints, no_rows, read_parquet};
@@ -43,7 +45,19 @@ const RESIDUALS: Input = Input::one(
     "residuals",
     &[Source::Stage("inkjet.scan_residuals")],
     "the measured and model-predicted profiles per layer (`profiles.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &profiles::TABLE,
+    columns: &[
+        profiles::layer,
+        profiles::x_index,
+        profiles::y_index,
+        profiles::x_um,
+        profiles::y_um,
+        profiles::measured_um,
+        profiles::model_um,
+    ],
+}]);
 
 impl Stage for InkjetModelVsScanFigure {
     type Params = ModelVsScanParams;
@@ -58,7 +72,7 @@ impl Stage for InkjetModelVsScanFigure {
 
     fn run(&self, ctx: &mut StageContext, p: &ModelVsScanParams) -> Result<(), StageError> {
         let desired = p.desired_height_um;
-        let prints = load(&ctx.input(&RESIDUALS).dir.join("profiles.parquet"), p.layer, desired)?;
+        let prints = load(&ctx.input(&RESIDUALS).dir.join(profiles::TABLE.file()), p.layer, desired)?;
         let title = crate::figures::common::title_or(&p.title, || {
             "Layer-to-layer model (eqs 2-7) against the profiler scan".to_string()
         });
@@ -87,14 +101,15 @@ fn draw_titled<DB: DrawingBackend>(
 /// half the desired height (the part).
 fn load(path: &std::path::Path, layer: i64, desired_um: f64) -> Result<[Print; 2], StageError> {
     let df = read_parquet(path)?;
-    let layers = ints(&df, "layer", path)?;
-    let last = layers.iter().copied().max().ok_or_else(|| no_rows(path, "layer", "one row per layer and cell"))?;
+    let layers = ints(&df, profiles::layer, path)?;
+    let last =
+        layers.iter().copied().max().ok_or_else(|| no_rows(path, profiles::layer, "one row per layer and cell"))?;
     let layer = if layer == 0 { last } else { layer };
-    let (xi, yi) = (ints(&df, "x_index", path)?, ints(&df, "y_index", path)?);
-    let (x, y) = (f64s(&df, "x_um", path)?, f64s(&df, "y_um", path)?);
+    let (xi, yi) = (ints(&df, profiles::x_index, path)?, ints(&df, profiles::y_index, path)?);
+    let (x, y) = (f64s(&df, profiles::x_um, path)?, f64s(&df, profiles::y_um, path)?);
     let rows: Vec<usize> = (0..df.height()).filter(|&r| layers[r] == layer).collect();
     if rows.is_empty() {
-        return Err(no_rows(path, "layer", &format!("rows of layer {layer}")));
+        return Err(no_rows(path, profiles::layer, &format!("rows of layer {layer}")));
     }
     let print = |column: &str, label: &str| -> Result<Print, StageError> {
         let h = f64s(&df, column, path)?;
@@ -117,13 +132,13 @@ fn load(path: &std::path::Path, layer: i64, desired_um: f64) -> Result<[Print; 2
             cells,
         })
     };
-    Ok([print("measured_um", "profiler scan")?, print("model_um", "model prediction")?])
+    Ok([print(profiles::measured_um, "profiler scan")?, print(profiles::model_um, "model prediction")?])
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use crate::figures::test_util::{assert_drawn, declared, noise, write_declared};
     use polars::df;
 
     /// Two layers of a 12 × 12 square part: the "scan" 10 % lower and noisy, the
@@ -146,10 +161,10 @@ mod tests {
                 }
             }
         }
-        let df = df!("layer" => layer, "x_index" => xi, "y_index" => yi, "x_um" => x, "y_um" => y,
-            "measured_um" => measured, "model_um" => model)
+        let df = df!(profiles::layer => layer, profiles::x_index => xi, profiles::y_index => yi, profiles::x_um => x,
+            profiles::y_um => y, profiles::measured_um => measured, profiles::model_um => model)
         .expect("frame");
-        write_table(dir, "profiles", df);
+        write_declared(dir, &profiles::TABLE, declared(&profiles::TABLE, df));
     }
 
     #[test]

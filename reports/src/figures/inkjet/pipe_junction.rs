@@ -11,8 +11,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::{edge_deformation, layers, part_top};
 
 use crate::figures::common::viridis;
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
@@ -41,14 +43,66 @@ const OPEN_LOOP: Input = Input::one(
     "open_loop",
     &[Source::Stage("inkjet.print_experiment")],
     "the open-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &part_top::TABLE,
+        columns: &[part_top::x_index, part_top::y_index, part_top::part_top_um, part_top::desired_top_um],
+    },
+    Reads {
+        table: &layers::TABLE,
+        columns: &[
+            layers::layer,
+            layers::x_index,
+            layers::y_index,
+            layers::bottom_um,
+            layers::top_um,
+            layers::material,
+        ],
+    },
+    Reads {
+        table: &edge_deformation::TABLE,
+        columns: &[
+            edge_deformation::controller,
+            edge_deformation::region,
+            edge_deformation::rmse_um,
+            edge_deformation::max_abs_um,
+        ],
+    },
+]);
 
 /// The closed-loop print.
 const CLOSED_LOOP: Input = Input::one(
     "closed_loop",
     &[Source::Stage("inkjet.print_experiment")],
     "the closed-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &part_top::TABLE,
+        columns: &[part_top::x_index, part_top::y_index, part_top::part_top_um, part_top::desired_top_um],
+    },
+    Reads {
+        table: &layers::TABLE,
+        columns: &[
+            layers::layer,
+            layers::x_index,
+            layers::y_index,
+            layers::bottom_um,
+            layers::top_um,
+            layers::material,
+        ],
+    },
+    Reads {
+        table: &edge_deformation::TABLE,
+        columns: &[
+            edge_deformation::controller,
+            edge_deformation::region,
+            edge_deformation::rmse_um,
+            edge_deformation::max_abs_um,
+        ],
+    },
+]);
 
 /// One pipe-junction print as drawn.
 struct PipePrint {
@@ -89,31 +143,35 @@ impl Stage for InkjetPipeJunctionFigure {
 }
 
 fn load(dir: &Path, column: i64) -> Result<PipePrint, StageError> {
-    let path = dir.join("part_top.parquet");
+    let path = dir.join(part_top::TABLE.file());
     let df = read_parquet(&path)?;
-    let (xi, yi) = (ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
-    let (top, want) = (f64s(&df, "part_top_um", &path)?, f64s(&df, "desired_top_um", &path)?);
+    let (xi, yi) = (ints(&df, part_top::x_index, &path)?, ints(&df, part_top::y_index, &path)?);
+    let (top, want) = (f64s(&df, part_top::part_top_um, &path)?, f64s(&df, part_top::desired_top_um, &path)?);
     let tops: Vec<_> = (0..df.height()).map(|r| (xi[r], yi[r], top[r], want[r])).collect();
     if tops.is_empty() {
-        return Err(no_rows(&path, "part_top_um", "one row per grid cell"));
+        return Err(no_rows(&path, part_top::part_top_um, "one row per grid cell"));
     }
-    let path = dir.join("layers.parquet");
+    let path = dir.join(layers::TABLE.file());
     let df = read_parquet(&path)?;
-    let (layer, xi, yi) = (ints(&df, "layer", &path)?, ints(&df, "x_index", &path)?, ints(&df, "y_index", &path)?);
+    let (layer, xi, yi) =
+        (ints(&df, layers::layer, &path)?, ints(&df, layers::x_index, &path)?, ints(&df, layers::y_index, &path)?);
     let (bottom, top, material) =
-        (f64s(&df, "bottom_um", &path)?, f64s(&df, "top_um", &path)?, strs(&df, "material", &path)?);
+        (f64s(&df, layers::bottom_um, &path)?, f64s(&df, layers::top_um, &path)?, strs(&df, layers::material, &path)?);
     let section: Vec<_> = (0..df.height())
         .filter(|&r| xi[r] == column && layer[r] > 0)
         .map(|r| (yi[r], bottom[r], top[r], material[r].clone()))
         .collect();
     if section.is_empty() {
-        return Err(no_rows(&path, "x_index", &format!("rows of grid column {column}")));
+        return Err(no_rows(&path, layers::x_index, &format!("rows of grid column {column}")));
     }
-    let path = dir.join("edge_deformation.parquet");
+    let path = dir.join(edge_deformation::TABLE.file());
     let df = read_parquet(&path)?;
-    let (region, rmse, max) =
-        (strs(&df, "region", &path)?, f64s(&df, "rmse_um", &path)?, f64s(&df, "max_abs_um", &path)?);
-    let controller = strs(&df, "controller", &path)?.into_iter().next().unwrap_or_default();
+    let (region, rmse, max) = (
+        strs(&df, edge_deformation::region, &path)?,
+        f64s(&df, edge_deformation::rmse_um, &path)?,
+        f64s(&df, edge_deformation::max_abs_um, &path)?,
+    );
+    let controller = strs(&df, edge_deformation::controller, &path)?.into_iter().next().unwrap_or_default();
     let regions = (0..df.height()).map(|r| (region[r].clone(), rmse[r], max[r])).collect();
     Ok(PipePrint { controller, tops, section, regions })
 }
@@ -243,7 +301,7 @@ fn draw_section<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, write_table};
+    use crate::figures::test_util::{assert_drawn, declared, write_declared};
     use polars::df;
 
     /// A 20 × 20 print with a part band along x (rows 8-11), 3 layers.
@@ -258,10 +316,10 @@ mod tests {
                 top.push(part.then_some(20.0 + j as f64 + offset_um));
             }
         }
-        write_table(
+        write_declared(
             dir,
-            "part_top",
-            df!("x_index" => xi, "y_index" => yi, "part_top_um" => top, "desired_top_um" => want).expect("frame"),
+            &part_top::TABLE,
+            declared(&part_top::TABLE, df!(part_top::x_index => xi, part_top::y_index => yi, part_top::part_top_um => top, part_top::desired_top_um => want).expect("frame")),
         );
         let (mut layer, mut xi, mut yi, mut bottom, mut upper, mut material) =
             (vec![], vec![], vec![], vec![], vec![], vec![]);
@@ -277,19 +335,22 @@ mod tests {
                 }
             }
         }
-        write_table(
+        write_declared(
             dir,
-            "layers",
-            df!("layer" => layer, "x_index" => xi, "y_index" => yi, "bottom_um" => bottom,
-            "top_um" => upper, "material" => material)
-            .expect("frame"),
+            &layers::TABLE,
+            declared(
+                &layers::TABLE,
+                df!(layers::layer => layer, layers::x_index => xi, layers::y_index => yi, layers::bottom_um => bottom,
+            layers::top_um => upper, layers::material => material)
+                .expect("frame"),
+            ),
         );
-        write_table(
+        write_declared(
             dir,
-            "edge_deformation",
-            df!("controller" => [controller, controller], "region" => ["edge", "interior"],
-            "rmse_um" => [offset_um, offset_um / 2.0], "max_abs_um" => [offset_um, offset_um])
-            .expect("frame"),
+            &edge_deformation::TABLE,
+            declared(&edge_deformation::TABLE, df!(edge_deformation::controller => [controller, controller], edge_deformation::region => ["edge", "interior"],
+            edge_deformation::rmse_um => [offset_um, offset_um / 2.0], edge_deformation::max_abs_um => [offset_um, offset_um])
+            .expect("frame")),
         );
     }
 
