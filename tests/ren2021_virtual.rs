@@ -11,7 +11,7 @@ use std::path::Path;
 
 use common::*;
 use polars::prelude::{DataFrame, ParquetReader, SerReader};
-use tables::fdm::loo;
+use tables::fdm::{agreement, loo, segment_accuracy, segment_diagnostics};
 
 fn read(path: &Path) -> DataFrame {
     ParquetReader::new(std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
@@ -44,9 +44,17 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
 
     // Segmentation: at 40 px/mm every photo within 0.01 mm RMSE and 0.005 mm bias, and
     // the edge fit beats the threshold count on every photo at every scale.
-    let acc = read(&out.join("segment_accuracy.parquet"));
-    let (line, method, scale) = (strs(&acc, "line_id"), strs(&acc, "method"), f64s(&acc, "px_per_mm"));
-    let (rmse, bias, printer) = (f64s(&acc, "rmse_mm"), f64s(&acc, "bias_mm"), strs(&acc, "printer"));
+    let acc = read(&out.join(segment_accuracy::TABLE.file()));
+    let (line, method, scale) = (
+        strs(&acc, segment_accuracy::line_id),
+        strs(&acc, segment_accuracy::method),
+        f64s(&acc, segment_accuracy::px_per_mm),
+    );
+    let (rmse, bias, printer) = (
+        f64s(&acc, segment_accuracy::rmse_mm),
+        f64s(&acc, segment_accuracy::bias_mm),
+        strs(&acc, segment_accuracy::printer),
+    );
     let mut by_photo: BTreeMap<(String, String, u64), BTreeMap<String, f64>> = BTreeMap::new();
     for i in 0..acc.height() {
         assert!(rmse[i].is_finite(), "photo {} at {} px/mm was not measured", line[i], scale[i]);
@@ -63,11 +71,14 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
     }
 
     // The virtual printers against the real lines, each held out of the calibration.
-    let agreement = read(&out.join("agreement.parquet"));
+    let agreement = read(&out.join(agreement::TABLE.file()));
     // Pooled over a printer's lines, the real lines' RMSE is about the virtual lines' own
     // scatter: a real line is like one more virtual line.
-    let (ap, rmse, scatter) =
-        (strs(&agreement, "printer"), f64s(&agreement, "rmse_mm"), f64s(&agreement, "virtual_scatter_mm"));
+    let (ap, rmse, scatter) = (
+        strs(&agreement, agreement::printer),
+        f64s(&agreement, agreement::rmse_mm),
+        f64s(&agreement, agreement::virtual_scatter_mm),
+    );
     assert_eq!(agreement.height(), 18);
     for p in ["taz5", "taz6"] {
         let pooled = |v: &[f64]| {
@@ -80,8 +91,8 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
 
     // Paper 000's leave-one-out on the photos: every line measured, medians of the lag
     // model within 30 % of the real lines'.
-    let diagnostics = read(&out.join("segment_diagnostics.parquet"));
-    assert!(strs(&diagnostics, "status").iter().all(|s| s == "measured"));
+    let diagnostics = read(&out.join(segment_diagnostics::TABLE.file()));
+    assert!(strs(&diagnostics, segment_diagnostics::status).iter().all(|s| s == "measured"));
     let runs = tmp.path().join("out/runs/ren2021_virtual");
     let loo_median = |file: &Path, p: &str| {
         let df = read(file);
@@ -216,8 +227,11 @@ fn photos_a_lab_could_get_wrong_are_reported_one_by_one_and_the_rest_are_measure
     std::fs::write(&spec, text).unwrap();
     ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
     let diagnostics = read(&tmp.path().join("out/runs/bad/widths/segment_diagnostics.parquet"));
-    let (ids, status, problem) =
-        (strs(&diagnostics, "line_id"), strs(&diagnostics, "status"), strs(&diagnostics, "problem"));
+    let (ids, status, problem) = (
+        strs(&diagnostics, segment_diagnostics::line_id),
+        strs(&diagnostics, segment_diagnostics::status),
+        strs(&diagnostics, segment_diagnostics::problem),
+    );
     let problem_of = |id: &str| {
         let i = ids.iter().position(|x| x == id).unwrap();
         assert_eq!(status[i], "skipped", "{id}");

@@ -162,6 +162,111 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `fdm.segment_widths`: one row per photo of the set, measured or skipped and why.
+    pub mod segment_diagnostics = "segment_diagnostics" {
+        /// The printer.
+        printer: Str "",
+        /// `edge_fit` or `threshold`.
+        method: Str "",
+        /// The photographed line.
+        line_id: Str "",
+        /// The photo's file.
+        image: Str "",
+        /// `measured` or `skipped`.
+        status: Str "",
+        /// For a skipped photo what is wrong; for a measured one the skipped positions by reason.
+        problem: Str "",
+        /// Positions measured.
+        columns_used: Int64 "1",
+        /// Positions skipped.
+        columns_skipped: Int64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.segment_accuracy`: one row per (photo, method), the segmented widths against
+    /// the virtual printer's truth.
+    pub mod segment_accuracy = "segment_accuracy" {
+        /// The virtual printer.
+        printer: Str "",
+        /// The photographed line.
+        line_id: Str "",
+        /// The camera's scale.
+        px_per_mm: Float64 "px/mm",
+        /// `edge_fit` (blurred two-edge model, sub-pixel) or `threshold` (Otsu, pixels counted).
+        method: Str "",
+        /// RMSE of segmented − true width; NaN when the photo was not measured.
+        rmse_mm: Float64 "mm",
+        /// Mean of segmented − true width.
+        bias_mm: Float64 "mm",
+        /// Positions measured.
+        columns_used: Int64 "1",
+        /// Positions skipped (near the line's ends).
+        columns_skipped: Int64 "1",
+        /// Why the photo was not measured; empty otherwise.
+        problem: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.segment_accuracy`: one row per photo set.
+    pub mod photo_sets = "photo_sets" {
+        /// The set (its stage name).
+        dataset: Str "",
+        /// The printer.
+        printer: Str "",
+        /// The camera's scale.
+        px_per_mm: Float64 "px/mm",
+        /// Lines photographed.
+        lines: Int64 "1",
+        /// The effects its `dataset.toml` records, `none` or `measured`.
+        effects: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.virtual_agreement`: one row per real line, against the virtual printer
+    /// calibrated on the printer's other lines.
+    pub mod agreement = "agreement" {
+        /// The printer.
+        printer: Str "",
+        /// The line's condition.
+        condition: Str "",
+        /// Commanded acceleration a0.
+        accel_mm_s2: Float64 "mm/s²",
+        /// Commanded feed F0.
+        feed_mm_s: Float64 "mm/s",
+        /// RMSE of the measured widths against the virtual mean profile.
+        rmse_mm: Float64 "mm",
+        /// RMS of the virtual lines around that mean.
+        virtual_scatter_mm: Float64 "mm",
+        /// Their ratio.
+        rmse_over_scatter: Float64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.virtual_agreement`: one row per (real line, position), the measured width
+    /// and the virtual printer's mean and 95 % band.
+    pub mod agreement_profiles = "agreement_profiles" {
+        /// The printer.
+        printer: Str "",
+        /// The line's condition.
+        condition: Str "",
+        /// Position along the line.
+        position_mm: Float64 "mm",
+        /// Measured width.
+        real_mm: Float64 "mm",
+        /// Mean width of the virtual lines.
+        virtual_mean_mm: Float64 "mm",
+        /// 2.5 % quantile of the virtual lines.
+        virtual_lo_mm: Float64 "mm",
+        /// 97.5 % quantile of the virtual lines.
+        virtual_hi_mm: Float64 "mm",
+    }
+}
+
 /// Every table of this module.
 pub const ALL: &[&pipeline::schema::Table] = &[
     &line_summary::TABLE,
@@ -172,4 +277,9 @@ pub const ALL: &[&pipeline::schema::Table] = &[
     &r_surface::TABLE,
     &infill::TABLE,
     &infill_map::TABLE,
+    &segment_diagnostics::TABLE,
+    &segment_accuracy::TABLE,
+    &photo_sets::TABLE,
+    &agreement::TABLE,
+    &agreement_profiles::TABLE,
 ];

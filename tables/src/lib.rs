@@ -7,12 +7,12 @@
 //! docs/OUTPUTS.md to them.
 //!
 //! One module per domain: paper 000's FDM tables (`fdm`), paper 002's ink-jet tables
-//! (`inkjet`), paper 003's thermal tables (`thermal`) and the discrepancy engine's
-//! tables shared by the three domains (`discrepancy`) and the report stages' own tables
-//! (`report`).
+//! (`inkjet`), paper 003's thermal tables (`thermal`) and the report stages' own tables
+//! (`report`). The discrepancy engine's tables, the hidden-effect studies' and the
+//! transfer tables are not declared yet (tests/published_tables_undeclared.txt lists
+//! the published ones).
 #![deny(missing_docs)]
 
-pub mod discrepancy;
 pub mod fdm;
 pub mod inkjet;
 pub mod report;
@@ -22,5 +22,5 @@ use pipeline::schema::Table;
 
 /// Every declared table, domain by domain.
 pub fn all() -> impl Iterator<Item = &'static Table> {
-    [fdm::ALL, inkjet::ALL, thermal::ALL, discrepancy::ALL, report::ALL].into_iter().flatten().copied()
+    [fdm::ALL, inkjet::ALL, thermal::ALL, report::ALL].into_iter().flatten().copied()
 }

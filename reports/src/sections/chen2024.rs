@@ -25,8 +25,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::{NoParams, ParamValue};
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{InputArtifact, StageContext, StageError};
+use tables::report::{comparison, variants};
 use tables::thermal::{accuracy, contour, contour_regions, corners, frames, spans, width_errors};
 
 use super::chen2024_variants::{read_variants, variants_frame, Variant};
@@ -94,13 +96,14 @@ impl Stage for Chen2024Section {
         inputs: &[COMPENSATE, REPRINT, ACCURACY, MONITOR, NAMED],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE, &variants::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let ours = Ours::read(&ctx.inputs)?;
         let (rows, html) = section(&ours);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
-        ctx.write_table("variants", &mut variants_frame(&ours.reprint, &ours.variants)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
+        ctx.write_table(variants::TABLE.name, &mut variants_frame(&ours.reprint, &ours.variants)?)?;
         Ok(())
     }
 }

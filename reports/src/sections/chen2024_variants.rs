@@ -8,6 +8,7 @@
 //! into the section; a variant the spec does not run is reported as not run.
 
 use std::collections::BTreeMap;
+use tables::report::variants;
 
 use pipeline::params::ParamValue;
 use pipeline::{InputArtifact, StageError};
@@ -160,18 +161,18 @@ pub fn variants_frame(main: &Reprint, variants: &[Variant]) -> Result<DataFrame,
         Series::new(name.into(), all.iter().map(|v| f(v)).collect::<Vec<f64>>()).into_column()
     };
     let columns = vec![
-        strs("variant", &|v| v.name.clone()),
-        strs("changes", &|v| if v.name == "defaults" { String::new() } else { v.changes_text() }),
-        floats("oe_before_pct", &|v| v.reprint.mean_oe_pct().0),
-        floats("oe_after_pct", &|v| v.reprint.mean_oe_pct().1),
-        floats("max_before_mm", &|v| v.reprint.contour_mm[0].0),
-        floats("max_after_mm", &|v| v.reprint.contour_mm[1].0),
-        floats("rms_before_mm", &|v| v.reprint.contour_mm[0].1),
-        floats("rms_after_mm", &|v| v.reprint.contour_mm[1].1),
-        floats("oe_change_pct", &|v| v.changes_pct()[0]),
-        floats("max_change_pct", &|v| v.changes_pct()[1]),
-        floats("rms_change_pct", &|v| v.changes_pct()[2]),
-        strs("source", &|v| v.reprint.sources[1].clone()),
+        strs(variants::variant, &|v| v.name.clone()),
+        strs(variants::changes, &|v| if v.name == "defaults" { String::new() } else { v.changes_text() }),
+        floats(variants::oe_before_pct, &|v| v.reprint.mean_oe_pct().0),
+        floats(variants::oe_after_pct, &|v| v.reprint.mean_oe_pct().1),
+        floats(variants::max_before_mm, &|v| v.reprint.contour_mm[0].0),
+        floats(variants::max_after_mm, &|v| v.reprint.contour_mm[1].0),
+        floats(variants::rms_before_mm, &|v| v.reprint.contour_mm[0].1),
+        floats(variants::rms_after_mm, &|v| v.reprint.contour_mm[1].1),
+        floats(variants::oe_change_pct, &|v| v.changes_pct()[0]),
+        floats(variants::max_change_pct, &|v| v.changes_pct()[1]),
+        floats(variants::rms_change_pct, &|v| v.changes_pct()[2]),
+        strs(variants::source, &|v| v.reprint.sources[1].clone()),
     ];
     DataFrame::new(all.len(), columns).map_err(|source| StageError::Table { path: "variants".into(), source })
 }

@@ -10,8 +10,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::report::comparison;
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -45,6 +47,7 @@ impl Stage for DiscrepancyFdmSection {
         inputs: &[DISCREPANCY, OTHERS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
@@ -77,7 +80,7 @@ impl Stage for DiscrepancyFdmSection {
         }
         html += &power_part(&power, &power_stage, &mut rows);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

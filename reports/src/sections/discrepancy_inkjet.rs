@@ -11,8 +11,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::report::comparison;
 
 use super::discrepancy_fdm::{causes_table, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow};
 use super::{comparison_frame, Row};
@@ -68,6 +70,7 @@ impl Stage for DiscrepancyInkjetSection {
         inputs: &[DISCREPANCY, STUDIES],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
@@ -91,7 +94,7 @@ impl Stage for DiscrepancyInkjetSection {
             }
         }
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

@@ -13,8 +13,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::report::comparison;
 
 use super::discrepancy_fdm::{Cause, GainRow, Names, Param, PowerRow};
 use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
@@ -60,6 +62,7 @@ impl Stage for DiscrepancyThermalSection {
         inputs: &[DISCREPANCY, STUDIES],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
@@ -84,7 +87,7 @@ impl Stage for DiscrepancyThermalSection {
             }
         }
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

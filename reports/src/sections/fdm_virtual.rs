@@ -14,10 +14,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::ParamError;
-use pipeline::schema::Reads;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::fdm::loo;
+use tables::fdm::{agreement, loo, photo_sets, segment_accuracy, segment_diagnostics};
+use tables::report::comparison;
 
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -58,21 +59,46 @@ const AGREEMENT: Input = Input::one(
     "agreement",
     &[Source::Stage("fdm.virtual_agreement")],
     "the held-out RMSE and virtual scatter per line (`agreement.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &agreement::TABLE,
+    columns: &[agreement::printer, agreement::condition, agreement::rmse_mm, agreement::virtual_scatter_mm],
+}]);
 
 /// The segmentation's accuracy against the truth.
 const ACCURACY: Input = Input::one(
     "accuracy",
     &[Source::Stage("fdm.segment_accuracy")],
     "the width RMSE and bias per photo, and what each photo set holds (`segment_accuracy.parquet`, `photo_sets.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &segment_accuracy::TABLE,
+        columns: &[
+            segment_accuracy::method,
+            segment_accuracy::px_per_mm,
+            segment_accuracy::rmse_mm,
+            segment_accuracy::bias_mm,
+        ],
+    },
+    Reads { table: &photo_sets::TABLE, columns: &[photo_sets::dataset, photo_sets::effects] },
+]);
 
 /// The segmentation's diagnostics (a `table.concat` of the segmentations').
 const DIAGNOSTICS: Input = Input::one(
     "diagnostics",
     &[Source::Stage("fdm.segment_widths")],
     "the positions the segmentation skipped and why (`segment_diagnostics.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &segment_diagnostics::TABLE,
+    columns: &[
+        segment_diagnostics::printer,
+        segment_diagnostics::line_id,
+        segment_diagnostics::status,
+        segment_diagnostics::problem,
+    ],
+}]);
 
 /// Paper 000's leave-one-out on the segmented widths.
 const PHOTO_LOO: Input =
@@ -107,6 +133,7 @@ impl Stage for FdmVirtualSection {
         inputs: &[AGREEMENT, ACCURACY, DIAGNOSTICS, PHOTO_LOO, REAL_LOO, CLEAN_ENGINE, HIDDEN_ENGINE],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn check(p: &FdmVirtualParams) -> Result<(), ParamError> {
         p.photo_sets().map(|_| ())
@@ -127,7 +154,7 @@ impl Stage for FdmVirtualSection {
         let runs = [(dir(&CLEAN_ENGINE), name(&CLEAN_ENGINE)), (dir(&HIDDEN_ENGINE), name(&HIDDEN_ENGINE))];
         html += &discrepancy_part(&runs, &photo_sets, &sets, &mut rows)?;
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }
@@ -140,10 +167,10 @@ fn row(section: &'static str, item: String, ours: f64, unit: &'static str, sourc
 /// calibrated without them, pooled over the lines (root mean square), beside the
 /// virtual lines' own scatter pooled the same way, and the worst line.
 fn agreement_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String, StageError> {
-    let path = dir.join("agreement.parquet");
+    let path = dir.join(agreement::TABLE.file());
     let df = read_parquet(&path)?;
-    let (printer, condition) = (strs(&df, "printer", &path)?, strs(&df, "condition", &path)?);
-    let (rmse, scatter) = (f64s(&df, "rmse_mm", &path)?, f64s(&df, "virtual_scatter_mm", &path)?);
+    let (printer, condition) = (strs(&df, agreement::printer, &path)?, strs(&df, agreement::condition, &path)?);
+    let (rmse, scatter) = (f64s(&df, agreement::rmse_mm, &path)?, f64s(&df, agreement::virtual_scatter_mm, &path)?);
     let mut html = String::from(
         "<h4>The virtual printers against the real lines</h4>\n<p>Each virtual printer's physics (the lag model with the start blob and the width cap where the discrepancy engine names them on the real lines, a layer height of its own per line, slow wander and rough edges) is calibrated on the real lines. Here each real line is held out: the printer calibrated on the other lines prints it, and the measured widths are compared with the virtual mean profile. If a real line were one more virtual line, its RMSE would be about the scatter of the virtual lines around that mean; both are pooled over the printer's lines as root mean squares.</p>\n<table><tr><th class=\"t\">printer</th><th>held-out RMSE, pooled (mm)</th><th>virtual scatter, pooled (mm)</th><th class=\"t\">worst line</th><th>its RMSE (mm)</th><th>its virtual scatter (mm)</th></tr>\n",
     );
@@ -167,10 +194,10 @@ fn agreement_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String
 
 /// Per scale and method: the mean and worst RMSE and the worst bias over the photos.
 fn accuracy_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String, StageError> {
-    let path = dir.join("segment_accuracy.parquet");
+    let path = dir.join(segment_accuracy::TABLE.file());
     let df = read_parquet(&path)?;
-    let (method, scale) = (strs(&df, "method", &path)?, f64s(&df, "px_per_mm", &path)?);
-    let (rmse, bias) = (f64s(&df, "rmse_mm", &path)?, f64s(&df, "bias_mm", &path)?);
+    let (method, scale) = (strs(&df, segment_accuracy::method, &path)?, f64s(&df, segment_accuracy::px_per_mm, &path)?);
+    let (rmse, bias) = (f64s(&df, segment_accuracy::rmse_mm, &path)?, f64s(&df, segment_accuracy::bias_mm, &path)?);
     let mut groups: BTreeMap<(i64, String), Vec<usize>> = BTreeMap::new();
     for i in 0..df.height() {
         groups.entry((-(scale[i].round() as i64), method[i].clone())).or_default().push(i);
@@ -201,13 +228,13 @@ fn accuracy_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String,
 
 /// The photos the segmentation could not measure, and why.
 fn skipped_part(dir: &Path) -> Result<String, StageError> {
-    let path = dir.join("segment_diagnostics.parquet");
+    let path = dir.join(segment_diagnostics::TABLE.file());
     let df = read_parquet(&path)?;
     let (printer, line, status, problem) = (
-        strs(&df, "printer", &path)?,
-        strs(&df, "line_id", &path)?,
-        strs(&df, "status", &path)?,
-        strs(&df, "problem", &path)?,
+        strs(&df, segment_diagnostics::printer, &path)?,
+        strs(&df, segment_diagnostics::line_id, &path)?,
+        strs(&df, segment_diagnostics::status, &path)?,
+        strs(&df, segment_diagnostics::problem, &path)?,
     );
     let skipped: Vec<usize> = (0..df.height()).filter(|&i| status[i] != "measured").collect();
     if skipped.is_empty() {
@@ -257,9 +284,9 @@ fn loo_part(photos: &Path, real: &Path, stages: (&str, &str), rows: &mut Vec<Row
 
 /// Dataset stage name → the effects its photos hold, from `photo_sets.parquet`.
 fn read_photo_sets(dir: &Path) -> Result<BTreeMap<String, String>, StageError> {
-    let path = dir.join("photo_sets.parquet");
+    let path = dir.join(photo_sets::TABLE.file());
     let df = read_parquet(&path)?;
-    let (dataset, effects) = (strs(&df, "dataset", &path)?, strs(&df, "effects", &path)?);
+    let (dataset, effects) = (strs(&df, photo_sets::dataset, &path)?, strs(&df, photo_sets::effects, &path)?);
     Ok(dataset.into_iter().zip(effects).collect())
 }
 

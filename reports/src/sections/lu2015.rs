@@ -14,10 +14,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Reads;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use tables::inkjet::{edge_deformation, recovery, scan_residuals, summary};
+use tables::report::comparison;
 
 use super::{comparison_frame, Row};
 use crate::read::{f64s, read_parquet, strs};
@@ -144,6 +145,7 @@ impl Stage for Lu2015Section {
         inputs: &[SUMMARY, RECOVERY, EDGE_DEFORMATION, SCAN_RESIDUALS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let summary = Summary::read(&ctx.input(&SUMMARY).dir.join(summary::TABLE.file()))?;
@@ -171,7 +173,7 @@ impl Stage for Lu2015Section {
         html += &discussion(&summary);
         html += &std_gap(&summary);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

@@ -24,6 +24,7 @@ pub use transfer_matrix::TransferMatrixSection;
 
 use pipeline::{Registry, StageError};
 use polars::prelude::{Column, DataFrame, IntoColumn, NamedFrom, Series};
+use tables::report::comparison;
 
 /// Registers every report-section kind.
 pub fn register(registry: &mut Registry) {
@@ -52,12 +53,13 @@ pub(crate) struct Row {
 pub(crate) fn comparison_frame(rows: &[Row]) -> Result<DataFrame, StageError> {
     let str_col = |name: &str, v: Vec<String>| -> Column { Series::new(name.into(), v).into_column() };
     let columns = vec![
-        str_col("section", rows.iter().map(|r| r.section.to_string()).collect()),
-        str_col("item", rows.iter().map(|r| r.item.clone()).collect()),
-        Series::new("paper_value".into(), rows.iter().map(|r| r.paper).collect::<Vec<Option<f64>>>()).into_column(),
-        Series::new("our_value".into(), rows.iter().map(|r| r.ours).collect::<Vec<f64>>()).into_column(),
-        str_col("unit", rows.iter().map(|r| r.unit.to_string()).collect()),
-        str_col("source", rows.iter().map(|r| r.source.clone()).collect()),
+        str_col(comparison::section, rows.iter().map(|r| r.section.to_string()).collect()),
+        str_col(comparison::item, rows.iter().map(|r| r.item.clone()).collect()),
+        Series::new(comparison::paper_value.into(), rows.iter().map(|r| r.paper).collect::<Vec<Option<f64>>>())
+            .into_column(),
+        Series::new(comparison::our_value.into(), rows.iter().map(|r| r.ours).collect::<Vec<f64>>()).into_column(),
+        str_col(comparison::unit, rows.iter().map(|r| r.unit.to_string()).collect()),
+        str_col(comparison::source, rows.iter().map(|r| r.source.clone()).collect()),
     ];
     DataFrame::new(rows.len(), columns).map_err(|source| StageError::Table { path: "comparison".into(), source })
 }

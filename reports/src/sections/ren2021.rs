@@ -11,10 +11,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Reads;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use tables::fdm::loo;
+use tables::report::comparison;
 
 use models::stats::finite_median;
 
@@ -72,6 +73,7 @@ impl Stage for Ren2021Section {
         inputs: &[LOO, TRANSFER],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let loo = read_loo(&ctx.input(&LOO).dir.join(loo::TABLE.file()))?;
@@ -84,7 +86,7 @@ impl Stage for Ren2021Section {
         html += &discussion(&loo, &medians);
         let rows: Vec<Row> = loo_rows.into_iter().chain(fig9_rows).collect();
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

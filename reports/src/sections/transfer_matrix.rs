@@ -11,8 +11,10 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::report::comparison;
 
 use super::{comparison_frame, Row};
 use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix};
@@ -49,6 +51,7 @@ impl Stage for TransferMatrixSection {
         inputs: &[MATRIX],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let matrix = load(&ctx.input(&MATRIX).dir)?;
@@ -57,7 +60,7 @@ impl Stage for TransferMatrixSection {
         html += &tally_html;
         html += &per_task(&matrix);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
-        ctx.write_table("comparison", &mut comparison_frame(&rows)?)?;
+        ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }

@@ -19,9 +19,11 @@ use datasets::fdm_lines::{FdmLinesDataset, PhotoLine};
 use datasets::fdm_widths::{FdmWidthsDataset, WidthLine};
 use datasets::limits::LINE_IMAGE_PIXELS;
 use datasets::manifest::{DatasetManifest, Provenance};
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use rayon::prelude::*;
+use tables::fdm::{photo_sets, segment_accuracy, segment_diagnostics};
 use vision::lines::{segment_edge_fit, segment_threshold_columns, GrayImage, LineGeometry, Segmentation};
 
 use crate::table::{f64_col, frame, i64_col, str_col};
@@ -132,6 +134,7 @@ impl Stage for SegmentWidthsStage {
         inputs: &[PHOTOS],
         output: Output::Dataset("fdm-widths"),
     };
+    const WRITES: &'static [&'static Table] = &[&segment_diagnostics::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &SegmentParams) -> Result<(), StageError> {
         let dir = ctx.input(&PHOTOS).dir.clone();
@@ -157,7 +160,7 @@ impl Stage for SegmentWidthsStage {
         }
         let widths = FdmWidthsDataset { manifest: segmented_manifest(&data.manifest, method), lines };
         widths.write(ctx.output_dir()).map_err(StageError::domain)?;
-        ctx.write_table("segment_diagnostics", &mut diagnostics.frame(&data.manifest.printer, method)?)?;
+        ctx.write_table(segment_diagnostics::TABLE.name, &mut diagnostics.frame(&data.manifest.printer, method)?)?;
         Ok(())
     }
 }
@@ -214,14 +217,14 @@ impl Diagnostics {
     fn frame(&self, printer: &str, method: &str) -> Result<polars::prelude::DataFrame, StageError> {
         let n = self.line_id.len();
         frame(vec![
-            str_col("printer", vec![printer.to_string(); n]),
-            str_col("method", vec![method.to_string(); n]),
-            str_col("line_id", self.line_id.clone()),
-            str_col("image", self.image.clone()),
-            str_col("status", self.status.clone()),
-            str_col("problem", self.problem.clone()),
-            i64_col("columns_used", self.used.clone()),
-            i64_col("columns_skipped", self.skipped.clone()),
+            str_col(segment_diagnostics::printer, vec![printer.to_string(); n]),
+            str_col(segment_diagnostics::method, vec![method.to_string(); n]),
+            str_col(segment_diagnostics::line_id, self.line_id.clone()),
+            str_col(segment_diagnostics::image, self.image.clone()),
+            str_col(segment_diagnostics::status, self.status.clone()),
+            str_col(segment_diagnostics::problem, self.problem.clone()),
+            i64_col(segment_diagnostics::columns_used, self.used.clone()),
+            i64_col(segment_diagnostics::columns_skipped, self.skipped.clone()),
         ])
     }
 }
@@ -243,6 +246,7 @@ impl Stage for SegmentAccuracyStage {
         inputs: &[PHOTO_SETS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&segment_accuracy::TABLE, &photo_sets::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &Step) -> Result<(), StageError> {
         let step_mm = p.step_mm;
@@ -262,8 +266,8 @@ impl Stage for SegmentAccuracyStage {
             }
         }
         bar.finish_and_clear();
-        ctx.write_table("segment_accuracy", &mut rows.frame()?)?;
-        ctx.write_table("photo_sets", &mut sets.frame()?)?;
+        ctx.write_table(segment_accuracy::TABLE.name, &mut rows.frame()?)?;
+        ctx.write_table(photo_sets::TABLE.name, &mut sets.frame()?)?;
         Ok(())
     }
 }
@@ -297,11 +301,11 @@ impl PhotoSets {
 
     fn frame(&self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            str_col("dataset", self.dataset.clone()),
-            str_col("printer", self.printer.clone()),
-            f64_col("px_per_mm", self.px_per_mm.clone()),
-            i64_col("lines", self.lines.clone()),
-            str_col("effects", self.effects.clone()),
+            str_col(photo_sets::dataset, self.dataset.clone()),
+            str_col(photo_sets::printer, self.printer.clone()),
+            f64_col(photo_sets::px_per_mm, self.px_per_mm.clone()),
+            i64_col(photo_sets::lines, self.lines.clone()),
+            str_col(photo_sets::effects, self.effects.clone()),
         ])
     }
 }
@@ -346,15 +350,15 @@ impl AccuracyRows {
 
     fn frame(&self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            str_col("printer", self.printer.clone()),
-            str_col("line_id", self.line_id.clone()),
-            f64_col("px_per_mm", self.px_per_mm.clone()),
-            str_col("method", self.method.clone()),
-            f64_col("rmse_mm", self.rmse_mm.clone()),
-            f64_col("bias_mm", self.bias_mm.clone()),
-            i64_col("columns_used", self.used.clone()),
-            i64_col("columns_skipped", self.skipped.clone()),
-            str_col("problem", self.problem.clone()),
+            str_col(segment_accuracy::printer, self.printer.clone()),
+            str_col(segment_accuracy::line_id, self.line_id.clone()),
+            f64_col(segment_accuracy::px_per_mm, self.px_per_mm.clone()),
+            str_col(segment_accuracy::method, self.method.clone()),
+            f64_col(segment_accuracy::rmse_mm, self.rmse_mm.clone()),
+            f64_col(segment_accuracy::bias_mm, self.bias_mm.clone()),
+            i64_col(segment_accuracy::columns_used, self.used.clone()),
+            i64_col(segment_accuracy::columns_skipped, self.skipped.clone()),
+            str_col(segment_accuracy::problem, self.problem.clone()),
         ])
     }
 }

@@ -11,8 +11,10 @@ use datasets::fdm_lines::camera::CameraSettings;
 use datasets::fdm_lines::generate::{conditions_named, generate_into_observed, GenerateConfig};
 use models::fdm::printer::{held_out_agreement, Effects, PrinterProfile, PRINTERS};
 use pipeline::params::{Names, OneOf, ParamError};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::{agreement, agreement_profiles};
 
 use super::lines::PrinterLines;
 use crate::progress::StageProgress;
@@ -135,6 +137,7 @@ impl Stage for VirtualAgreementStage {
         inputs: &[roles::FDM_WIDTHS_MANY],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&agreement::TABLE, &agreement_profiles::TABLE];
 
     fn run(&self, ctx: &mut StageContext, p: &VirtualAgreementParams) -> Result<(), StageError> {
         let (draws, step_mm) = (p.draws as usize, p.profile_step_mm);
@@ -154,8 +157,8 @@ impl Stage for VirtualAgreementStage {
                 .map_err(|e| super::lines::fit_failed("calibrating the virtual printer", e))?;
             rows.push(&printer, &agreement, step_mm);
         }
-        ctx.write_table("agreement", &mut rows.summary()?)?;
-        ctx.write_table("agreement_profiles", &mut rows.profiles()?)?;
+        ctx.write_table(agreement::TABLE.name, &mut rows.summary()?)?;
+        ctx.write_table(agreement_profiles::TABLE.name, &mut rows.profiles()?)?;
         Ok(())
     }
 }
@@ -207,25 +210,25 @@ impl AgreementRows {
     fn summary(&self) -> Result<polars::prelude::DataFrame, StageError> {
         let ratio: Vec<f64> = self.rmse_mm.iter().zip(&self.scatter_mm).map(|(r, s)| r / s).collect();
         frame(vec![
-            str_col("printer", self.printer.clone()),
-            str_col("condition", self.condition.clone()),
-            f64_col("accel_mm_s2", self.accel_mm_s2.clone()),
-            f64_col("feed_mm_s", self.feed_mm_s.clone()),
-            f64_col("rmse_mm", self.rmse_mm.clone()),
-            f64_col("virtual_scatter_mm", self.scatter_mm.clone()),
-            f64_col("rmse_over_scatter", ratio),
+            str_col(agreement::printer, self.printer.clone()),
+            str_col(agreement::condition, self.condition.clone()),
+            f64_col(agreement::accel_mm_s2, self.accel_mm_s2.clone()),
+            f64_col(agreement::feed_mm_s, self.feed_mm_s.clone()),
+            f64_col(agreement::rmse_mm, self.rmse_mm.clone()),
+            f64_col(agreement::virtual_scatter_mm, self.scatter_mm.clone()),
+            f64_col(agreement::rmse_over_scatter, ratio),
         ])
     }
 
     fn profiles(&self) -> Result<polars::prelude::DataFrame, StageError> {
         frame(vec![
-            str_col("printer", self.profile_printer.clone()),
-            str_col("condition", self.profile_condition.clone()),
-            f64_col("position_mm", self.profile_position_mm.clone()),
-            f64_col("real_mm", self.profile_real_mm.clone()),
-            f64_col("virtual_mean_mm", self.profile_mean_mm.clone()),
-            f64_col("virtual_lo_mm", self.profile_lo_mm.clone()),
-            f64_col("virtual_hi_mm", self.profile_hi_mm.clone()),
+            str_col(agreement_profiles::printer, self.profile_printer.clone()),
+            str_col(agreement_profiles::condition, self.profile_condition.clone()),
+            f64_col(agreement_profiles::position_mm, self.profile_position_mm.clone()),
+            f64_col(agreement_profiles::real_mm, self.profile_real_mm.clone()),
+            f64_col(agreement_profiles::virtual_mean_mm, self.profile_mean_mm.clone()),
+            f64_col(agreement_profiles::virtual_lo_mm, self.profile_lo_mm.clone()),
+            f64_col(agreement_profiles::virtual_hi_mm, self.profile_hi_mm.clone()),
         ])
     }
 }

@@ -9,8 +9,10 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::segment_accuracy;
 
 use crate::read::{f64s, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -25,7 +27,11 @@ const ACCURACY: Input = Input::one(
     "accuracy",
     &[Source::Stage("fdm.segment_accuracy")],
     "the width RMSE of every photo per scale and method (`segment_accuracy.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &segment_accuracy::TABLE,
+    columns: &[segment_accuracy::method, segment_accuracy::px_per_mm, segment_accuracy::rmse_mm],
+}]);
 
 /// Method → (px/mm, RMSE mm) per measured photo.
 type Points = BTreeMap<String, Vec<(f64, f64)>>;
@@ -42,10 +48,13 @@ impl Stage for SegmentAccuracyFigure {
     };
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
-        let path = ctx.input(&ACCURACY).dir.join("segment_accuracy.parquet");
+        let path = ctx.input(&ACCURACY).dir.join(segment_accuracy::TABLE.file());
         let df = read_parquet(&path)?;
-        let (method, scale, rmse) =
-            (strs(&df, "method", &path)?, f64s(&df, "px_per_mm", &path)?, f64s(&df, "rmse_mm", &path)?);
+        let (method, scale, rmse) = (
+            strs(&df, segment_accuracy::method, &path)?,
+            f64s(&df, segment_accuracy::px_per_mm, &path)?,
+            f64s(&df, segment_accuracy::rmse_mm, &path)?,
+        );
         let mut points = Points::new();
         for i in (0..df.height()).filter(|&i| rmse[i].is_finite() && rmse[i] > 0.0) {
             points.entry(method[i].clone()).or_default().push((scale[i], rmse[i]));

@@ -10,8 +10,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::{agreement, agreement_profiles};
 
 use crate::read::{f64s, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, text, PALETTE};
@@ -35,7 +37,41 @@ const AGREEMENT: Input = Input::one(
     "agreement",
     &[Source::Stage("fdm.virtual_agreement")],
     "the real and virtual profiles per line (`agreement.parquet`, `agreement_profiles.parquet`)",
-);
+)
+.reading(&[
+    Reads {
+        table: &agreement::TABLE,
+        columns: &[
+            agreement::printer,
+            agreement::condition,
+            agreement::accel_mm_s2,
+            agreement::feed_mm_s,
+            agreement::rmse_mm,
+            agreement::virtual_scatter_mm,
+        ],
+    },
+    Reads {
+        table: &agreement_profiles::TABLE,
+        columns: &[
+            agreement_profiles::printer,
+            agreement_profiles::condition,
+            agreement_profiles::position_mm,
+            agreement_profiles::real_mm,
+            agreement_profiles::virtual_mean_mm,
+            agreement_profiles::virtual_lo_mm,
+            agreement_profiles::virtual_hi_mm,
+        ],
+    },
+]);
+
+/// The profile columns drawn, in the order of a panel's rows.
+const PROFILE_COLUMNS: [&str; 5] = [
+    agreement_profiles::position_mm,
+    agreement_profiles::real_mm,
+    agreement_profiles::virtual_mean_mm,
+    agreement_profiles::virtual_lo_mm,
+    agreement_profiles::virtual_hi_mm,
+];
 
 /// Colour of the measured widths.
 const MEASURED: RGBColor = RGBColor(70, 70, 70);
@@ -72,11 +108,11 @@ impl Stage for VirtualAgreementFigure {
 }
 
 fn load(dir: &Path, printer: &str) -> Result<Vec<Panel>, StageError> {
-    let path = dir.join("agreement.parquet");
+    let path = dir.join(agreement::TABLE.file());
     let df = read_parquet(&path)?;
-    let (printers, conditions) = (strs(&df, "printer", &path)?, strs(&df, "condition", &path)?);
-    let (accel, feed) = (f64s(&df, "accel_mm_s2", &path)?, f64s(&df, "feed_mm_s", &path)?);
-    let (rmse, scatter) = (f64s(&df, "rmse_mm", &path)?, f64s(&df, "virtual_scatter_mm", &path)?);
+    let (printers, conditions) = (strs(&df, agreement::printer, &path)?, strs(&df, agreement::condition, &path)?);
+    let (accel, feed) = (f64s(&df, agreement::accel_mm_s2, &path)?, f64s(&df, agreement::feed_mm_s, &path)?);
+    let (rmse, scatter) = (f64s(&df, agreement::rmse_mm, &path)?, f64s(&df, agreement::virtual_scatter_mm, &path)?);
     let mut panels: Vec<Panel> = (0..df.height())
         .filter(|&i| printers[i] == printer)
         .map(|i| Panel {
@@ -89,15 +125,13 @@ fn load(dir: &Path, printer: &str) -> Result<Vec<Panel>, StageError> {
         })
         .collect();
     if panels.is_empty() {
-        return Err(no_rows(&path, "printer", printer));
+        return Err(no_rows(&path, agreement::printer, printer));
     }
-    let path = dir.join("agreement_profiles.parquet");
+    let path = dir.join(agreement_profiles::TABLE.file());
     let df = read_parquet(&path)?;
-    let (printers, conditions) = (strs(&df, "printer", &path)?, strs(&df, "condition", &path)?);
-    let columns = ["position_mm", "real_mm", "virtual_mean_mm", "virtual_lo_mm", "virtual_hi_mm"]
-        .map(|c| f64s(&df, c, &path))
-        .into_iter()
-        .collect::<Result<Vec<_>, _>>()?;
+    let (printers, conditions) =
+        (strs(&df, agreement_profiles::printer, &path)?, strs(&df, agreement_profiles::condition, &path)?);
+    let columns = PROFILE_COLUMNS.map(|c| f64s(&df, c, &path)).into_iter().collect::<Result<Vec<_>, _>>()?;
     for i in (0..df.height()).filter(|&i| printers[i] == printer) {
         if let Some(p) = panels.iter_mut().find(|p| p.condition == conditions[i]) {
             p.rows.push([columns[0][i], columns[1][i], columns[2][i], columns[3][i], columns[4][i]]);

@@ -42,13 +42,8 @@ pipeline::params! {
     }
 }
 
-/// The open-loop print (drawn first).
-const OPEN_LOOP: Input = Input::one(
-    "open_loop",
-    &[Source::Stage("inkjet.print_experiment")],
-    "the open-loop print (`height_map.parquet`, `summary.parquet`)",
-)
-.reading(&[
+/// What the figure reads of each print.
+const PRINT_READS: &[Reads] = &[
     Reads {
         table: &height_map::TABLE,
         columns: &[height_map::x_index, height_map::y_index, height_map::x_um, height_map::y_um, height_map::height_um],
@@ -57,7 +52,15 @@ const OPEN_LOOP: Input = Input::one(
         table: &summary::TABLE,
         columns: &[summary::controller, summary::layers, summary::mean_err_um, summary::std_um],
     },
-]);
+];
+
+/// The open-loop print (drawn first).
+const OPEN_LOOP: Input = Input::one(
+    "open_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the open-loop print (`height_map.parquet`, `summary.parquet`)",
+)
+.reading(PRINT_READS);
 
 /// The closed-loop print.
 const CLOSED_LOOP: Input = Input::one(
@@ -65,16 +68,7 @@ const CLOSED_LOOP: Input = Input::one(
     &[Source::Stage("inkjet.print_experiment")],
     "the closed-loop print (`height_map.parquet`, `summary.parquet`)",
 )
-.reading(&[
-    Reads {
-        table: &height_map::TABLE,
-        columns: &[height_map::x_index, height_map::y_index, height_map::x_um, height_map::y_um, height_map::height_um],
-    },
-    Reads {
-        table: &summary::TABLE,
-        columns: &[summary::controller, summary::layers, summary::mean_err_um, summary::std_um],
-    },
-]);
+.reading(PRINT_READS);
 
 /// One grid cell of a height map.
 #[derive(Debug, Clone, Copy, PartialEq)]

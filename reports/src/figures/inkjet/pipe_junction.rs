@@ -38,13 +38,8 @@ pipeline::params! {
     }
 }
 
-/// The open-loop print (drawn first).
-const OPEN_LOOP: Input = Input::one(
-    "open_loop",
-    &[Source::Stage("inkjet.print_experiment")],
-    "the open-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
-)
-.reading(&[
+/// What the figure reads of each print.
+const PRINT_READS: &[Reads] = &[
     Reads {
         table: &part_top::TABLE,
         columns: &[part_top::x_index, part_top::y_index, part_top::part_top_um, part_top::desired_top_um],
@@ -69,7 +64,15 @@ const OPEN_LOOP: Input = Input::one(
             edge_deformation::max_abs_um,
         ],
     },
-]);
+];
+
+/// The open-loop print (drawn first).
+const OPEN_LOOP: Input = Input::one(
+    "open_loop",
+    &[Source::Stage("inkjet.print_experiment")],
+    "the open-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
+)
+.reading(PRINT_READS);
 
 /// The closed-loop print.
 const CLOSED_LOOP: Input = Input::one(
@@ -77,32 +80,7 @@ const CLOSED_LOOP: Input = Input::one(
     &[Source::Stage("inkjet.print_experiment")],
     "the closed-loop pipe junction (`part_top.parquet`, `layers.parquet`, `edge_deformation.parquet`)",
 )
-.reading(&[
-    Reads {
-        table: &part_top::TABLE,
-        columns: &[part_top::x_index, part_top::y_index, part_top::part_top_um, part_top::desired_top_um],
-    },
-    Reads {
-        table: &layers::TABLE,
-        columns: &[
-            layers::layer,
-            layers::x_index,
-            layers::y_index,
-            layers::bottom_um,
-            layers::top_um,
-            layers::material,
-        ],
-    },
-    Reads {
-        table: &edge_deformation::TABLE,
-        columns: &[
-            edge_deformation::controller,
-            edge_deformation::region,
-            edge_deformation::rmse_um,
-            edge_deformation::max_abs_um,
-        ],
-    },
-]);
+.reading(PRINT_READS);
 
 /// One pipe-junction print as drawn.
 struct PipePrint {
