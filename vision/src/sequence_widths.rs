@@ -19,8 +19,8 @@ use crate::frame::ThermalFrame;
 use crate::homography::Homography;
 use crate::widths::{bilinear, extract_widths_into, WidthParams, WidthQuery};
 
-/// Bisection steps of the T_t calibration: 30 halvings of a 170 °C bracket resolve it
-/// to well under a millikelvin.
+/// Bisection steps of the T_t calibration: 30 halvings shrink a bed-to-nozzle bracket
+/// of a few hundred kelvin below a millikelvin.
 const CALIBRATION_STEPS: usize = 30;
 
 /// One frame of the sequence as the width reading sees it.
