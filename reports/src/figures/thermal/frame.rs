@@ -170,10 +170,9 @@ impl Stage for ThermalFrameFigure {
 }
 
 /// The cells of `table` (columns `x`, `y` and `temp`) with a finite temperature.
-fn cells(dir: &Path, table: &Table, [x, y, temp]: [&str; 3]) -> Result<Vec<Cell>, StageError> {
+fn cells(dir: &Path, table: &Table, [x, y, temp_col]: [&str; 3]) -> Result<Vec<Cell>, StageError> {
     let path = dir.join(table.file());
     let df = read_parquet(&path)?;
-    let temp_col = temp;
     let temp = f64s(&df, temp_col, &path)?;
     let (xs, ys) = (coords(&df, x, &path)?, coords(&df, y, &path)?);
     let cells: Vec<Cell> = (0..df.height())
