@@ -11,6 +11,7 @@ mod common;
 use std::path::Path;
 
 use common::*;
+use tables::inkjet::control_gain;
 
 #[test]
 fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() {
@@ -44,10 +45,15 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
     // printers, intervals around every mean, the paper's controller against itself 0.
     let control = read_table(&out.join("inkjet_control_gain.parquet"));
     assert_eq!(control.height(), 9);
-    let (controller, printers) = (strings(&control, "controller"), control.column("printers").unwrap().i64().unwrap());
+    let (controller, printers) =
+        (strings(&control, control_gain::controller), control.column(control_gain::printers).unwrap().i64().unwrap());
     assert!(printers.iter().all(|n| n == Some(3)));
-    let (rmsd, lo, hi) = (floats(&control, "rmsd_um"), floats(&control, "rmsd_ci_lo"), floats(&control, "rmsd_ci_hi"));
-    let vs_paper = floats(&control, "rmsd_vs_paper_um");
+    let (rmsd, lo, hi) = (
+        floats(&control, control_gain::rmsd_um),
+        floats(&control, control_gain::rmsd_ci_lo),
+        floats(&control, control_gain::rmsd_ci_hi),
+    );
+    let vs_paper = floats(&control, control_gain::rmsd_vs_paper_um);
     for i in 0..control.height() {
         assert!(lo[i] <= rmsd[i] && rmsd[i] <= hi[i] && rmsd[i] > 0.0, "row {i}");
         assert_eq!(vs_paper[i] == 0.0, controller[i] == "paper", "row {i}");
@@ -100,7 +106,7 @@ fn the_power_study_spec_runs_cut_to_a_few_prints() {
         std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_inkjet_power/report/section.html")).unwrap();
     assert!(section.contains("How often is a hidden effect named?"));
     let control = read_table(&tmp.path().join("out/discrepancy/inkjet_control_gain.parquet"));
-    assert_eq!(strings(&control, "controller"), ["paper", "mean_droplet", "extended"]);
+    assert_eq!(strings(&control, control_gain::controller), ["paper", "mean_droplet", "extended"]);
     assert!(section.contains("Does the extended model print better?"));
 }
 

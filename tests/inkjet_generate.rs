@@ -8,6 +8,7 @@ use common::*;
 use datasets::inkjet::InkjetScans;
 use datasets::manifest::Provenance;
 use polars::prelude::{ParquetReader, SerReader};
+use tables::inkjet::scan_residuals;
 
 #[test]
 fn generates_a_readable_dataset_with_its_effects() {
@@ -99,9 +100,10 @@ fn a_generated_dataset_declared_in_a_spec_is_analysed() {
     let path = tmp.path().join("out/mine/scan_residuals.parquet");
     let df = ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap();
     assert_eq!(df.height(), 4);
-    let effects = df.column("effects").unwrap().str().unwrap();
+    let effects = df.column(scan_residuals::effects).unwrap().str().unwrap();
     assert_eq!(effects.get(0), Some("volume_drift=0.01"));
     // Droplets grow by 1 % per layer: the model's under-prediction grows layer by layer.
-    let bias: Vec<f64> = df.column("bias_um").unwrap().f64().unwrap().iter().map(|v| v.unwrap()).collect();
+    let bias: Vec<f64> =
+        df.column(scan_residuals::bias_um).unwrap().f64().unwrap().iter().map(|v| v.unwrap()).collect();
     assert!(bias[3] > bias[0], "{bias:?}");
 }

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use common::*;
 use polars::prelude::{DataFrame, ParquetReader, SerReader};
-use tables::fdm::loo;
+use tables::fdm::{loo, transfer_cv};
 
 fn read(path: &Path) -> DataFrame {
     ParquetReader::new(std::fs::File::open(path).unwrap()).finish().unwrap()
@@ -59,7 +59,7 @@ fn reproduces_table_ii_and_fig9_tables_on_the_real_data() {
 
     let transfer = read(&out.join("transfer_cv.parquet"));
     let subsets: std::collections::BTreeSet<(String, String)> =
-        strs(&transfer, "subset").into_iter().zip(strs(&transfer, "method")).collect();
+        strs(&transfer, transfer_cv::subset).into_iter().zip(strs(&transfer, transfer_cv::method)).collect();
     assert_eq!(subsets.len(), 510 * 3, "every subset of n = 1..8 of 9 lines, 3 methods");
     // Each subset of n lines is tested on the other 9 − n: Σ C(9,n)(9 − n) = 9·(2^8 − 1) = 2295 per method.
     assert_eq!(transfer.height(), 3 * 9 * 255);

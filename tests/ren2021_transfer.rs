@@ -7,21 +7,31 @@
 mod common;
 
 use common::*;
+use tables::fdm::{transfer_matrix, transfer_matrix_rows};
 
 #[test]
 fn the_guard_never_hurts_beyond_its_interval_on_the_real_lines() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = shipped_spec(tmp.path(), "ren2021_transfer", &data_root().join("fsu-linewidth"));
     ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    use transfer_matrix as t;
     let table = read_table(&tmp.path().join("out/fdm/transfer_matrix.parquet"));
     let names: Vec<String> = table.get_column_names().iter().map(|c| c.to_string()).collect();
-    let wanted =
-        ["sources", "target", "n_train", "method", "median_rmse_mm", "improvement_pct", "ci_lo_pct", "ci_hi_pct"];
+    let wanted = [
+        t::sources,
+        t::target,
+        t::n_train,
+        t::method,
+        t::median_rmse_mm,
+        t::improvement_pct,
+        t::ci_lo_pct,
+        t::ci_hi_pct,
+    ];
     assert!(wanted.iter().all(|w| names.iter().any(|n| n == w)), "{names:?}");
     // Two printers: two ordered pairs × 8 training sizes × 4 methods.
     assert_eq!(table.height(), 2 * 8 * 4);
-    let (method, hi, lo) = (strings(&table, "method"), floats(&table, "ci_hi_pct"), floats(&table, "ci_lo_pct"));
-    let imp = floats(&table, "improvement_pct");
+    let (method, hi, lo) = (strings(&table, t::method), floats(&table, t::ci_hi_pct), floats(&table, t::ci_lo_pct));
+    let imp = floats(&table, t::improvement_pct);
     for i in (0..table.height()).filter(|&i| method[i] == "guarded") {
         assert!(hi[i] >= 0.0, "row {i}: the guard is worse than single beyond its interval");
         assert!(lo[i] <= imp[i] && imp[i] <= hi[i] + 1e-9, "row {i}: the estimate lies in its interval");
@@ -33,9 +43,10 @@ fn the_guard_never_hurts_beyond_its_interval_on_the_real_lines() {
     let section = std::fs::read_to_string(run.join("comparison/section.html")).unwrap();
     assert!(section.contains("negative-transfer guard"), "{section}");
     let rows = read_table(&tmp.path().join("out/fdm/transfer_matrix_rows.parquet"));
-    let prior = strings(&rows, "prior");
-    let rows_method = strings(&rows, "method");
-    let n_train: Vec<i64> = rows.column("n_train").unwrap().i64().unwrap().into_no_null_iter().collect();
+    let prior = strings(&rows, transfer_matrix_rows::prior);
+    let rows_method = strings(&rows, transfer_matrix_rows::method);
+    let n_train: Vec<i64> =
+        rows.column(transfer_matrix_rows::n_train).unwrap().i64().unwrap().into_no_null_iter().collect();
     assert!((0..rows.height()).filter(|&i| rows_method[i] == "guarded" && n_train[i] == 1).all(|i| prior[i] == "none"));
 }
 

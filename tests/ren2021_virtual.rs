@@ -11,7 +11,8 @@ use std::path::Path;
 
 use common::*;
 use polars::prelude::{DataFrame, ParquetReader, SerReader};
-use tables::fdm::{agreement, loo, segment_accuracy, segment_diagnostics};
+use tables::discrepancy::fdm::{causes, extension};
+use tables::fdm::{agreement, loo, segment_accuracy, segment_diagnostics, transfer_cv};
 
 fn read(path: &Path) -> DataFrame {
     ParquetReader::new(std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
@@ -104,12 +105,12 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
             (loo_median(&out.join("loo.parquet"), p), loo_median(&runs.join("real_loo").join(loo::TABLE.file()), p));
         assert!((photos / real - 1.0).abs() < 0.3, "{p}: lag leave-one-out {photos} on photos, {real} on real lines");
     }
-    assert!(read(&out.join("transfer_cv.parquet")).height() > 0);
+    assert!(read(&out.join(transfer_cv::TABLE.file())).height() > 0);
 
     // The engine names the hidden gear ripple, and nothing in the clean photos.
     let named = |stage: &str| -> Vec<String> {
-        let df = read(&runs.join(stage).join("causes.parquet"));
-        let (m, n) = (strs(&df, "mechanism"), bools(&df, "named"));
+        let df = read(&runs.join(stage).join(causes::TABLE.file()));
+        let (m, n) = (strs(&df, causes::mechanism), bools(&df, causes::named));
         (0..df.height()).filter(|&i| n[i]).map(|i| m[i].clone()).collect()
     };
     assert_eq!(named("discrepancy_clean"), Vec::<String>::new());
@@ -129,15 +130,16 @@ fn photos_of_the_virtual_printers_reproduce_paper_000_and_hide_what_the_engine_f
     ok(tmp.path(), &["run", "-q", piecewise.to_str().unwrap()]);
     let piecewise_runs = tmp.path().join("out/runs/piecewise");
     let named_on = |stage: &str| -> Vec<String> {
-        let df = read(&piecewise_runs.join(stage).join("causes.parquet"));
-        let (m, n) = (strs(&df, "mechanism"), bools(&df, "named"));
-        assert!(strs(&df, "base_model").iter().all(|b| b.starts_with("piecewise_model")));
+        let df = read(&piecewise_runs.join(stage).join(causes::TABLE.file()));
+        let (m, n) = (strs(&df, causes::mechanism), bools(&df, causes::named));
+        assert!(strs(&df, causes::base_model).iter().all(|b| b.starts_with("piecewise_model")));
         (0..df.height()).filter(|&i| n[i]).map(|i| m[i].clone()).collect()
     };
     assert_eq!(named_on("clean"), Vec::<String>::new());
     assert_eq!(named_on("hidden"), ["gear_eccentricity"]);
-    let ext = read(&piecewise_runs.join("hidden/extension.parquet"));
-    let (param, lo, hi) = (strs(&ext, "parameter"), f64s(&ext, "ci_lo"), f64s(&ext, "ci_hi"));
+    let ext = read(&piecewise_runs.join("hidden").join(extension::TABLE.file()));
+    let (param, lo, hi) =
+        (strs(&ext, extension::parameter), f64s(&ext, extension::ci_lo), f64s(&ext, extension::ci_hi));
     let k = param.iter().position(|p| p == "amplitude").unwrap();
     assert!(lo[k] <= 0.05 && 0.05 <= hi[k], "the amplitude's interval [{}, {}] covers the hidden 5 %", lo[k], hi[k]);
 

@@ -1,16 +1,17 @@
 //! What a finished run contributes to a night: its stages' costs (from the manifest)
 //! and every compared number in its tables.
 //!
-//! A table is recognised by its columns, not its name, so a new report section or
-//! power study is picked up without touching this file:
-//! - **comparison tables** (`section`, `item`, `our_value`; the report sections'
-//!   `comparison.parquet`): each row is a number, `section/item`, with the paper's value
-//!   where the paper has one;
-//! - **power tables** (`correct_rate`, `false_alarm_rate`): per row, the rate of naming
-//!   the hidden effect, of naming a wrong one, and the interval's coverage, keyed by the
-//!   row's text columns and its `strength`;
-//! - **discrepancy verdicts** (`verdict`, `named`, `mechanism`, `round`: the engine's
-//!   `causes.parquet`): per round, the cause named or why none was, as text.
+//! A table is recognised by the declared columns it carries (the `tables` crate), not
+//! its file name, so a new report section or power study is picked up without touching
+//! this file:
+//! - **comparison tables** ([`comparison`]: `section`, `item`, `our_value`): each row is
+//!   a number, `section/item`, with the paper's value where the paper has one;
+//! - **power tables** ([`power`]: `correct_rate`, `false_alarm_rate`): per row, the rate
+//!   of naming the hidden effect, of naming a wrong one, and the interval's coverage,
+//!   keyed by the row's text columns and its `strength`;
+//! - **discrepancy verdicts** ([`causes`]: `verdict`, `named`, `mechanism`, `round`; the
+//!   engine's `causes.parquet`, whose columns every domain names alike): per round, the
+//!   cause named or why none was, as text.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -20,6 +21,9 @@ use pipeline::columns::{bools, if_present, ints, opt_f64s, strs};
 use pipeline::manifest::Manifest;
 use pipeline::StageError;
 use polars::prelude::{DataFrame, DataType};
+use tables::discrepancy::fdm::causes;
+use tables::discrepancy::power;
+use tables::report::comparison;
 
 use crate::{NumberRow, StageRow};
 
@@ -90,11 +94,11 @@ impl TableRef<'_> {
 fn table_numbers(table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let df = read_parquet(table.path)?;
     let has = |names: &[&str]| names.iter().all(|n| df.column(n).is_ok());
-    if has(&["section", "item", "our_value"]) {
+    if has(&[comparison::section, comparison::item, comparison::our_value]) {
         comparison_numbers(&df, table)
-    } else if has(&["correct_rate", "false_alarm_rate"]) {
+    } else if has(&[power::correct_rate, power::false_alarm_rate]) {
         power_numbers(&df, table)
-    } else if has(&["verdict", "named", "mechanism", "round"]) {
+    } else if has(&[causes::verdict, causes::named, causes::mechanism, causes::round]) {
         verdicts(&df, table)
     } else {
         Ok(Vec::new())
@@ -103,13 +107,13 @@ fn table_numbers(table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
 
 fn comparison_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let path = table.path;
-    let (section, item) = (strs(df, "section", path)?, strs(df, "item", path)?);
-    let paper = if_present(df, "paper_value", path, opt_f64s)?.unwrap_or_else(|| vec![None; df.height()]);
-    let ours = opt_f64s(df, "our_value", path)?;
+    let (section, item) = (strs(df, comparison::section, path)?, strs(df, comparison::item, path)?);
+    let paper = if_present(df, comparison::paper_value, path, opt_f64s)?.unwrap_or_else(|| vec![None; df.height()]);
+    let ours = opt_f64s(df, comparison::our_value, path)?;
     let text = |name: &str| -> Result<Vec<String>, StageError> {
         Ok(if_present(df, name, path, strs)?.unwrap_or_else(|| vec![String::new(); df.height()]))
     };
-    let (unit, source) = (text("unit")?, text("source")?);
+    let (unit, source) = (text(comparison::unit)?, text(comparison::source)?);
     Ok((0..df.height())
         .map(|i| table.number(format!("{}/{}", section[i], item[i]), paper[i], ours[i], &unit[i], source[i].clone()))
         .collect())
@@ -118,12 +122,12 @@ fn comparison_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>
 /// `correct_rate`, `false_alarm_rate` and (where present) `coverage_rate` of each row.
 fn power_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let keys = row_keys(df, table.path, &[])?;
-    let draws = match df.column("draws") {
-        Ok(_) => ints(df, "draws", table.path)?.into_iter().map(Some).collect(),
+    let draws = match df.column(power::draws) {
+        Ok(_) => ints(df, power::draws, table.path)?.into_iter().map(Some).collect(),
         Err(_) => vec![None; df.height()],
     };
     let mut numbers = Vec::new();
-    for rate in ["correct_rate", "false_alarm_rate", "coverage_rate"] {
+    for rate in [power::correct_rate, power::false_alarm_rate, power::coverage_rate] {
         let Ok(_) = df.column(rate) else { continue };
         let values = opt_f64s(df, rate, table.path)?;
         for (i, key) in keys.iter().enumerate() {
@@ -140,9 +144,13 @@ fn power_numbers(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, Sta
 /// Per (key, round): `named MECHANISM`, or the round's verdict when nothing was named.
 fn verdicts(df: &DataFrame, table: &TableRef) -> Result<Vec<NumberRow>, StageError> {
     let path = table.path;
-    let keys = row_keys(df, path, &["base_model", "mechanism", "verdict", "failure"])?;
-    let (round, named, mechanism, verdict) =
-        (ints(df, "round", path)?, bools(df, "named", path)?, strs(df, "mechanism", path)?, strs(df, "verdict", path)?);
+    let keys = row_keys(df, path, &[causes::base_model, causes::mechanism, causes::verdict, causes::failure])?;
+    let (round, named, mechanism, verdict) = (
+        ints(df, causes::round, path)?,
+        bools(df, causes::named, path)?,
+        strs(df, causes::mechanism, path)?,
+        strs(df, causes::verdict, path)?,
+    );
     let mut rounds: BTreeMap<(String, i64), String> = BTreeMap::new();
     for i in 0..df.height() {
         let slot = rounds.entry((keys[i].clone(), round[i])).or_insert_with(|| verdict[i].clone());
@@ -172,7 +180,7 @@ fn row_keys(df: &DataFrame, path: &Path, except: &[&str]) -> Result<Vec<String>,
             for (part, value) in parts.iter_mut().zip(strs(df, name, path)?) {
                 part.push(value);
             }
-        } else if name == "strength" {
+        } else if name == power::strength {
             for (part, value) in parts.iter_mut().zip(opt_f64s(df, name, path)?) {
                 part.push(format!("strength={}", value.map_or("null".into(), |v| v.to_string())));
             }

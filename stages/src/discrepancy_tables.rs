@@ -1,16 +1,22 @@
 //! The tables every domain's discrepancy stage writes from a [`Discovery`]
-//! (`fdm.discrepancy`, `inkjet.discrepancy`; docs/OUTPUTS.md lists the columns):
+//! (`fdm.discrepancy`, `inkjet.discrepancy`, `thermal.discrepancy`):
 //! `residuals.parquet` (held-out residuals binned per candidate variable, baseline and
 //! extended), `causes.parquet` (every candidate of every round with its cross-validated
 //! gain, p-values and the verdict), `extension.parquet` (the final model's parameters
-//! with jackknife intervals) and `gain.parquet` (held-out RMSE before and after). The
-//! columns are declared once, below, with the domain's set column and unit filled in.
+//! with jackknife intervals) and `gain.parquet` (held-out RMSE before and after), and
+//! the power studies' `power.parquet` and `power_draws.parquet`. The columns are declared
+//! once, per domain, in `tables::discrepancy`: a row is pushed in declared order and
+//! written under the declared names, and the power tables name the columns every domain
+//! shares through the FDM declarations.
 
 use discrepancy::power::{Outcome, PowerRow};
 use discrepancy::{Discovery, Model, Settings, VariableKind, Verdict};
 use pipeline::params::ParamError;
+use pipeline::schema::{Column, Dtype, Table as Declared};
 use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
+use tables::discrepancy::fdm::power_draws;
+use tables::discrepancy::{power, Engine};
 
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
@@ -62,19 +68,6 @@ fn mechanism_name<M: Model>(model: &M, mechanism: Option<usize>) -> String {
     mechanism.map_or(model.name(), |c| model.candidates()[c].name()).to_string()
 }
 
-/// A column's type.
-#[derive(Clone, Copy, PartialEq, Debug)]
-pub(crate) enum Kind {
-    /// f64.
-    F,
-    /// i64.
-    I,
-    /// String.
-    S,
-    /// bool.
-    B,
-}
-
 /// One value of a row.
 #[derive(Clone)]
 pub(crate) enum Value {
@@ -89,130 +82,59 @@ pub(crate) enum Value {
 }
 
 impl Value {
-    fn kind(&self) -> Kind {
+    fn dtype(&self) -> Dtype {
         match self {
-            Self::F(_) => Kind::F,
-            Self::I(_) => Kind::I,
-            Self::S(_) => Kind::S,
-            Self::B(_) => Kind::B,
+            Self::F(_) => Dtype::Float64,
+            Self::I(_) => Dtype::Int64,
+            Self::S(_) => Dtype::Str,
+            Self::B(_) => Dtype::Bool,
         }
     }
 }
 
-/// The columns of each output table, declared once (docs/OUTPUTS.md lists them).
-const RESIDUALS: &[(&str, Kind)] = &[
-    ("{set}", Kind::S),
-    ("model", Kind::S),
-    ("variable", Kind::S),
-    ("unit", Kind::S),
-    ("bin", Kind::I),
-    ("label", Kind::S),
-    ("bin_lo", Kind::F),
-    ("bin_hi", Kind::F),
-    ("mean_residual_{unit}", Kind::F),
-    ("ci_lo_{unit}", Kind::F),
-    ("ci_hi_{unit}", Kind::F),
-    ("n", Kind::I),
-    ("groups", Kind::I),
-    ("structure", Kind::F),
-];
-const CAUSES: &[(&str, Kind)] = &[
-    ("{set}", Kind::S),
-    ("round", Kind::I),
-    ("base_model", Kind::S),
-    ("mechanism", Kind::S),
-    ("cv_rmse_before_{unit}", Kind::F),
-    ("cv_rmse_after_{unit}", Kind::F),
-    ("gain_pct", Kind::F),
-    ("gain_ci_lo_pct", Kind::F),
-    ("gain_ci_hi_pct", Kind::F),
-    ("groups_helped", Kind::I),
-    ("groups", Kind::I),
-    ("p_value", Kind::F),
-    ("p_adjusted", Kind::F),
-    ("alpha", Kind::F),
-    ("named", Kind::B),
-    ("verdict", Kind::S),
-    ("failure", Kind::S),
-];
-const EXTENSION: &[(&str, Kind)] = &[
-    ("{set}", Kind::S),
-    ("round", Kind::I),
-    ("mechanism", Kind::S),
-    ("parameter", Kind::S),
-    ("unit", Kind::S),
-    ("estimate", Kind::F),
-    ("ci_lo", Kind::F),
-    ("ci_hi", Kind::F),
-    ("meaning", Kind::S),
-];
-const GAIN: &[(&str, Kind)] = &[
-    ("{set}", Kind::S),
-    ("baseline", Kind::S),
-    ("extended_model", Kind::S),
-    ("groups", Kind::I),
-    ("rmse_before_{unit}", Kind::F),
-    ("rmse_after_{unit}", Kind::F),
-    ("gain_pct", Kind::F),
-    ("gain_ci_lo_pct", Kind::F),
-    ("gain_ci_hi_pct", Kind::F),
-];
-
-/// A table being filled row by row against its declared columns.
+/// A declared table being filled row by row, one value per declared column in order.
 pub(crate) struct Table {
-    name: &'static str,
-    schema: Vec<(String, Kind)>,
+    declared: &'static Declared,
     columns: Vec<Vec<Value>>,
 }
 
 impl Table {
-    /// A table of these columns; `{set}` and `{unit}` in a name are replaced by the
-    /// domain's set column and residual unit.
-    pub(crate) fn new(name: &'static str, schema: &[(&str, Kind)], domain: Domain) -> Self {
-        let schema: Vec<(String, Kind)> = schema
-            .iter()
-            .map(|(n, k)| (n.replace("{set}", domain.set_column).replace("{unit}", domain.unit), *k))
-            .collect();
-        Self { name, columns: vec![Vec::new(); schema.len()], schema }
+    /// An empty table of `declared`'s columns.
+    pub(crate) fn new(declared: &'static Declared) -> Self {
+        Self { declared, columns: vec![Vec::new(); declared.columns.len()] }
     }
 
     /// Appends a row, one value per column in order.
     pub(crate) fn push(&mut self, row: Vec<Value>) {
-        debug_assert_eq!(row.len(), self.schema.len(), "{}: row length", self.name);
-        for ((column, value), (name, kind)) in self.columns.iter_mut().zip(row).zip(&self.schema) {
-            debug_assert_eq!(value.kind(), *kind, "{}.{name}", self.name);
+        let name = self.declared.name;
+        debug_assert_eq!(row.len(), self.columns.len(), "{name}: row length");
+        for ((column, value), declared) in self.columns.iter_mut().zip(row).zip(self.declared.columns) {
+            debug_assert_eq!(value.dtype(), declared.dtype, "{name}.{}", declared.name);
             column.push(value);
         }
     }
 
-    /// Writes the table as `NAME.parquet` through the context.
+    /// Writes the table as its declared file through the context.
     pub(crate) fn write(self, ctx: &mut StageContext) -> Result<(), StageError> {
-        let columns =
-            self.schema.iter().zip(&self.columns).map(|((name, kind), values)| to_column(name, *kind, values));
+        let columns = self.declared.columns.iter().zip(&self.columns).map(|(c, values)| to_column(c, values));
         let mut df = frame(columns.collect())?;
-        ctx.write_table(self.name, &mut df)?;
+        ctx.write_table(self.declared.name, &mut df)?;
         Ok(())
     }
 }
 
-fn to_column(name: &str, kind: Kind, values: &[Value]) -> polars::prelude::Column {
-    match kind {
-        Kind::I => i64_col(name, values.iter().map(|v| if let Value::I(x) = v { *x } else { 0 }).collect()),
-        Kind::S => {
+fn to_column(declared: &Column, values: &[Value]) -> polars::prelude::Column {
+    let name = declared.name;
+    match declared.dtype {
+        Dtype::Int64 => i64_col(name, values.iter().map(|v| if let Value::I(x) = v { *x } else { 0 }).collect()),
+        Dtype::Str => {
             str_col(name, values.iter().map(|v| if let Value::S(x) = v { x.clone() } else { String::new() }).collect())
         }
-        Kind::B => bool_col(name, values.iter().map(|v| matches!(v, Value::B(true))).collect()),
-        Kind::F => f64_col(name, values.iter().map(|v| if let Value::F(x) = v { *x } else { f64::NAN }).collect()),
+        Dtype::Bool => bool_col(name, values.iter().map(|v| matches!(v, Value::B(true))).collect()),
+        Dtype::Float64 => {
+            f64_col(name, values.iter().map(|v| if let Value::F(x) = v { *x } else { f64::NAN }).collect())
+        }
     }
-}
-
-/// Which column names a domain's discrepancy tables carry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Domain {
-    /// The column naming the data set a discovery ran on (`printer`, `dataset`).
-    pub(crate) set_column: &'static str,
-    /// The unit of residuals and RMSEs in column names (`mm`, `um`).
-    pub(crate) unit: &'static str,
 }
 
 /// Rows of the four tables every domain's discrepancy stage writes.
@@ -229,17 +151,14 @@ fn s(text: &str) -> Value {
 }
 
 impl DiscrepancyTables {
-    /// The tables' names, as written.
-    pub(crate) const NAMES: [&'static str; 4] = ["residuals", "causes", "extension", "gain"];
-
-    /// Empty tables with the domain's column names.
-    pub(crate) fn new(domain: Domain, alpha: f64) -> Self {
+    /// Empty tables of the domain's declarations.
+    pub(crate) fn new(engine: &Engine, alpha: f64) -> Self {
         Self {
             alpha,
-            residuals: Table::new(Self::NAMES[0], RESIDUALS, domain),
-            causes: Table::new(Self::NAMES[1], CAUSES, domain),
-            extension: Table::new(Self::NAMES[2], EXTENSION, domain),
-            gain: Table::new(Self::NAMES[3], GAIN, domain),
+            residuals: Table::new(engine.residuals),
+            causes: Table::new(engine.causes),
+            extension: Table::new(engine.extension),
+            gain: Table::new(engine.gain),
         }
     }
 
@@ -366,26 +285,26 @@ pub(crate) fn power_frame(base: &str, rows: &[PowerRow]) -> Result<DataFrame, St
     let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|r| f(r) as i64).collect::<Vec<i64>>();
     frame(vec![
-        str_col("base", vec![base.to_string(); n]),
-        str_col("noise", vec!["virtual".to_string(); n]),
-        str_col("own_causes", vec!["none".to_string(); n]),
-        str_col("effect", rows.iter().map(|r| r.effect.to_string()).collect()),
-        f64_col("strength", col(&|r| r.strength)),
-        i64_col("draws", int(&|r| r.draws)),
-        i64_col("correct", int(&|r| r.correct)),
-        i64_col("wrong", int(&|r| r.wrong)),
-        i64_col("none", int(&|r| r.none)),
-        f64_col("correct_rate", col(&|r| r.correct_rate.0)),
-        f64_col("correct_ci_lo", col(&|r| r.correct_rate.1)),
-        f64_col("correct_ci_hi", col(&|r| r.correct_rate.2)),
-        f64_col("false_alarm_rate", col(&|r| r.false_alarm_rate.0)),
-        f64_col("false_alarm_ci_lo", col(&|r| r.false_alarm_rate.1)),
-        f64_col("false_alarm_ci_hi", col(&|r| r.false_alarm_rate.2)),
-        i64_col("covered", int(&|r| r.covered.0)),
-        i64_col("with_interval", int(&|r| r.covered.1)),
-        f64_col("coverage_rate", col(&|r| r.coverage_rate().0)),
-        f64_col("coverage_ci_lo", col(&|r| r.coverage_rate().1)),
-        f64_col("coverage_ci_hi", col(&|r| r.coverage_rate().2)),
+        str_col(power::base, vec![base.to_string(); n]),
+        str_col(power::noise, vec!["virtual".to_string(); n]),
+        str_col(power::own_causes, vec!["none".to_string(); n]),
+        str_col(power::effect, rows.iter().map(|r| r.effect.to_string()).collect()),
+        f64_col(power::strength, col(&|r| r.strength)),
+        i64_col(power::draws, int(&|r| r.draws)),
+        i64_col(power::correct, int(&|r| r.correct)),
+        i64_col(power::wrong, int(&|r| r.wrong)),
+        i64_col(power::none, int(&|r| r.none)),
+        f64_col(power::correct_rate, col(&|r| r.correct_rate.0)),
+        f64_col(power::correct_ci_lo, col(&|r| r.correct_rate.1)),
+        f64_col(power::correct_ci_hi, col(&|r| r.correct_rate.2)),
+        f64_col(power::false_alarm_rate, col(&|r| r.false_alarm_rate.0)),
+        f64_col(power::false_alarm_ci_lo, col(&|r| r.false_alarm_rate.1)),
+        f64_col(power::false_alarm_ci_hi, col(&|r| r.false_alarm_rate.2)),
+        i64_col(power::covered, int(&|r| r.covered.0)),
+        i64_col(power::with_interval, int(&|r| r.covered.1)),
+        f64_col(power::coverage_rate, col(&|r| r.coverage_rate().0)),
+        f64_col(power::coverage_ci_lo, col(&|r| r.coverage_rate().1)),
+        f64_col(power::coverage_ci_hi, col(&|r| r.coverage_rate().2)),
     ])
 }
 
@@ -407,25 +326,54 @@ pub(crate) struct DrawRow<'a> {
 }
 
 /// `power_draws.parquet`: one row per draw, with each candidate's first-round p-value
-/// as `p_<candidate>`.
+/// as `p_<candidate>` (the domain's declaration names those columns, and the write
+/// checks the frame against it).
 pub(crate) fn draws_frame(base: &str, draws: &[DrawRow<'_>], candidates: &[&str]) -> Result<DataFrame, StageError> {
     let n = draws.len();
     let fitted = |k: usize| draws.iter().map(|d| d.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect();
     let mut columns = vec![
-        str_col("base", vec![base.to_string(); n]),
-        str_col("effect", draws.iter().map(|d| d.effect.to_string()).collect()),
-        f64_col("strength", draws.iter().map(|d| d.strength).collect()),
-        i64_col("draw", draws.iter().map(|d| d.draw as i64).collect()),
-        str_col("seed", draws.iter().map(|d| format!("{:016x}", d.seed)).collect()),
-        f64_col("injected", draws.iter().map(|d| d.injected).collect()),
-        str_col("named", draws.iter().map(|d| d.named.clone()).collect()),
-        str_col("outcome", draws.iter().map(|d| d.outcome.label().to_string()).collect()),
-        f64_col("estimate", fitted(0)),
-        f64_col("ci_lo", fitted(1)),
-        f64_col("ci_hi", fitted(2)),
+        str_col(power_draws::base, vec![base.to_string(); n]),
+        str_col(power_draws::effect, draws.iter().map(|d| d.effect.to_string()).collect()),
+        f64_col(power_draws::strength, draws.iter().map(|d| d.strength).collect()),
+        i64_col(power_draws::draw, draws.iter().map(|d| d.draw as i64).collect()),
+        str_col(power_draws::seed, draws.iter().map(|d| format!("{:016x}", d.seed)).collect()),
+        f64_col(power_draws::injected, draws.iter().map(|d| d.injected).collect()),
+        str_col(power_draws::named, draws.iter().map(|d| d.named.clone()).collect()),
+        str_col(power_draws::outcome, draws.iter().map(|d| d.outcome.label().to_string()).collect()),
+        f64_col(power_draws::estimate, fitted(0)),
+        f64_col(power_draws::ci_lo, fitted(1)),
+        f64_col(power_draws::ci_hi, fitted(2)),
     ];
     for (c, candidate) in candidates.iter().enumerate() {
         columns.push(f64_col(&format!("p_{candidate}"), draws.iter().map(|d| d.first_round_p[c]).collect()));
     }
     frame(columns)
+}
+
+#[cfg(test)]
+mod tests {
+    use discrepancy::Mechanism;
+    use tables::discrepancy::{inkjet, thermal};
+
+    use super::*;
+
+    /// The `p_<candidate>` columns a study's declaration names after the FDM draws'.
+    fn p_columns(draws: &Declared) -> Vec<&'static str> {
+        draws.columns[power_draws::TABLE.columns.len()..].iter().map(|c| c.name).collect()
+    }
+
+    /// What [`draws_frame`] writes after the fixed columns: one per candidate, in order.
+    fn written(candidates: &[&dyn Mechanism]) -> Vec<String> {
+        candidates.iter().map(|c| format!("p_{}", c.name())).collect()
+    }
+
+    #[test]
+    fn each_study_declares_a_p_value_column_per_candidate_of_its_model_in_order() {
+        let inkjet_candidates: Vec<&dyn Mechanism> =
+            models::inkjet::discrepancy::mechanisms::CANDIDATES.iter().map(|c| c as &dyn Mechanism).collect();
+        assert_eq!(p_columns(&inkjet::power_draws::TABLE), written(&inkjet_candidates));
+        let thermal_candidates: Vec<&dyn Mechanism> =
+            models::thermal::discrepancy::CANDIDATES.iter().map(|c| c as &dyn Mechanism).collect();
+        assert_eq!(p_columns(&thermal::power_draws::TABLE), written(&thermal_candidates));
+    }
 }

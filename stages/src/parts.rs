@@ -10,17 +10,20 @@ use std::path::PathBuf;
 
 use discrepancy::power::{summarize, DrawScore, Outcome};
 use pipeline::artifact::read_parquet;
+use pipeline::schema::Table;
 use pipeline::{StageContext, StageError, Unit};
 use polars::prelude::{DataFrame, IntoColumn, NamedFrom, PlSmallStr, Series};
+// A study's part and draws have the FDM study's columns first in every domain
+// (`tables::discrepancy`), so the shared code names them through those.
+use tables::discrepancy::fdm::{power_draws, power_part};
+use tables::discrepancy::power;
 
 use crate::discrepancy_tables::power_frame;
-use crate::table::{opt_bools, strs};
+use crate::table::{f64s, opt_bools, strs};
 
-/// The file of a unit's part in its folder.
+/// The file of a unit's part in its folder (each split kind declares its part's columns
+/// as a table of this name).
 pub const PART_TABLE: &str = "part";
-/// The part's column saying whether a draw's strength interval covered the truth (null:
-/// no interval), which the summary needs and `power_draws.parquet` does not carry.
-pub const COVERED: &str = "covered";
 
 pipeline::params! {
     /// How a power study's draws are cut into work units, as every study declares it.
@@ -43,9 +46,9 @@ pub fn write_study_part(
     covered: Vec<Option<bool>>,
 ) -> Result<(), StageError> {
     let mut part = draws;
-    part.with_column(Series::new(COVERED.into(), covered).into_column())
+    part.with_column(Series::new(power_part::covered.into(), covered).into_column())
         .map_err(|source| StageError::Table { path: ctx.output_dir().join(PART_TABLE), source })?;
-    ctx.write_table(PART_TABLE, &mut part)?;
+    ctx.write_table(power_part::TABLE.name, &mut part)?;
     Ok(())
 }
 
@@ -55,10 +58,13 @@ pub fn write_study_part(
 pub fn merge_study(ctx: &mut StageContext, parts: &[PathBuf], effects: &[&'static str]) -> Result<(), StageError> {
     let all = read_parts(parts)?;
     let file = ctx.output_dir().join("parts");
-    let (base, effect, outcome) =
-        (strs(&all, "base", &file)?, strs(&all, "effect", &file)?, strs(&all, "outcome", &file)?);
-    let strength = crate::table::f64s(&all, "strength", &file)?;
-    let covered = opt_bools(&all, COVERED, &file)?;
+    let (base, effect, outcome) = (
+        strs(&all, power_part::base, &file)?,
+        strs(&all, power_part::effect, &file)?,
+        strs(&all, power_part::outcome, &file)?,
+    );
+    let strength = f64s(&all, power_part::strength, &file)?;
+    let covered = opt_bools(&all, power_part::covered, &file)?;
     let bad = |what: &str, value: &str| StageError::BadInput {
         file: file.clone(),
         location: None,
@@ -76,8 +82,8 @@ pub fn merge_study(ctx: &mut StageContext, parts: &[PathBuf], effects: &[&'stati
         })
         .collect::<Result<Vec<_>, StageError>>()?;
     let label = base.first().cloned().unwrap_or_default();
-    ctx.write_table("power", &mut power_frame(&label, &summarize(&scores))?)?;
-    ctx.write_table("power_draws", &mut without(&all, &[COVERED])?)?;
+    ctx.write_table(power::TABLE.name, &mut power_frame(&label, &summarize(&scores))?)?;
+    ctx.write_table(power_draws::TABLE.name, &mut without(&all, &[power_part::covered])?)?;
     Ok(())
 }
 
@@ -132,12 +138,12 @@ pub fn data_set_units(inputs: usize, per_set: usize) -> Vec<Unit> {
     (0..inputs.div_ceil(per_set.max(1))).map(|u| Unit { key: format!("data set {u}"), cost: 1.0 }).collect()
 }
 
-/// Merges the parts of a per-data-set stage: each table of `names` is the parts' rows
+/// Merges the parts of a per-data-set stage: each of `tables` is the parts' rows
 /// stacked in unit order.
-pub fn merge_tables(ctx: &mut StageContext, parts: &[PathBuf], names: &[&str]) -> Result<(), StageError> {
-    for name in names {
-        let files: Vec<PathBuf> = parts.iter().map(|p| p.join(format!("{name}.parquet"))).collect();
-        ctx.write_table(name, &mut stack(&files)?)?;
+pub fn merge_tables(ctx: &mut StageContext, parts: &[PathBuf], tables: &[&Table]) -> Result<(), StageError> {
+    for table in tables {
+        let files: Vec<PathBuf> = parts.iter().map(|p| p.join(table.file())).collect();
+        ctx.write_table(table.name, &mut stack(&files)?)?;
     }
     Ok(())
 }

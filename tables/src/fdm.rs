@@ -1,6 +1,8 @@
 //! Paper 000's tables (Ren et al. 2021): measured line widths and their summary, the
 //! nozzle's kinematics (eq. 1), the leave-one-out of the piecewise and lag models
-//! (Table II, Fig. 6) and infill nonuniformity (Fig. 7).
+//! (Table II, Fig. 6), infill nonuniformity (Fig. 7), the transfer between printers
+//! (Case B, Fig. 9, and over several printers) with its work units' parts, the photo
+//! segmentation and the virtual printer's agreement with the real lines.
 
 pipeline::table! {
     /// `fdm.line_summary`: one row per measured line (paper 000 Figs 3-4).
@@ -267,6 +269,139 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `fdm.transfer_cv`: one row per training subset of the target's lines, held-out
+    /// line and method (paper 000 Case B, Fig. 9).
+    pub mod transfer_cv = "transfer_cv" {
+        /// Target training lines.
+        n_train: Int64 "1",
+        /// Which ones: `n3-0_4_8` = the target's lines 0, 4, 8 in `lines.csv` order.
+        subset: Str "",
+        /// The held-out target line's condition.
+        test_condition: Str "",
+        /// `single`, `transfer_zero_mean` (the paper's prior N(0, Σ)) or `transfer_source_mean` (the prior centred on the source's estimates).
+        method: Str "",
+        /// RMSE over the whole held-out line.
+        rmse_mm: Float64 "mm",
+        /// Prior weight chosen (0 for `single`).
+        lambda: Float64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.transfer_cv`: one work unit's grid winners (`part.parquet`), one row per
+    /// (training subset, prior configuration) in that order, exactly as the merge needs
+    /// them back.
+    pub mod transfer_cv_part = "part" {
+        /// Prior configurations per subset.
+        configurations: Int64 "1",
+        /// Training SSE of the winner (infinite while no pair of the block gave a finite one).
+        sse: Float64 "mm²",
+        /// Index of the winning pair in the target's grid; −1 where none gave a finite SSE.
+        pair: Int64 "1",
+        /// The bp1 law's α1 at that pair (eq. 2).
+        alpha_1: Float64 "s/mm²",
+        /// The bp1 law's α2 at that pair.
+        alpha_2: Float64 "1/mm",
+        /// The fitted β (p2's growth coefficient).
+        theta_0: Float64 "s",
+        /// The fitted γ (p3's growth coefficient).
+        theta_1: Float64 "√mm",
+        /// The fitted steady width c.
+        theta_2: Float64 "mm",
+        /// The fitted ρ (p5's coefficient of log(F/v)).
+        theta_3: Float64 "mm",
+        /// The fitted width at t = 0 without a start blob.
+        theta_4: Float64 "mm",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.transfer_cv`: one work unit's failures (`part_errors.parquet`), one row per
+    /// training subset whose fit failed at a pair of the unit's block.
+    pub mod transfer_cv_errors = "part_errors" {
+        /// The subset's index.
+        subset: Int64 "1",
+        /// The first pair of the block at which its fit failed.
+        pair: Int64 "1",
+        /// Why.
+        error: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.transfer_matrix`: one row per task (sources → target), training-set size and
+    /// method, the held-out RMSEs summarised (paper 000 Fig. 9 over several printers).
+    pub mod transfer_matrix = "transfer_matrix" {
+        /// The source printer(s), `+`-joined.
+        sources: Str "",
+        /// The target printer.
+        target: Str "",
+        /// Target training lines (every subset of that size).
+        n_train: Int64 "1",
+        /// `single`, `transfer_zero_mean`, `transfer_source_mean`, `guarded` (the negative-transfer guard) or `co_learning` (several sources).
+        method: Str "",
+        /// Median held-out RMSE over every (subset, held-out line).
+        median_rmse_mm: Float64 "mm",
+        /// 100·(single − method)/single of the medians; above 0 is better than learning from the target alone.
+        improvement_pct: Float64 "%",
+        /// Lower end of its 95 % interval (paired bootstrap over the target's held-out lines).
+        ci_lo_pct: Float64 "%",
+        /// Upper end of that interval.
+        ci_hi_pct: Float64 "%",
+        /// Predictions behind the median.
+        rows: Int64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.transfer_matrix`: one row per prediction: task, training subset, held-out
+    /// line and method.
+    pub mod transfer_matrix_rows = "transfer_matrix_rows" {
+        /// The source printer(s), `+`-joined.
+        sources: Str "",
+        /// The target printer.
+        target: Str "",
+        /// Target training lines.
+        n_train: Int64 "1",
+        /// Which ones (`n3-0_4_8`).
+        subset: Str "",
+        /// The held-out target line's condition.
+        test_condition: Str "",
+        /// The method.
+        method: Str "",
+        /// RMSE over the whole held-out line.
+        rmse_mm: Float64 "mm",
+        /// Prior weight chosen.
+        lambda: Float64 "1",
+        /// The prior used: `none`, the source printer's name, or `pooled`.
+        prior: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.transfer_matrix`: one work unit's rows (`part.parquet`, one target printer),
+    /// with indices instead of names, as the merge needs them back.
+    pub mod transfer_matrix_part = "part" {
+        /// The task's index.
+        task: Int64 "1",
+        /// Target training lines.
+        n_train: Int64 "1",
+        /// Which ones.
+        subset: Str "",
+        /// The held-out line's index among the target's lines.
+        test_index: Int64 "1",
+        /// The method.
+        method: Str "",
+        /// RMSE over the whole held-out line.
+        rmse_mm: Float64 "mm",
+        /// Prior weight chosen.
+        lambda: Float64 "1",
+        /// The prior used.
+        prior: Str "",
+    }
+}
+
 /// Every table of this module.
 pub const ALL: &[&pipeline::schema::Table] = &[
     &line_summary::TABLE,
@@ -282,4 +417,10 @@ pub const ALL: &[&pipeline::schema::Table] = &[
     &photo_sets::TABLE,
     &agreement::TABLE,
     &agreement_profiles::TABLE,
+    &transfer_cv::TABLE,
+    &transfer_cv_part::TABLE,
+    &transfer_cv_errors::TABLE,
+    &transfer_matrix::TABLE,
+    &transfer_matrix_rows::TABLE,
+    &transfer_matrix_part::TABLE,
 ];

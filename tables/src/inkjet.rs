@@ -1,7 +1,7 @@
 //! Paper 002's tables (Lu et al. 2015): simulated prints (Figs 11-15, Table II), the
 //! layer-to-layer height model's residuals on scans (eqs 2-7) and the exact recovery of
-//! droplet patterns (Sec. IV-C). Not declared yet: the control study's tables
-//! (`inkjet.control_gain`).
+//! droplet patterns (Sec. IV-C), and the control study's closed-loop prints with the
+//! discrepancy engine's extended model (`inkjet.control_gain`).
 
 use pipeline::schema::Table;
 
@@ -160,6 +160,84 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `inkjet.control_gain`: one row per effect, strength and controller model, the
+    /// closed-loop cylinder's top surface over the printers (paper 002 eq. 8 with the
+    /// discrepancy engine's extended model).
+    pub mod control_gain = "control_gain" {
+        /// The printers' effect: `curing_shrinkage`, `volume_drift` or `nozzle_bias`.
+        effect: Str "",
+        /// Its strength (magnitude; the drift's sign is drawn per printer).
+        strength: Float64 "1",
+        /// The controller's model: `paper`, `mean_droplet` (the engine's baseline) or `extended`.
+        controller: Str "",
+        /// Printers (trials) summarised.
+        printers: Int64 "1",
+        /// The desired height h_d.
+        desired_um: Float64 "µm",
+        /// |mean(h_d − H)| of the true top surface over the footprint, mean over printers.
+        mean_error_um: Float64 "µm",
+        /// Its 95 % Student-t interval over printers, low end.
+        mean_error_ci_lo: Float64 "µm",
+        /// Its 95 % Student-t interval over printers, high end.
+        mean_error_ci_hi: Float64 "µm",
+        /// sqrt(mean((H − h_d)²)), mean over printers.
+        rmsd_um: Float64 "µm",
+        /// Its 95 % interval, low end.
+        rmsd_ci_lo: Float64 "µm",
+        /// Its 95 % interval, high end.
+        rmsd_ci_hi: Float64 "µm",
+        /// mean(H), mean over printers.
+        average_height_um: Float64 "µm",
+        /// Its 95 % interval, low end.
+        average_height_ci_lo: Float64 "µm",
+        /// Its 95 % interval, high end.
+        average_height_ci_hi: Float64 "µm",
+        /// Mean over printers of this controller's mean error minus the paper controller's on the same printer (0 for `paper`).
+        mean_error_vs_paper_um: Float64 "µm",
+        /// Its paired 95 % interval, low end.
+        mean_error_vs_paper_ci_lo: Float64 "µm",
+        /// Its paired 95 % interval, high end.
+        mean_error_vs_paper_ci_hi: Float64 "µm",
+        /// The same paired difference for the RMSD.
+        rmsd_vs_paper_um: Float64 "µm",
+        /// Its paired 95 % interval, low end.
+        rmsd_vs_paper_ci_lo: Float64 "µm",
+        /// Its paired 95 % interval, high end.
+        rmsd_vs_paper_ci_hi: Float64 "µm",
+    }
+}
+
+pipeline::table! {
+    /// `inkjet.control_gain`: one row per production print (printer and controller model).
+    pub mod control_trials = "control_trials" {
+        /// The printer's effect.
+        effect: Str "",
+        /// Its strength (signed: the drift's sign is drawn per printer).
+        strength: Float64 "1",
+        /// The printer (trial) within its effect and strength.
+        printer: Int64 "1",
+        /// The printer's seed, 16 hex digits.
+        seed: Str "",
+        /// What the engine named on the printer's calibration print (`none`: nothing).
+        named: Str "",
+        /// The controller's model: `paper`, `mean_droplet` or `extended`.
+        controller: Str "",
+        /// Layers the controller printed.
+        layers_printed: Int64 "1",
+        /// The desired height h_d.
+        desired_um: Float64 "µm",
+        /// |mean(h_d − H)| of the true top surface over the footprint.
+        mean_error_um: Float64 "µm",
+        /// sqrt(mean((H − h_d)²)).
+        rmsd_um: Float64 "µm",
+        /// Population standard deviation of H.
+        std_um: Float64 "µm",
+        /// mean(H).
+        average_height_um: Float64 "µm",
+    }
+}
+
 /// Every table of this module.
 pub const ALL: &[&Table] = &[
     &summary::TABLE,
@@ -170,4 +248,6 @@ pub const ALL: &[&Table] = &[
     &scan_residuals::TABLE,
     &profiles::TABLE,
     &recovery::TABLE,
+    &control_gain::TABLE,
+    &control_trials::TABLE,
 ];

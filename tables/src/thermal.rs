@@ -1,8 +1,9 @@
 //! Paper 003's tables (Chen et al. 2024): what the thermal monitor measures (the
 //! deposition directions of Sec. 2.2, the frames' localisation of eqs 27-30, the widths
 //! of Sec. 2.4 and eqs 31-32, and the example frame of Fig. 4) and the evaluation's true
-//! widths, the compensation (eqs 33-39) and the re-print's scores (eqs 40-41). Not declared
-//! yet: the studies' tables (`thermal.control_gain`, the discovery power).
+//! widths, the compensation (eqs 33-39), the re-print's scores (eqs 40-41) and the control
+//! study's re-prints with the discrepancy engine's τ (`thermal.control_gain`). The
+//! discrepancy engine's and the power study's tables are in `crate::discrepancy`.
 
 use pipeline::schema::Table;
 
@@ -519,6 +520,104 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `thermal.control_gain`: one row per strength and controller, the re-prints'
+    /// scores (eqs 40-41) over the prints with 95 % Student-t intervals and the paired
+    /// difference to the paper's controller.
+    pub mod control_gain = "control_gain" {
+        /// The effect printed: `tau_mismatch`.
+        effect: Str "",
+        /// Its relative strength (the printer's τ = τ0·(1 + strength)).
+        strength: Float64 "1",
+        /// The re-print's command: `conventional` (nominal), `paper` (eqs 31-39 with the nominal τ) or `extended` (with the τ the engine fitted).
+        controller: Str "",
+        /// Prints (seeds) summarised.
+        prints: Int64 "1",
+        /// Prints on which the engine named `tau_mismatch`.
+        tau_named: Int64 "1",
+        /// Eq. 40's O_E of the first re-printed layer, mean over the corners: mean over prints.
+        mean_oe_pct: Float64 "%",
+        /// Its 95 % Student-t interval over prints, low end.
+        mean_oe_pct_ci_lo: Float64 "%",
+        /// Its 95 % Student-t interval over prints, high end.
+        mean_oe_pct_ci_hi: Float64 "%",
+        /// Mean over prints of this controller's `mean_oe_pct` minus the paper controller's on the same print (0 for `paper`).
+        mean_oe_pct_vs_paper: Float64 "%",
+        /// Its paired 95 % Student-t interval, low end.
+        mean_oe_pct_vs_paper_ci_lo: Float64 "%",
+        /// Its paired 95 % Student-t interval, high end.
+        mean_oe_pct_vs_paper_ci_hi: Float64 "%",
+        /// Eq. 41's contour error, RMS over every re-printed layer's CAD points: mean over prints.
+        contour_rms_mm: Float64 "mm",
+        /// Its 95 % Student-t interval over prints, low end.
+        contour_rms_mm_ci_lo: Float64 "mm",
+        /// Its 95 % Student-t interval over prints, high end.
+        contour_rms_mm_ci_hi: Float64 "mm",
+        /// Mean over prints of this controller's `contour_rms_mm` minus the paper controller's on the same print (0 for `paper`).
+        contour_rms_mm_vs_paper: Float64 "mm",
+        /// Its paired 95 % Student-t interval, low end.
+        contour_rms_mm_vs_paper_ci_lo: Float64 "mm",
+        /// Its paired 95 % Student-t interval, high end.
+        contour_rms_mm_vs_paper_ci_hi: Float64 "mm",
+        /// Eq. 41's contour error, maximum over every re-printed layer's CAD points: mean over prints.
+        contour_max_mm: Float64 "mm",
+        /// Its 95 % Student-t interval over prints, low end.
+        contour_max_mm_ci_lo: Float64 "mm",
+        /// Its 95 % Student-t interval over prints, high end.
+        contour_max_mm_ci_hi: Float64 "mm",
+        /// Mean over prints of this controller's `contour_max_mm` minus the paper controller's on the same print (0 for `paper`).
+        contour_max_mm_vs_paper: Float64 "mm",
+        /// Its paired 95 % Student-t interval, low end.
+        contour_max_mm_vs_paper_ci_lo: Float64 "mm",
+        /// Its paired 95 % Student-t interval, high end.
+        contour_max_mm_vs_paper_ci_hi: Float64 "mm",
+    }
+}
+
+pipeline::table! {
+    /// `thermal.control_gain`: one row per print and controller, what the engine named
+    /// and fitted on the filmed print and the re-print's scores.
+    pub mod control_trials = "control_trials" {
+        /// The effect printed: `tau_mismatch`.
+        effect: Str "",
+        /// Its relative strength (the printer's τ = τ0·(1 + strength)).
+        strength: Float64 "1",
+        /// The print (seed index) within its strength.
+        print: Int64 "1",
+        /// The print's seed, in hex.
+        seed: Str "",
+        /// What the engine named on the filmed print (`+`-joined, or `none`).
+        named: Str "",
+        /// The τ excess m̂ the engine fitted (τ = τ0·(1 + m̂)); NaN when it did not name `tau_mismatch`.
+        tau_excess: Float64 "1",
+        /// Its jackknife interval, low end.
+        tau_excess_ci_lo: Float64 "1",
+        /// Its jackknife interval, high end.
+        tau_excess_ci_hi: Float64 "1",
+        /// The re-print's command: `conventional`, `paper` or `extended`.
+        controller: Str "",
+        /// Eq. 40's O_E of the first re-printed layer, mean over the corners.
+        mean_oe_pct: Float64 "%",
+        /// Eq. 41's contour error, RMS over every re-printed layer's CAD points.
+        contour_rms_mm: Float64 "mm",
+        /// Eq. 41's contour error, maximum over every re-printed layer's CAD points.
+        contour_max_mm: Float64 "mm",
+    }
+}
+
+/// `thermal.control_gain`: one work unit's print (`part.parquet`), its rows of
+/// `control_trials`, column for column, from which the merge rebuilds the trial.
+#[allow(non_upper_case_globals)]
+pub mod control_part {
+    pub use super::control_trials::*;
+    /// The declaration: `control_trials`'s columns under the unit's file name.
+    pub const TABLE: pipeline::schema::Table = pipeline::schema::Table {
+        name: "part",
+        doc: "`thermal.control_gain`: one work unit's print, its rows of `control_trials`.",
+        columns: super::control_trials::TABLE.columns,
+    };
+}
+
 /// The homography columns of `frames.parquet`, row-major.
 pub const FRAME_HOMOGRAPHY: [&str; 9] = [
     frames::h11,
@@ -560,4 +659,19 @@ pub const ALL: &[&Table] = &[
     &contour_regions::TABLE,
     &deposit_regions::TABLE,
     &path::TABLE,
+    &control_gain::TABLE,
+    &control_trials::TABLE,
+    &control_part::TABLE,
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A control work unit's part is its rows of `control_trials`, column for column
+    /// (the merge rebuilds the trials from the parts and writes them again).
+    #[test]
+    fn the_control_part_has_the_trials_columns() {
+        assert_eq!(control_part::TABLE.columns, control_trials::TABLE.columns);
+    }
+}

@@ -8,8 +8,10 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::discrepancy::power;
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_png_and_svg, house_mesh, text, PALETTE};
@@ -34,7 +36,21 @@ const POWER: Input = Input::one(
         Source::Stage("fdm.discovery_power"),
     ],
     "a power study's rates per effect and strength (`power.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &power::TABLE,
+    columns: &[
+        power::base,
+        power::effect,
+        power::strength,
+        power::draws,
+        power::correct_rate,
+        power::correct_ci_lo,
+        power::correct_ci_hi,
+        power::false_alarm_rate,
+        power::false_alarm_ci_hi,
+    ],
+}]);
 
 impl Stage for DiscoveryPowerByEffectFigure {
     type Params = PowerByEffectParams;
@@ -48,7 +64,7 @@ impl Stage for DiscoveryPowerByEffectFigure {
     };
 
     fn run(&self, ctx: &mut StageContext, p: &PowerByEffectParams) -> Result<(), StageError> {
-        let study = Study::read(&ctx.input(&POWER).dir.join("power.parquet"))?;
+        let study = Study::read(&ctx.input(&POWER).dir.join(power::TABLE.file()))?;
         let title = p.title.clone();
         let columns = study.curves.len().clamp(1, 4);
         let rows = study.curves.len().div_ceil(columns).max(1);
@@ -75,13 +91,16 @@ struct Study {
 impl Study {
     fn read(path: &std::path::Path) -> Result<Self, StageError> {
         let df = read_parquet(path)?;
-        let (base, effect) = (strs(&df, "base", path)?, strs(&df, "effect", path)?);
-        let (strength, draws) = (f64s(&df, "strength", path)?, ints(&df, "draws", path)?);
-        let (rate, lo, hi) =
-            (f64s(&df, "correct_rate", path)?, f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
-        let (fa, fa_hi) = (f64s(&df, "false_alarm_rate", path)?, f64s(&df, "false_alarm_ci_hi", path)?);
+        let (base, effect) = (strs(&df, power::base, path)?, strs(&df, power::effect, path)?);
+        let (strength, draws) = (f64s(&df, power::strength, path)?, ints(&df, power::draws, path)?);
+        let (rate, lo, hi) = (
+            f64s(&df, power::correct_rate, path)?,
+            f64s(&df, power::correct_ci_lo, path)?,
+            f64s(&df, power::correct_ci_hi, path)?,
+        );
+        let (fa, fa_hi) = (f64s(&df, power::false_alarm_rate, path)?, f64s(&df, power::false_alarm_ci_hi, path)?);
         if df.height() == 0 {
-            return Err(no_rows(path, "effect", "any effect"));
+            return Err(no_rows(path, power::effect, "any effect"));
         }
         let mut study = Study { base: base[0].clone(), null: None, curves: Vec::new() };
         for i in 0..df.height() {

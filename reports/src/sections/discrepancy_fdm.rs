@@ -10,9 +10,14 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Table;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+// The columns every domain names alike are read through the FDM declarations (one
+// template declares every domain's: `tables::discrepancy`), those carrying a domain's
+// data-set column or unit through its `Engine` (`Names::engine`).
+use tables::discrepancy::fdm::{causes, extension, gain, residuals};
+use tables::discrepancy::{power, Engine};
 use tables::report::comparison;
 
 use super::{comparison_frame, Row};
@@ -22,14 +27,83 @@ use crate::read::{bools, f64s, ints, read_parquet, strs};
 /// The `report.discrepancy_fdm` stage kind.
 pub struct DiscrepancyFdmSection;
 
+/// What [`Cause::read`], [`Param::read`] and [`GainRow::read`] read of a domain's
+/// engine tables (`tables::discrepancy::<domain>`), then `extra` reads, for the input
+/// role of its section.
+macro_rules! engine_reads {
+    ($domain:ident $(, $extra:expr)* $(,)?) => {{
+        use tables::discrepancy::$domain::{causes, extension, gain, ENGINE};
+        &[
+            pipeline::schema::Reads {
+                table: &causes::TABLE,
+                columns: &[
+                    ENGINE.set,
+                    causes::base_model,
+                    causes::mechanism,
+                    causes::verdict,
+                    causes::round,
+                    causes::groups_helped,
+                    causes::groups,
+                    ENGINE.cv_rmse_before,
+                    ENGINE.cv_rmse_after,
+                    causes::gain_pct,
+                    causes::gain_ci_lo_pct,
+                    causes::gain_ci_hi_pct,
+                    causes::p_value,
+                    causes::p_adjusted,
+                    causes::alpha,
+                    causes::named,
+                ],
+            },
+            pipeline::schema::Reads {
+                table: &extension::TABLE,
+                columns: &[
+                    ENGINE.set,
+                    extension::mechanism,
+                    extension::parameter,
+                    extension::unit,
+                    extension::meaning,
+                    extension::estimate,
+                    extension::ci_lo,
+                    extension::ci_hi,
+                ],
+            },
+            pipeline::schema::Reads {
+                table: &gain::TABLE,
+                columns: &[
+                    ENGINE.set,
+                    gain::extended_model,
+                    gain::groups,
+                    ENGINE.rmse_before,
+                    ENGINE.rmse_after,
+                    gain::gain_pct,
+                    gain::gain_ci_lo_pct,
+                    gain::gain_ci_hi_pct,
+                ],
+            },
+            $($extra,)*
+        ]
+    }};
+}
+pub(super) use engine_reads;
+
 /// The engine run on the lag model.
 const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("fdm.discrepancy")],
     "the causes, extension, gain and residual structure of the lag model (`causes.parquet`, `extension.parquet`, `gain.parquet`, `residuals.parquet`)",
-);
+)
+.reading(engine_reads!(
+    fdm,
+    Reads {
+        table: &residuals::TABLE,
+        columns: &[residuals::printer, residuals::model, residuals::variable, residuals::structure],
+    },
+));
 
-/// The power studies and the engine runs on other baselines, told apart by their tables.
+/// The power studies and the engine runs on other baselines, told apart by their tables
+/// (so the role declares no reads: a power study writes no `causes`, an engine run no
+/// `power`).
 const OTHERS: Input = Input::many(
     "others",
     1,
@@ -52,16 +126,16 @@ impl Stage for DiscrepancyFdmSection {
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
         let dir = &discrepancy.dir;
-        let causes = Cause::read(&dir.join("causes.parquet"), &FDM)?;
-        let params = Param::read(&dir.join("extension.parquet"), &FDM)?;
-        let gains = GainRow::read(&dir.join("gain.parquet"), &FDM)?;
-        let structure = Structure::read(&dir.join("residuals.parquet"))?;
+        let causes = Cause::read(dir, &FDM)?;
+        let params = Param::read(dir, &FDM)?;
+        let gains = GainRow::read(dir, &FDM)?;
+        let structure = Structure::read(&dir.join(residuals::TABLE.file()))?;
         // The other inputs: power studies (power.parquet), and engine runs on another
         // baseline (causes.parquet without power.parquet).
-        let (mut power, mut power_stages, mut other_baselines) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut power_rows, mut power_stages, mut other_baselines) = (Vec::new(), Vec::new(), Vec::new());
         for input in ctx.inputs_of(&OTHERS) {
-            if input.dir.join("power.parquet").exists() || !input.dir.join("causes.parquet").exists() {
-                power.extend(PowerRow::read(&input.dir.join("power.parquet"))?);
+            if input.dir.join(power::TABLE.file()).exists() || !input.dir.join(causes::TABLE.file()).exists() {
+                power_rows.extend(PowerRow::read(&input.dir)?);
                 power_stages.push(input.name.as_str());
             } else {
                 other_baselines.push(input);
@@ -78,27 +152,27 @@ impl Stage for DiscrepancyFdmSection {
         for input in other_baselines {
             html += &other_baseline_part(&input.dir, &input.name, &mut rows)?;
         }
-        html += &power_part(&power, &power_stage, &mut rows);
+        html += &power_part(&power_rows, &power_stage, &mut rows);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
     }
 }
 
-/// The column names and words a domain's discrepancy tables use.
+/// A domain's discrepancy tables and the words its section uses.
 pub(super) struct Names {
-    /// The column naming the data set (`printer`, `dataset`).
-    pub(super) set: &'static str,
-    /// The unit suffix of residual and RMSE columns (`mm`, `um`).
+    /// Its engine tables (`tables::discrepancy::<domain>::ENGINE`).
+    pub(super) engine: &'static Engine,
+    /// The unit of residuals and RMSEs in the comparison table (`mm`, `um`, `sd`).
     pub(super) unit: &'static str,
-    /// The unit as printed (`mm`, `µm`).
+    /// The same as printed (`mm`, `µm`).
     pub(super) unit_label: &'static str,
     /// What a group is, plural (`lines`, `layer blocks`).
     pub(super) groups: &'static str,
 }
 
 /// The FDM tables: one discovery per printer, widths in mm, a group is a line.
-const FDM: Names = Names { set: "printer", unit: "mm", unit_label: "mm", groups: "lines" };
+const FDM: Names = Names { engine: &tables::discrepancy::fdm::ENGINE, unit: "mm", unit_label: "mm", groups: "lines" };
 
 /// A row of `causes.parquet`.
 pub(super) struct Cause {
@@ -119,24 +193,26 @@ pub(super) struct Cause {
 }
 
 impl Cause {
-    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+    /// The rows of `causes.parquet` in `dir`, a stage of the domain of `names`.
+    pub(super) fn read(dir: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+        use causes as c;
+        let engine = names.engine;
+        let path = &dir.join(engine.causes.file());
         let df = read_parquet(path)?;
         let (printer, base, mechanism, verdict) = (
-            strs(&df, names.set, path)?,
-            strs(&df, "base_model", path)?,
-            strs(&df, "mechanism", path)?,
-            strs(&df, "verdict", path)?,
+            strs(&df, engine.set, path)?,
+            strs(&df, c::base_model, path)?,
+            strs(&df, c::mechanism, path)?,
+            strs(&df, c::verdict, path)?,
         );
         let (round, helped, groups) =
-            (ints(&df, "round", path)?, ints(&df, "groups_helped", path)?, ints(&df, "groups", path)?);
-        let (before, after) = (
-            f64s(&df, &format!("cv_rmse_before_{}", names.unit), path)?,
-            f64s(&df, &format!("cv_rmse_after_{}", names.unit), path)?,
-        );
+            (ints(&df, c::round, path)?, ints(&df, c::groups_helped, path)?, ints(&df, c::groups, path)?);
+        let (before, after) = (f64s(&df, engine.cv_rmse_before, path)?, f64s(&df, engine.cv_rmse_after, path)?);
         let (gain, lo, hi) =
-            (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
-        let (p, padj, alpha) = (f64s(&df, "p_value", path)?, f64s(&df, "p_adjusted", path)?, f64s(&df, "alpha", path)?);
-        let named = bools(&df, "named", path)?;
+            (f64s(&df, c::gain_pct, path)?, f64s(&df, c::gain_ci_lo_pct, path)?, f64s(&df, c::gain_ci_hi_pct, path)?);
+        let (p, padj, alpha) =
+            (f64s(&df, c::p_value, path)?, f64s(&df, c::p_adjusted, path)?, f64s(&df, c::alpha, path)?);
+        let named = bools(&df, c::named, path)?;
         Ok((0..df.height())
             .map(|i| Self {
                 printer: printer[i].clone(),
@@ -170,16 +246,21 @@ pub(super) struct Param {
 }
 
 impl Param {
-    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+    /// The rows of `extension.parquet` in `dir`, a stage of the domain of `names`.
+    pub(super) fn read(dir: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+        use extension as e;
+        let engine = names.engine;
+        let path = &dir.join(engine.extension.file());
         let df = read_parquet(path)?;
         let (printer, mechanism, parameter, unit, meaning) = (
-            strs(&df, names.set, path)?,
-            strs(&df, "mechanism", path)?,
-            strs(&df, "parameter", path)?,
-            strs(&df, "unit", path)?,
-            strs(&df, "meaning", path)?,
+            strs(&df, engine.set, path)?,
+            strs(&df, e::mechanism, path)?,
+            strs(&df, e::parameter, path)?,
+            strs(&df, e::unit, path)?,
+            strs(&df, e::meaning, path)?,
         );
-        let (estimate, lo, hi) = (f64s(&df, "estimate", path)?, f64s(&df, "ci_lo", path)?, f64s(&df, "ci_hi", path)?);
+        let (estimate, lo, hi) =
+            (f64s(&df, e::estimate, path)?, f64s(&df, e::ci_lo, path)?, f64s(&df, e::ci_hi, path)?);
         Ok((0..df.height())
             .map(|i| Self {
                 printer: printer[i].clone(),
@@ -205,16 +286,17 @@ pub(super) struct GainRow {
 }
 
 impl GainRow {
-    pub(super) fn read(path: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+    /// The rows of `gain.parquet` in `dir`, a stage of the domain of `names`.
+    pub(super) fn read(dir: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
+        use gain as g;
+        let engine = names.engine;
+        let path = &dir.join(engine.gain.file());
         let df = read_parquet(path)?;
-        let (printer, extended) = (strs(&df, names.set, path)?, strs(&df, "extended_model", path)?);
-        let groups = ints(&df, "groups", path)?;
-        let (before, after) = (
-            f64s(&df, &format!("rmse_before_{}", names.unit), path)?,
-            f64s(&df, &format!("rmse_after_{}", names.unit), path)?,
-        );
+        let (printer, extended) = (strs(&df, engine.set, path)?, strs(&df, g::extended_model, path)?);
+        let groups = ints(&df, g::groups, path)?;
+        let (before, after) = (f64s(&df, engine.rmse_before, path)?, f64s(&df, engine.rmse_after, path)?);
         let (gain, lo, hi) =
-            (f64s(&df, "gain_pct", path)?, f64s(&df, "gain_ci_lo_pct", path)?, f64s(&df, "gain_ci_hi_pct", path)?);
+            (f64s(&df, g::gain_pct, path)?, f64s(&df, g::gain_ci_lo_pct, path)?, f64s(&df, g::gain_ci_hi_pct, path)?);
         Ok((0..df.height())
             .map(|i| Self {
                 printer: printer[i].clone(),
@@ -238,10 +320,11 @@ struct Structure {
 
 impl Structure {
     fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        use residuals as r;
         let df = read_parquet(path)?;
         let (printer, model, variable) =
-            (strs(&df, "printer", path)?, strs(&df, "model", path)?, strs(&df, "variable", path)?);
-        let share = f64s(&df, "structure", path)?;
+            (strs(&df, r::printer, path)?, strs(&df, r::model, path)?, strs(&df, r::variable, path)?);
+        let share = f64s(&df, r::structure, path)?;
         let mut out: Vec<Self> = Vec::new();
         for i in 0..df.height() {
             let seen = out.iter().any(|s| s.printer == printer[i] && s.model == model[i] && s.variable == variable[i]);
@@ -274,24 +357,27 @@ pub(super) struct PowerRow {
 }
 
 impl PowerRow {
-    pub(super) fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    /// The rows of `power.parquet` in `dir`, any domain's power study.
+    pub(super) fn read(dir: &Path) -> Result<Vec<Self>, StageError> {
+        use power as p;
+        let path = &dir.join(p::TABLE.file());
         let df = read_parquet(path)?;
         let (base, own, effect) =
-            (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
-        let noise = strs(&df, "noise", path)?;
-        let strength = f64s(&df, "strength", path)?;
+            (strs(&df, p::base, path)?, strs(&df, p::own_causes, path)?, strs(&df, p::effect, path)?);
+        let noise = strs(&df, p::noise, path)?;
+        let strength = f64s(&df, p::strength, path)?;
         let (draws, wrong, covered, with) = (
-            ints(&df, "draws", path)?,
-            ints(&df, "wrong", path)?,
-            ints(&df, "covered", path)?,
-            ints(&df, "with_interval", path)?,
+            ints(&df, p::draws, path)?,
+            ints(&df, p::wrong, path)?,
+            ints(&df, p::covered, path)?,
+            ints(&df, p::with_interval, path)?,
         );
         let (rate, lo, hi) =
-            (f64s(&df, "correct_rate", path)?, f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
+            (f64s(&df, p::correct_rate, path)?, f64s(&df, p::correct_ci_lo, path)?, f64s(&df, p::correct_ci_hi, path)?);
         let (fa, fa_lo, fa_hi) = (
-            f64s(&df, "false_alarm_rate", path)?,
-            f64s(&df, "false_alarm_ci_lo", path)?,
-            f64s(&df, "false_alarm_ci_hi", path)?,
+            f64s(&df, p::false_alarm_rate, path)?,
+            f64s(&df, p::false_alarm_ci_lo, path)?,
+            f64s(&df, p::false_alarm_ci_hi, path)?,
         );
         Ok((0..df.height())
             .map(|i| Self {
@@ -503,8 +589,8 @@ pub(super) fn parameter_table<'a>(params: impl Iterator<Item = &'a Param>) -> St
 /// The engine on another baseline (paper 000's piecewise model): per printer, the
 /// baseline's held-out RMSE, what was named and the candidates' scores.
 fn other_baseline_part(dir: &Path, stage: &str, rows: &mut Vec<Row>) -> Result<String, StageError> {
-    let causes = Cause::read(&dir.join("causes.parquet"), &FDM)?;
-    let gains = GainRow::read(&dir.join("gain.parquet"), &FDM)?;
+    let causes = Cause::read(dir, &FDM)?;
+    let gains = GainRow::read(dir, &FDM)?;
     let baseline = causes.first().map_or("piecewise_model".to_string(), |c| c.base_model.clone());
     let mut html = format!(
         "<h4>The paper's own model as the baseline ({})</h4>\n<p>The same engine with paper 000's piecewise model (eqs 1-3, its r_a × r_F grid search in every fold) in place of the lag model. A curve fitted per phase has no flow to extend, so the candidates are the three that act on the width it predicts: a tilted bed, a gear's ripple and flow lost at high flow.</p>\n",

@@ -14,9 +14,12 @@ use pipeline::params::NoParams;
 use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::control_gain;
 use tables::report::comparison;
 
-use super::discrepancy_fdm::{causes_table, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow};
+use super::discrepancy_fdm::{
+    causes_table, engine_reads, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow,
+};
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
 use crate::read::{f64_triples, f64s, ints, read_parquet, strs};
@@ -24,7 +27,9 @@ use crate::read::{f64_triples, f64s, ints, read_parquet, strs};
 /// The ink-jet tables: one discovery per dataset, heights in µm, a group is a block of
 /// consecutive layers.
 const INKJET: DatasetText = DatasetText {
-    names: Names { set: "dataset", unit: "um", unit_label: "µm", groups: "layer blocks" },
+    names: Names {
+        engine: &tables::discrepancy::inkjet::ENGINE, unit: "um", unit_label: "µm", groups: "layer blocks"
+    },
     section: "discrepancy_inkjet",
     kind: "inkjet.discrepancy",
     power_kind: "inkjet.discovery",
@@ -50,7 +55,8 @@ const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("inkjet.discrepancy")],
     "the causes, extension and gain per dataset (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
-);
+)
+.reading(engine_reads!(inkjet));
 
 /// The optional studies, told apart by their tables.
 const STUDIES: Input = Input::many(
@@ -75,9 +81,9 @@ impl Stage for DiscrepancyInkjetSection {
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
         let (dir, stage) = (&discrepancy.dir, discrepancy.name.clone());
-        let causes = Cause::read(&dir.join("causes.parquet"), &INKJET.names)?;
-        let params = Param::read(&dir.join("extension.parquet"), &INKJET.names)?;
-        let gains = GainRow::read(&dir.join("gain.parquet"), &INKJET.names)?;
+        let causes = Cause::read(dir, &INKJET.names)?;
+        let params = Param::read(dir, &INKJET.names)?;
+        let gains = GainRow::read(dir, &INKJET.names)?;
         let mut rows = Vec::new();
         let mut html = String::from("<h3>What the layer-to-layer model gets wrong, and why</h3>\n");
         html += &method(&causes);
@@ -85,11 +91,11 @@ impl Stage for DiscrepancyInkjetSection {
             html += &dataset_part(g, &causes, &params, &stage, &mut rows, &INKJET);
         }
         for input in ctx.inputs_of(&STUDIES) {
-            let control = input.dir.join("control_gain.parquet");
+            let control = input.dir.join(control_gain::TABLE.file());
             if control.is_file() {
                 html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);
             } else {
-                let power = PowerRow::read(&input.dir.join("power.parquet"))?;
+                let power = PowerRow::read(&input.dir)?;
                 html += &power_part(&power, &input.name, &mut rows);
             }
         }
@@ -241,15 +247,16 @@ struct ControlRow {
 
 impl ControlRow {
     fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+        use control_gain as c;
         let df = read_parquet(path)?;
         let triple = |name: &str, lo: &str, hi: &str| f64_triples(&df, [name, lo, hi], path);
-        let (effect, controller) = (strs(&df, "effect", path)?, strs(&df, "controller", path)?);
+        let (effect, controller) = (strs(&df, c::effect, path)?, strs(&df, c::controller, path)?);
         let (strength, desired, printers) =
-            (f64s(&df, "strength", path)?, f64s(&df, "desired_um", path)?, ints(&df, "printers", path)?);
-        let mean_error = triple("mean_error_um", "mean_error_ci_lo", "mean_error_ci_hi")?;
-        let rmsd = triple("rmsd_um", "rmsd_ci_lo", "rmsd_ci_hi")?;
-        let height = triple("average_height_um", "average_height_ci_lo", "average_height_ci_hi")?;
-        let vs_paper = triple("rmsd_vs_paper_um", "rmsd_vs_paper_ci_lo", "rmsd_vs_paper_ci_hi")?;
+            (f64s(&df, c::strength, path)?, f64s(&df, c::desired_um, path)?, ints(&df, c::printers, path)?);
+        let mean_error = triple(c::mean_error_um, c::mean_error_ci_lo, c::mean_error_ci_hi)?;
+        let rmsd = triple(c::rmsd_um, c::rmsd_ci_lo, c::rmsd_ci_hi)?;
+        let height = triple(c::average_height_um, c::average_height_ci_lo, c::average_height_ci_hi)?;
+        let vs_paper = triple(c::rmsd_vs_paper_um, c::rmsd_vs_paper_ci_lo, c::rmsd_vs_paper_ci_hi)?;
         Ok((0..df.height())
             .map(|i| Self {
                 effect: effect[i].clone(),

@@ -18,7 +18,7 @@ use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use tables::report::comparison;
 
-use super::discrepancy_fdm::{Cause, GainRow, Names, Param, PowerRow};
+use super::discrepancy_fdm::{engine_reads, Cause, GainRow, Names, Param, PowerRow};
 use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
 use super::{comparison_frame, Row};
 use crate::html::escape;
@@ -27,7 +27,12 @@ use crate::read::{f64_triples, f64s, ints, read_parquet, strs};
 /// The thermal tables: one discovery per filmed print, residuals in noise standard
 /// deviations, a group is a filmed layer.
 const THERMAL: DatasetText = DatasetText {
-    names: Names { set: "dataset", unit: "sd", unit_label: "noise sd", groups: "layers" },
+    names: Names {
+        engine: &tables::discrepancy::thermal::ENGINE,
+        unit: "sd",
+        unit_label: "noise sd",
+        groups: "layers",
+    },
     section: "discrepancy_thermal",
     kind: "thermal.discrepancy",
     power_kind: "thermal.discovery",
@@ -42,7 +47,8 @@ const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("thermal.discrepancy")],
     "the causes, extension and gain per filmed print (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
-);
+)
+.reading(engine_reads!(thermal));
 
 /// The optional studies, told apart by their tables.
 const STUDIES: Input = Input::many(
@@ -67,9 +73,9 @@ impl Stage for DiscrepancyThermalSection {
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let discrepancy = ctx.input(&DISCREPANCY);
         let (dir, stage) = (&discrepancy.dir, discrepancy.name.clone());
-        let causes = Cause::read(&dir.join("causes.parquet"), &THERMAL.names)?;
-        let params = Param::read(&dir.join("extension.parquet"), &THERMAL.names)?;
-        let gains = GainRow::read(&dir.join("gain.parquet"), &THERMAL.names)?;
+        let causes = Cause::read(dir, &THERMAL.names)?;
+        let params = Param::read(dir, &THERMAL.names)?;
+        let gains = GainRow::read(dir, &THERMAL.names)?;
         let mut rows = Vec::new();
         let mut html = String::from("<h3>What the thermal monitor's models get wrong, and why</h3>\n");
         html += &method(&causes);
@@ -81,7 +87,7 @@ impl Stage for DiscrepancyThermalSection {
             if control.is_file() {
                 html += &control_part(&ControlRow::read(&control)?, &input.name, &mut rows);
             } else {
-                let power = PowerRow::read(&input.dir.join("power.parquet"))?;
+                let power = PowerRow::read(&input.dir)?;
                 html += POWER_INTRO;
                 html += &power_table(&power, &input.name, &mut rows, &THERMAL);
             }

@@ -17,6 +17,7 @@ use pipeline::params::ParamError;
 use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::discrepancy::fdm::{causes, extension};
 use tables::fdm::{agreement, loo, photo_sets, segment_accuracy, segment_diagnostics};
 use tables::report::comparison;
 
@@ -109,19 +110,47 @@ const PHOTO_LOO: Input =
 const REAL_LOO: Input =
     Input::one("real_loo", LOO_KINDS, "the held-out RMSE on the real widths (`loo.parquet`)").reading(LOO_READS);
 
+/// What the section reads of an engine run on photos.
+const ENGINE_READS: &[Reads] = &[
+    Reads {
+        table: &causes::TABLE,
+        columns: &[
+            causes::mechanism,
+            causes::verdict,
+            causes::named,
+            causes::gain_pct,
+            causes::p_adjusted,
+            causes::round,
+        ],
+    },
+    Reads {
+        table: &extension::TABLE,
+        columns: &[
+            extension::mechanism,
+            extension::parameter,
+            extension::unit,
+            extension::estimate,
+            extension::ci_lo,
+            extension::ci_hi,
+        ],
+    },
+];
+
 /// The engine on the clean photo set.
 const CLEAN_ENGINE: Input = Input::one(
     "clean_engine",
     &[Source::Stage("fdm.discrepancy")],
     "the engine's causes and extension on the photo set as printed (`causes.parquet`, `extension.parquet`)",
-);
+)
+.reading(ENGINE_READS);
 
 /// The engine on the photo set with a hidden effect.
 const HIDDEN_ENGINE: Input = Input::one(
     "hidden_engine",
     &[Source::Stage("fdm.discrepancy")],
     "the engine's causes and extension on the photo set with a hidden effect (`causes.parquet`, `extension.parquet`)",
-);
+)
+.reading(ENGINE_READS);
 
 impl Stage for FdmVirtualSection {
     type Params = FdmVirtualParams;
@@ -301,12 +330,15 @@ fn discrepancy_part(
         "<h4>The discrepancy engine on photos</h4>\n<p>The engine runs on widths segmented from two photo sets of the virtual Taz 6, whose physics is the lag model alone: one set as printed, one with an effect hidden in the printer. It is told nothing of either; what each set holds is read from its dataset afterwards.</p>\n<table><tr><th class=\"t\">engine run</th><th class=\"t\">photo set holds</th><th class=\"t\">verdict</th><th class=\"t\">named</th><th class=\"t\">fitted, with 95 % interval</th><th>held-out gain (%)</th><th>adjusted p</th></tr>\n",
     );
     for ((dir, stage), photos) in runs.iter().zip(photo_sets) {
-        let path = dir.join("causes.parquet");
+        let path = dir.join(causes::TABLE.file());
         let df = read_parquet(&path)?;
-        let (mechanism, verdict) = (strs(&df, "mechanism", &path)?, strs(&df, "verdict", &path)?);
-        let (named, gain, p) =
-            (bools(&df, "named", &path)?, f64s(&df, "gain_pct", &path)?, f64s(&df, "p_adjusted", &path)?);
-        let round = ints(&df, "round", &path)?;
+        let (mechanism, verdict) = (strs(&df, causes::mechanism, &path)?, strs(&df, causes::verdict, &path)?);
+        let (named, gain, p) = (
+            bools(&df, causes::named, &path)?,
+            f64s(&df, causes::gain_pct, &path)?,
+            f64s(&df, causes::p_adjusted, &path)?,
+        );
+        let round = ints(&df, causes::round, &path)?;
         let holds =
             sets.get(*photos).map_or("(not among the accuracy stage's photo sets)".into(), |e| e.replace('_', " "));
         let hits: Vec<usize> = (0..df.height()).filter(|&i| named[i]).collect();
@@ -328,10 +360,12 @@ fn discrepancy_part(
 /// The named mechanism's parameters from the run's `extension.parquet`:
 /// `period_mm 12.10 mm [12.00, 12.20]; …`.
 fn fitted_parameters(dir: &Path, mechanism: &str) -> Result<String, StageError> {
-    let path = dir.join("extension.parquet");
+    use extension as e;
+    let path = dir.join(e::TABLE.file());
     let df = read_parquet(&path)?;
-    let (m, name, unit) = (strs(&df, "mechanism", &path)?, strs(&df, "parameter", &path)?, strs(&df, "unit", &path)?);
-    let (est, lo, hi) = (f64s(&df, "estimate", &path)?, f64s(&df, "ci_lo", &path)?, f64s(&df, "ci_hi", &path)?);
+    let (m, name, unit) =
+        (strs(&df, e::mechanism, &path)?, strs(&df, e::parameter, &path)?, strs(&df, e::unit, &path)?);
+    let (est, lo, hi) = (f64s(&df, e::estimate, &path)?, f64s(&df, e::ci_lo, &path)?, f64s(&df, e::ci_hi, &path)?);
     let unit_text = |u: &str| if u == "1" || u.is_empty() { String::new() } else { format!(" {u}") };
     let parts: Vec<String> = (0..df.height())
         .filter(|&i| m[i] == mechanism)

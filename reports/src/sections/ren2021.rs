@@ -14,7 +14,7 @@ use pipeline::params::NoParams;
 use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::fdm::loo;
+use tables::fdm::{loo, transfer_cv};
 use tables::report::comparison;
 
 use models::stats::finite_median;
@@ -42,7 +42,11 @@ const TRANSFER: Input = Input::one(
     "transfer",
     &[Source::Stage("fdm.transfer_cv")],
     "the held-out RMSE per training-set size and method (`transfer_cv.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &transfer_cv::TABLE,
+    columns: &[transfer_cv::method, transfer_cv::rmse_mm, transfer_cv::n_train],
+}]);
 
 /// Paper 000 Table II: LOO RMSE (mm) per Table I sample `(a mm/s², F mm/s)`.
 pub const TABLE_II: [(&str, f64, f64, f64); 9] = [
@@ -77,7 +81,7 @@ impl Stage for Ren2021Section {
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let loo = read_loo(&ctx.input(&LOO).dir.join(loo::TABLE.file()))?;
-        let medians = transfer_medians(&ctx.input(&TRANSFER).dir.join("transfer_cv.parquet"))?;
+        let medians = transfer_medians(&ctx.input(&TRANSFER).dir.join(transfer_cv::TABLE.file()))?;
         let (loo_rows, loo_html) = table_ii(&loo);
         let (fig9_rows, fig9_html) = fig9(&medians);
         let mut html = String::from("<h3>Paper 000 vs ours</h3>\n");
@@ -104,9 +108,9 @@ fn read_loo(path: &Path) -> Result<LooMap, StageError> {
 /// Median held-out RMSE per (method, n_train).
 fn transfer_medians(path: &Path) -> Result<BTreeMap<(String, i64), f64>, StageError> {
     let df = read_parquet(path)?;
-    let method = strs(&df, "method", path)?;
-    let rmse = f64s(&df, "rmse_mm", path)?;
-    let n = ints(&df, "n_train", path)?;
+    let method = strs(&df, transfer_cv::method, path)?;
+    let rmse = f64s(&df, transfer_cv::rmse_mm, path)?;
+    let n = ints(&df, transfer_cv::n_train, path)?;
     let mut groups: BTreeMap<(String, i64), Vec<f64>> = BTreeMap::new();
     for i in 0..df.height() {
         groups.entry((method[i].clone(), n[i])).or_default().push(rmse[i]);

@@ -17,7 +17,7 @@ use pipeline::{StageContext, StageError};
 use tables::report::comparison;
 
 use super::{comparison_frame, Row};
-use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix};
+use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix, READS};
 use crate::html::escape;
 
 /// The `report.transfer_matrix` stage kind.
@@ -28,7 +28,8 @@ const MATRIX: Input = Input::one(
     "matrix",
     &[Source::Stage("fdm.transfer_matrix")],
     "the median improvements with their intervals per task, n and method (`transfer_matrix.parquet`)",
-);
+)
+.reading(READS);
 
 /// Methods in table order, with what a reader of the paper calls them.
 const METHODS: [(&str, &str); 4] = [

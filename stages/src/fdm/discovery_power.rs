@@ -23,15 +23,18 @@ use models::fdm::discrepancy::inject::{Effect, InjectSettings};
 use models::fdm::discrepancy::power::{names, run_draw_range, Base, DrawResult, Noise, PowerDesign};
 use models::fdm::discrepancy::FdmModel;
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::{IntoColumn, NamedFrom, Series};
+use tables::discrepancy::fdm::{power_draws, power_part};
+use tables::discrepancy::power;
 
 use crate::discrepancy_tables::study_settings;
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, LagBaseline, StartBlob};
-use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize, COVERED, PART_TABLE};
+use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize};
 use crate::roles;
 use crate::table::{f64_col, f64s, frame, i64_col, opt_bools, str_col, strs};
 
@@ -102,7 +105,7 @@ impl DiscoveryPowerParams {
 const STUDIED: [Effect; 3] = [Effect::BedTilt, Effect::GearEccentricity, Effect::FlowSaturation];
 
 /// The part's bookkeeping columns, beyond those of `power_draws.parquet`.
-const PART_ONLY: [&str; 2] = ["own_causes", COVERED];
+const PART_ONLY: [&str; 2] = [power_part::own_causes, power_part::covered];
 
 impl Stage for DiscoveryPowerStage {
     type Params = DiscoveryPowerParams;
@@ -114,6 +117,7 @@ impl Stage for DiscoveryPowerStage {
         inputs: &[roles::FDM_WIDTHS_MANY],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&power::TABLE, &power_draws::TABLE, &power_part::TABLE];
 
     fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
         STUDIED.iter().try_for_each(|e| p.strengths(*e).map(|_| ()))
@@ -156,7 +160,7 @@ impl Split for DiscoveryPowerStage {
             rows.add(&base, &results);
         }
         let mut part = rows.into_frame()?;
-        ctx.write_table(PART_TABLE, &mut part)?;
+        ctx.write_table(power_part::TABLE.name, &mut part)?;
         Ok(())
     }
 
@@ -164,9 +168,9 @@ impl Split for DiscoveryPowerStage {
         let p = DiscoveryPowerParams::from_params(&ctx.params);
         let all = read_parts(parts)?;
         let mut power = power_rows(ctx, p.noise(), &all)?.into_frame()?;
-        ctx.write_table("power", &mut power)?;
+        ctx.write_table(power::TABLE.name, &mut power)?;
         let mut per_draw = without(&all, &PART_ONLY)?;
-        ctx.write_table("power_draws", &mut per_draw)?;
+        ctx.write_table(power_draws::TABLE.name, &mut per_draw)?;
         Ok(())
     }
 }
@@ -180,8 +184,9 @@ fn power_rows(ctx: &StageContext, noise: Noise, all: &polars::prelude::DataFrame
     };
     let file = ctx.output_dir().join("parts");
     let text = |name: &str| strs(all, name, &file);
-    let (base, own, effect, outcome) = (text("base")?, text(PART_ONLY[0])?, text("effect")?, text("outcome")?);
-    let (strength, covered) = (f64s(all, "strength", &file)?, opt_bools(all, PART_ONLY[1], &file)?);
+    let (base, own) = (text(power_part::base)?, text(power_part::own_causes)?);
+    let (effect, outcome) = (text(power_part::effect)?, text(power_part::outcome)?);
+    let (strength, covered) = (f64s(all, power_part::strength, &file)?, opt_bools(all, power_part::covered, &file)?);
     let mut labels: Vec<&str> = Vec::new();
     for b in &base {
         if !labels.contains(&b.as_str()) {
@@ -225,7 +230,7 @@ fn design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError
     })
 }
 
-/// Columns of `power.parquet`.
+/// Columns of `power.parquet` (`tables::discrepancy::power`).
 #[derive(Default)]
 struct PowerRows {
     noise: Vec<String>,
@@ -270,26 +275,26 @@ impl PowerRows {
         let [fa, fa_lo, fa_hi] = self.false_alarm;
         let [cov, cov_lo, cov_hi] = self.coverage;
         frame(vec![
-            str_col("base", self.base),
-            str_col("noise", self.noise),
-            str_col("own_causes", self.own),
-            str_col("effect", self.effect),
-            f64_col("strength", self.strength),
-            i64_col("draws", self.draws),
-            i64_col("correct", self.correct),
-            i64_col("wrong", self.wrong),
-            i64_col("none", self.none),
-            f64_col("correct_rate", rate),
-            f64_col("correct_ci_lo", rate_lo),
-            f64_col("correct_ci_hi", rate_hi),
-            f64_col("false_alarm_rate", fa),
-            f64_col("false_alarm_ci_lo", fa_lo),
-            f64_col("false_alarm_ci_hi", fa_hi),
-            i64_col("covered", self.covered),
-            i64_col("with_interval", self.with_interval),
-            f64_col("coverage_rate", cov),
-            f64_col("coverage_ci_lo", cov_lo),
-            f64_col("coverage_ci_hi", cov_hi),
+            str_col(power::base, self.base),
+            str_col(power::noise, self.noise),
+            str_col(power::own_causes, self.own),
+            str_col(power::effect, self.effect),
+            f64_col(power::strength, self.strength),
+            i64_col(power::draws, self.draws),
+            i64_col(power::correct, self.correct),
+            i64_col(power::wrong, self.wrong),
+            i64_col(power::none, self.none),
+            f64_col(power::correct_rate, rate),
+            f64_col(power::correct_ci_lo, rate_lo),
+            f64_col(power::correct_ci_hi, rate_hi),
+            f64_col(power::false_alarm_rate, fa),
+            f64_col(power::false_alarm_ci_lo, fa_lo),
+            f64_col(power::false_alarm_ci_hi, fa_hi),
+            i64_col(power::covered, self.covered),
+            i64_col(power::with_interval, self.with_interval),
+            f64_col(power::coverage_rate, cov),
+            f64_col(power::coverage_ci_lo, cov_lo),
+            f64_col(power::coverage_ci_hi, cov_hi),
         ])
     }
 }
@@ -300,7 +305,8 @@ fn push3(columns: &mut [Vec<f64>; 3], (a, b, c): (f64, f64, f64)) {
     columns[2].push(c);
 }
 
-/// Columns of `power_draws.parquet`.
+/// Columns of a unit's `part.parquet`: `power_draws.parquet`'s and the bookkeeping
+/// (`tables::discrepancy::fdm::power_part`).
 #[derive(Default)]
 struct DrawRows {
     base: Vec<String>,
@@ -336,19 +342,19 @@ impl DrawRows {
     fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
         let [estimate, lo, hi] = self.fitted;
         frame(vec![
-            str_col("base", self.base),
-            str_col("effect", self.effect),
-            f64_col("strength", self.strength),
-            i64_col("draw", self.draw),
-            str_col("seed", self.seed),
-            f64_col("injected", self.injected),
-            str_col("named", self.named),
-            str_col("outcome", self.outcome),
-            f64_col("estimate", estimate),
-            f64_col("ci_lo", lo),
-            f64_col("ci_hi", hi),
-            str_col(PART_ONLY[0], self.own),
-            Series::new(PART_ONLY[1].into(), self.covered).into_column(),
+            str_col(power_part::base, self.base),
+            str_col(power_part::effect, self.effect),
+            f64_col(power_part::strength, self.strength),
+            i64_col(power_part::draw, self.draw),
+            str_col(power_part::seed, self.seed),
+            f64_col(power_part::injected, self.injected),
+            str_col(power_part::named, self.named),
+            str_col(power_part::outcome, self.outcome),
+            f64_col(power_part::estimate, estimate),
+            f64_col(power_part::ci_lo, lo),
+            f64_col(power_part::ci_hi, hi),
+            str_col(power_part::own_causes, self.own),
+            Series::new(power_part::covered.into(), self.covered).into_column(),
         ])
     }
 }

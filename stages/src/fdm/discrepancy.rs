@@ -18,10 +18,12 @@ use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
 use models::progress::Progress;
 use pipeline::params::ParamError;
+use pipeline::schema::Table as Declared;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{InputArtifact, StageContext, StageError};
+use tables::discrepancy::fdm::{causes, extension, gain, predictions, residuals, ENGINE};
 
-use crate::discrepancy_tables::{DiscrepancyTables, Domain, EngineParams, Kind, Table, Value};
+use crate::discrepancy_tables::{DiscrepancyTables, EngineParams, Table, Value};
 use crate::fdm::lines::{model_param_error, PrinterLines};
 use crate::progress::StageProgress;
 use crate::roles;
@@ -73,6 +75,8 @@ impl Stage for DiscrepancyStage {
         inputs: &[roles::FDM_WIDTHS_MANY],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Declared] =
+        &[&residuals::TABLE, &causes::TABLE, &extension::TABLE, &gain::TABLE, &predictions::TABLE];
 
     fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
         p.engine.settings(p.max_rounds, 0)?;
@@ -171,20 +175,6 @@ impl StartBlob {
     }
 }
 
-/// The FDM tables' names: one discovery per printer, widths in mm.
-const FDM: Domain = Domain { set_column: "printer", unit: "mm" };
-
-const PREDICTIONS: &[(&str, Kind)] = &[
-    ("printer", Kind::S),
-    ("condition", Kind::S),
-    ("accel_mm_s2", Kind::F),
-    ("feed_mm_s", Kind::F),
-    ("position_mm", Kind::F),
-    ("measured_width_mm", Kind::F),
-    ("baseline_width_mm", Kind::F),
-    ("extended_width_mm", Kind::F),
-];
-
 /// The four discrepancy tables and each line's held-out predictions.
 struct Tables {
     tables: DiscrepancyTables,
@@ -193,7 +183,7 @@ struct Tables {
 
 impl Tables {
     fn new(alpha: f64) -> Self {
-        Self { tables: DiscrepancyTables::new(FDM, alpha), predictions: Table::new("predictions", PREDICTIONS, FDM) }
+        Self { tables: DiscrepancyTables::new(&ENGINE, alpha), predictions: Table::new(&predictions::TABLE) }
     }
 
     fn add<M: discrepancy::Model<Group = FdmLine>>(
@@ -207,6 +197,7 @@ impl Tables {
         for (k, line) in lines.iter().enumerate() {
             let m = &line.line;
             for i in 0..m.len() {
+                // In `predictions`' declared order.
                 self.predictions.push(vec![
                     Value::S(printer.to_string()),
                     Value::S(line.label.clone()),

@@ -65,7 +65,7 @@ impl Stage for ImportStage {
         let dataset = fsu::read_printer(&ctx.input(&RAW).dir, printer, opts).map_err(StageError::domain)?;
         dataset.write(ctx.output_dir()).map_err(StageError::domain)?;
         let mut long = widths_table(&dataset)?;
-        ctx.write_table("widths", &mut long)?;
+        ctx.write_table(widths::TABLE.name, &mut long)?;
         Ok(())
     }
 }

@@ -101,8 +101,8 @@ impl Stage for InfillStage {
                 }
             }
         }
-        ctx.write_table("infill", &mut stats.into_frame()?)?;
-        ctx.write_table("infill_map", &mut map.into_frame()?)?;
+        ctx.write_table(infill::TABLE.name, &mut stats.into_frame()?)?;
+        ctx.write_table(infill_map::TABLE.name, &mut map.into_frame()?)?;
         Ok(())
     }
 }

@@ -49,7 +49,7 @@ impl Stage for KinematicsStage {
             }
         }
         let mut table = rows.into_frame()?;
-        ctx.write_table("kinematics", &mut table)?;
+        ctx.write_table(kinematics::TABLE.name, &mut table)?;
         Ok(())
     }
 }

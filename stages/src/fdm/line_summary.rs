@@ -124,7 +124,7 @@ impl Stage for LineSummaryStage {
             rows.push_dataset(&dataset, *windows, &input.dir)?;
         }
         let mut table = rows.into_frame()?;
-        ctx.write_table("line_summary", &mut table)?;
+        ctx.write_table(line_summary::TABLE.name, &mut table)?;
         Ok(())
     }
 }

@@ -137,7 +137,7 @@ impl Stage for PiecewiseLooStage {
         .map_err(|e| fit_failed("piecewise leave-one-out", e))?;
         write_loo(ctx, &printer, "piecewise", &folds)?;
         let mut surface = r_surface(&printer, &params)?;
-        ctx.write_table("r_surface", &mut surface)?;
+        ctx.write_table(r_surface::TABLE.name, &mut surface)?;
         Ok(())
     }
 }
@@ -188,9 +188,9 @@ fn write_loo(ctx: &mut StageContext, printer: &PrinterLines, model: &str, folds:
         f64_col(loo::r_f, folds.iter().map(|f| f.r_f).collect()),
         optional_col(loo::tau_s, folds.iter().map(|f| f.tau_s).collect()),
     ])?;
-    ctx.write_table("loo", &mut summary)?;
+    ctx.write_table(loo::TABLE.name, &mut summary)?;
     let mut predictions = predictions_frame(printer, model, folds)?;
-    ctx.write_table("loo_predictions", &mut predictions)?;
+    ctx.write_table(loo_predictions::TABLE.name, &mut predictions)?;
     Ok(())
 }
 

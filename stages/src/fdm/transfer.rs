@@ -28,17 +28,15 @@ use models::fdm::{
 };
 use pipeline::artifact::read_parquet;
 use pipeline::params::NoParams;
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::DataFrame;
+use tables::fdm::{transfer_cv, transfer_cv_errors, transfer_cv_part};
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
-use crate::parts::PART_TABLE;
 use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
-
-/// A unit's failures: per subset, the first grid pair of its block at which the fit failed.
-const PART_ERRORS: &str = "part_errors";
 
 /// The `fdm.transfer_cv` stage kind.
 pub struct TransferCvStage;
@@ -59,6 +57,8 @@ impl Stage for TransferCvStage {
         inputs: &[SOURCE, TARGET],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] =
+        &[&transfer_cv::TABLE, &transfer_cv_part::TABLE, &transfer_cv_errors::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         run_split(self, ctx)
@@ -92,8 +92,8 @@ impl Split for TransferCvStage {
             pairs,
         )
         .map_err(|e| fit_failed("transfer cross-validation", e))?;
-        ctx.write_table(PART_TABLE, &mut winners_frame(&part)?)?;
-        ctx.write_table(PART_ERRORS, &mut errors_frame(&part)?)?;
+        ctx.write_table(transfer_cv_part::TABLE.name, &mut winners_frame(&part)?)?;
+        ctx.write_table(transfer_cv_errors::TABLE.name, &mut errors_frame(&part)?)?;
         Ok(())
     }
 
@@ -111,14 +111,17 @@ impl Split for TransferCvStage {
         .map_err(|e| fit_failed("transfer cross-validation", e))?;
         let target = &study.target;
         let mut table = frame(vec![
-            i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
-            str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
-            str_col("test_condition", rows.iter().map(|r| target.conditions[r.test_index].clone()).collect()),
-            str_col("method", rows.iter().map(|r| r.method.name().to_string()).collect()),
-            f64_col("rmse_mm", rows.iter().map(|r| r.rmse_mm).collect()),
-            f64_col("lambda", rows.iter().map(|r| r.lambda).collect()),
+            i64_col(transfer_cv::n_train, rows.iter().map(|r| r.n_train as i64).collect()),
+            str_col(transfer_cv::subset, rows.iter().map(|r| r.subset.clone()).collect()),
+            str_col(
+                transfer_cv::test_condition,
+                rows.iter().map(|r| target.conditions[r.test_index].clone()).collect(),
+            ),
+            str_col(transfer_cv::method, rows.iter().map(|r| r.method.name().to_string()).collect()),
+            f64_col(transfer_cv::rmse_mm, rows.iter().map(|r| r.rmse_mm).collect()),
+            f64_col(transfer_cv::lambda, rows.iter().map(|r| r.lambda).collect()),
         ])?;
-        ctx.write_table("transfer_cv", &mut table)?;
+        ctx.write_table(transfer_cv::TABLE.name, &mut table)?;
         Ok(())
     }
 }
@@ -157,39 +160,46 @@ impl Study {
 fn winners_frame(part: &GridPart) -> Result<DataFrame, StageError> {
     let w = &part.winners;
     let mut columns = vec![
-        i64_col("configurations", vec![part.n_configs as i64; w.len()]),
-        f64_col("sse", w.iter().map(|w| w.sse).collect()),
-        i64_col("pair", w.iter().map(|w| w.pair.map_or(-1, |p| p as i64)).collect()),
-        f64_col("alpha_1", w.iter().map(|w| w.alpha.0).collect()),
-        f64_col("alpha_2", w.iter().map(|w| w.alpha.1).collect()),
+        i64_col(transfer_cv_part::configurations, vec![part.n_configs as i64; w.len()]),
+        f64_col(transfer_cv_part::sse, w.iter().map(|w| w.sse).collect()),
+        i64_col(transfer_cv_part::pair, w.iter().map(|w| w.pair.map_or(-1, |p| p as i64)).collect()),
+        f64_col(transfer_cv_part::alpha_1, w.iter().map(|w| w.alpha.0).collect()),
+        f64_col(transfer_cv_part::alpha_2, w.iter().map(|w| w.alpha.1).collect()),
     ];
-    columns.extend((0..THETA).map(|k| f64_col(&format!("theta_{k}"), w.iter().map(|w| w.theta[k]).collect())));
+    columns.extend(THETA.iter().enumerate().map(|(k, name)| f64_col(name, w.iter().map(|w| w.theta[k]).collect())));
     frame(columns)
 }
 
-/// Entries of a winner's `θ = (β, γ, c, ρ, w_start)`.
-const THETA: usize = GridWinner::NONE.theta.len();
+/// The part's columns of a winner's `θ = (β, γ, c, ρ, w_start)`, one per entry (a θ of
+/// another length does not build).
+const THETA: [&str; GridWinner::NONE.theta.len()] = [
+    transfer_cv_part::theta_0,
+    transfer_cv_part::theta_1,
+    transfer_cv_part::theta_2,
+    transfer_cv_part::theta_3,
+    transfer_cv_part::theta_4,
+];
 
 /// A unit's failures: each subset's first failing pair and the failure's text.
 fn errors_frame(part: &GridPart) -> Result<DataFrame, StageError> {
     let failed: Vec<(usize, &(usize, FitError))> =
         part.first_error.iter().enumerate().filter_map(|(s, e)| e.as_ref().map(|e| (s, e))).collect();
     frame(vec![
-        i64_col("subset", failed.iter().map(|(s, _)| *s as i64).collect()),
-        i64_col("pair", failed.iter().map(|(_, (p, _))| *p as i64).collect()),
-        str_col("error", failed.iter().map(|(_, (_, e))| e.to_string()).collect()),
+        i64_col(transfer_cv_errors::subset, failed.iter().map(|(s, _)| *s as i64).collect()),
+        i64_col(transfer_cv_errors::pair, failed.iter().map(|(_, (p, _))| *p as i64).collect()),
+        str_col(transfer_cv_errors::error, failed.iter().map(|(_, (_, e))| e.to_string()).collect()),
     ])
 }
 
 /// A unit's [`GridPart`] back from its two tables.
 fn read_part(dir: &Path) -> Result<GridPart, StageError> {
-    let file = dir.join(format!("{PART_TABLE}.parquet"));
+    use transfer_cv_part as part;
+    let file = dir.join(part::TABLE.file());
     let winners = read_parquet(&file)?;
-    let n_configs = ints(&winners, "configurations", &file)?.first().copied().unwrap_or(1).max(1) as usize;
-    let (sse, pair) = (f64s(&winners, "sse", &file)?, ints(&winners, "pair", &file)?);
-    let (a1, a2) = (f64s(&winners, "alpha_1", &file)?, f64s(&winners, "alpha_2", &file)?);
-    let theta: Vec<Vec<f64>> =
-        (0..THETA).map(|k| f64s(&winners, &format!("theta_{k}"), &file)).collect::<Result<_, _>>()?;
+    let n_configs = ints(&winners, part::configurations, &file)?.first().copied().unwrap_or(1).max(1) as usize;
+    let (sse, pair) = (f64s(&winners, part::sse, &file)?, ints(&winners, part::pair, &file)?);
+    let (a1, a2) = (f64s(&winners, part::alpha_1, &file)?, f64s(&winners, part::alpha_2, &file)?);
+    let theta: Vec<Vec<f64>> = THETA.iter().map(|name| f64s(&winners, name, &file)).collect::<Result<_, _>>()?;
     let winners = (0..winners.height())
         .map(|i| GridWinner {
             sse: sse[i],
@@ -198,16 +208,17 @@ fn read_part(dir: &Path) -> Result<GridPart, StageError> {
             theta: std::array::from_fn(|k| theta[k][i]),
         })
         .collect::<Vec<_>>();
-    let file = dir.join(format!("{PART_ERRORS}.parquet"));
+    use transfer_cv_errors as errors_part;
+    let file = dir.join(errors_part::TABLE.file());
     let errors = read_parquet(&file)?;
     let n_subsets = winners.len() / n_configs;
     let mut first_error = vec![None; n_subsets];
-    let (subset, pair) = (ints(&errors, "subset", &file)?, ints(&errors, "pair", &file)?);
-    for (i, text) in strs(&errors, "error", &file)?.into_iter().enumerate() {
+    let (subset, pair) = (ints(&errors, errors_part::subset, &file)?, ints(&errors, errors_part::pair, &file)?);
+    for (i, text) in strs(&errors, errors_part::error, &file)?.into_iter().enumerate() {
         let slot = usize::try_from(subset[i]).ok().and_then(|s| first_error.get_mut(s)).ok_or_else(|| {
             StageError::BadInput {
                 file: file.clone(),
-                location: Some(format!("row {i}, column `subset`")),
+                location: Some(format!("row {i}, column `{}`", errors_part::subset)),
                 expected: format!("a subset index below {n_subsets}, got {}", subset[i]),
             }
         })?;

@@ -26,12 +26,14 @@ use models::fdm::{
     PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
+use tables::fdm::{transfer_matrix, transfer_matrix_part, transfer_matrix_rows};
 
 use crate::fdm::lines::{fit_failed, PrinterLines};
-use crate::parts::{read_parts, PART_TABLE};
+use crate::parts::read_parts;
 use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 
 /// The `fdm.transfer_matrix` stage kind.
@@ -65,6 +67,8 @@ impl Stage for TransferMatrixStage {
         inputs: &[PRINTERS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] =
+        &[&transfer_matrix::TABLE, &transfer_matrix_rows::TABLE, &transfer_matrix_part::TABLE];
 
     fn check(p: &TransferMatrixParams) -> Result<(), ParamError> {
         lambda_grid(p.lambda_step_decades)
@@ -94,7 +98,7 @@ impl Split for TransferMatrixStage {
         let printers = study.printers();
         let rows = transfer_matrix_for_target(&printers, &study.tasks, &study.transfer, index)
             .map_err(|e| fit_failed("transfer matrix", e))?;
-        ctx.write_table(PART_TABLE, &mut part_table(&rows)?)?;
+        ctx.write_table(transfer_matrix_part::TABLE.name, &mut part_table(&rows)?)?;
         Ok(())
     }
 
@@ -113,18 +117,19 @@ fn write_tables(ctx: &mut StageContext, study: &Study, rows: &[MatrixRow]) -> Re
     let names = task_names(&study.tasks, &study.lines);
     let (s_src, s_tgt): (Vec<String>, Vec<String>) = summary.iter().map(|s| names[s.task].clone()).unzip();
     let mut table = frame(vec![
-        str_col("sources", s_src),
-        str_col("target", s_tgt),
-        i64_col("n_train", summary.iter().map(|s| s.n_train as i64).collect()),
-        str_col("method", summary.iter().map(|s| s.method.name().to_string()).collect()),
-        f64_col("median_rmse_mm", summary.iter().map(|s| s.median_rmse_mm).collect()),
-        f64_col("improvement_pct", summary.iter().map(|s| s.improvement_pct).collect()),
-        f64_col("ci_lo_pct", summary.iter().map(|s| s.ci_lo_pct).collect()),
-        f64_col("ci_hi_pct", summary.iter().map(|s| s.ci_hi_pct).collect()),
-        i64_col("rows", summary.iter().map(|s| s.rows as i64).collect()),
+        str_col(transfer_matrix::sources, s_src),
+        str_col(transfer_matrix::target, s_tgt),
+        i64_col(transfer_matrix::n_train, summary.iter().map(|s| s.n_train as i64).collect()),
+        str_col(transfer_matrix::method, summary.iter().map(|s| s.method.name().to_string()).collect()),
+        f64_col(transfer_matrix::median_rmse_mm, summary.iter().map(|s| s.median_rmse_mm).collect()),
+        f64_col(transfer_matrix::improvement_pct, summary.iter().map(|s| s.improvement_pct).collect()),
+        f64_col(transfer_matrix::ci_lo_pct, summary.iter().map(|s| s.ci_lo_pct).collect()),
+        f64_col(transfer_matrix::ci_hi_pct, summary.iter().map(|s| s.ci_hi_pct).collect()),
+        i64_col(transfer_matrix::rows, summary.iter().map(|s| s.rows as i64).collect()),
     ])?;
-    ctx.write_table("transfer_matrix", &mut table)?;
-    ctx.write_table("transfer_matrix_rows", &mut rows_table(rows, &study.tasks, &study.lines, &names)?)?;
+    ctx.write_table(transfer_matrix::TABLE.name, &mut table)?;
+    let mut rows = rows_table(rows, &study.tasks, &study.lines, &names)?;
+    ctx.write_table(transfer_matrix_rows::TABLE.name, &mut rows)?;
     Ok(())
 }
 
@@ -160,28 +165,30 @@ impl Study {
 
 /// A unit's rows, exactly (indices, not names: the merge needs them back).
 fn part_table(rows: &[MatrixRow]) -> Result<polars::prelude::DataFrame, StageError> {
+    use transfer_matrix_part as part;
     frame(vec![
-        i64_col("task", rows.iter().map(|r| r.task as i64).collect()),
-        i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
-        str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
-        i64_col("test_index", rows.iter().map(|r| r.test_index as i64).collect()),
-        str_col("method", rows.iter().map(|r| r.method.name().to_string()).collect()),
-        f64_col("rmse_mm", rows.iter().map(|r| r.rmse_mm).collect()),
-        f64_col("lambda", rows.iter().map(|r| r.lambda).collect()),
-        str_col("prior", rows.iter().map(|r| r.prior.clone()).collect()),
+        i64_col(part::task, rows.iter().map(|r| r.task as i64).collect()),
+        i64_col(part::n_train, rows.iter().map(|r| r.n_train as i64).collect()),
+        str_col(part::subset, rows.iter().map(|r| r.subset.clone()).collect()),
+        i64_col(part::test_index, rows.iter().map(|r| r.test_index as i64).collect()),
+        str_col(part::method, rows.iter().map(|r| r.method.name().to_string()).collect()),
+        f64_col(part::rmse_mm, rows.iter().map(|r| r.rmse_mm).collect()),
+        f64_col(part::lambda, rows.iter().map(|r| r.lambda).collect()),
+        str_col(part::prior, rows.iter().map(|r| r.prior.clone()).collect()),
     ])
 }
 
 /// The rows of [`part_table`]s, stacked.
 fn part_rows(ctx: &StageContext, all: &polars::prelude::DataFrame) -> Result<Vec<MatrixRow>, StageError> {
+    use transfer_matrix_part as part;
     let file = ctx.output_dir().join("parts");
     let index = |name: &str| -> Result<Vec<usize>, StageError> {
         Ok(ints(all, name, &file)?.into_iter().map(|v| v as usize).collect())
     };
-    let (task, n_train, test_index) = (index("task")?, index("n_train")?, index("test_index")?);
+    let (task, n_train, test_index) = (index(part::task)?, index(part::n_train)?, index(part::test_index)?);
     let (subset, method, prior) =
-        (strs(all, "subset", &file)?, strs(all, "method", &file)?, strs(all, "prior", &file)?);
-    let (rmse_mm, lambda) = (f64s(all, "rmse_mm", &file)?, f64s(all, "lambda", &file)?);
+        (strs(all, part::subset, &file)?, strs(all, part::method, &file)?, strs(all, part::prior, &file)?);
+    let (rmse_mm, lambda) = (f64s(all, part::rmse_mm, &file)?, f64s(all, part::lambda, &file)?);
     (0..all.height())
         .map(|i| {
             let method = MatrixMethod::parse(&method[i]).ok_or_else(|| StageError::BadInput {
@@ -249,15 +256,16 @@ fn rows_table(
 ) -> Result<polars::prelude::DataFrame, StageError> {
     let (src, tgt): (Vec<String>, Vec<String>) = rows.iter().map(|r| names[r.task].clone()).unzip();
     let condition = |r: &MatrixRow| printers[tasks[r.task].target].conditions[r.test_index].clone();
+    use transfer_matrix_rows as t;
     frame(vec![
-        str_col("sources", src),
-        str_col("target", tgt),
-        i64_col("n_train", rows.iter().map(|r| r.n_train as i64).collect()),
-        str_col("subset", rows.iter().map(|r| r.subset.clone()).collect()),
-        str_col("test_condition", rows.iter().map(condition).collect()),
-        str_col("method", rows.iter().map(|r| r.method.name().to_string()).collect()),
-        f64_col("rmse_mm", rows.iter().map(|r| r.rmse_mm).collect()),
-        f64_col("lambda", rows.iter().map(|r| r.lambda).collect()),
-        str_col("prior", rows.iter().map(|r| r.prior.clone()).collect()),
+        str_col(t::sources, src),
+        str_col(t::target, tgt),
+        i64_col(t::n_train, rows.iter().map(|r| r.n_train as i64).collect()),
+        str_col(t::subset, rows.iter().map(|r| r.subset.clone()).collect()),
+        str_col(t::test_condition, rows.iter().map(condition).collect()),
+        str_col(t::method, rows.iter().map(|r| r.method.name().to_string()).collect()),
+        f64_col(t::rmse_mm, rows.iter().map(|r| r.rmse_mm).collect()),
+        f64_col(t::lambda, rows.iter().map(|r| r.lambda).collect()),
+        str_col(t::prior, rows.iter().map(|r| r.prior.clone()).collect()),
     ])
 }

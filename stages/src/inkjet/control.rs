@@ -17,8 +17,10 @@ use models::inkjet::discrepancy::control::{run_trials_observed, summarize, Contr
 use models::inkjet::discrepancy::power::PrintDesign;
 use models::inkjet::printer::Effect;
 use pipeline::params::ParamError;
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::inkjet::{control_gain, control_trials};
 
 use super::discrepancy::{LayerSearch, StrengthLists};
 use crate::discrepancy_tables::{study_settings, FalseAlarm};
@@ -72,6 +74,7 @@ impl Stage for ControlGainStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&control_gain::TABLE, &control_trials::TABLE];
 
     fn check(p: &ControlGainParams) -> Result<(), ParamError> {
         p.cells(&STUDIED).map(|_| ())
@@ -81,9 +84,9 @@ impl Stage for ControlGainStage {
         let design = design(p, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let rows = run_trials_observed(&design, &StageProgress::new(ctx)).map_err(StageError::domain)?;
         let mut gain = gain_frame(&summarize(&rows))?;
-        ctx.write_table("control_gain", &mut gain)?;
+        ctx.write_table(control_gain::TABLE.name, &mut gain)?;
         let mut trials = trials_frame(&rows)?;
-        ctx.write_table("control_trials", &mut trials)?;
+        ctx.write_table(control_trials::TABLE.name, &mut trials)?;
         Ok(())
     }
 }
@@ -106,43 +109,43 @@ fn design(p: &ControlGainParams, seed: u64) -> Result<ControlDesign, ParamError>
 fn gain_frame(rows: &[ControlSummary]) -> Result<polars::prelude::DataFrame, StageError> {
     let col = |f: &dyn Fn(&ControlSummary) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     frame(vec![
-        str_col("effect", rows.iter().map(|r| r.effect.name().to_string()).collect()),
-        f64_col("strength", col(&|r| r.strength)),
-        str_col("controller", rows.iter().map(|r| r.predictor.name().to_string()).collect()),
-        i64_col("printers", rows.iter().map(|r| r.trials as i64).collect()),
-        f64_col("desired_um", col(&|r| r.desired_um)),
-        f64_col("mean_error_um", col(&|r| r.mean_error_um.mean.0)),
-        f64_col("mean_error_ci_lo", col(&|r| r.mean_error_um.mean.1)),
-        f64_col("mean_error_ci_hi", col(&|r| r.mean_error_um.mean.2)),
-        f64_col("rmsd_um", col(&|r| r.rmsd_um.mean.0)),
-        f64_col("rmsd_ci_lo", col(&|r| r.rmsd_um.mean.1)),
-        f64_col("rmsd_ci_hi", col(&|r| r.rmsd_um.mean.2)),
-        f64_col("average_height_um", col(&|r| r.average_height_um.mean.0)),
-        f64_col("average_height_ci_lo", col(&|r| r.average_height_um.mean.1)),
-        f64_col("average_height_ci_hi", col(&|r| r.average_height_um.mean.2)),
-        f64_col("mean_error_vs_paper_um", col(&|r| r.mean_error_um.vs_paper.0)),
-        f64_col("mean_error_vs_paper_ci_lo", col(&|r| r.mean_error_um.vs_paper.1)),
-        f64_col("mean_error_vs_paper_ci_hi", col(&|r| r.mean_error_um.vs_paper.2)),
-        f64_col("rmsd_vs_paper_um", col(&|r| r.rmsd_um.vs_paper.0)),
-        f64_col("rmsd_vs_paper_ci_lo", col(&|r| r.rmsd_um.vs_paper.1)),
-        f64_col("rmsd_vs_paper_ci_hi", col(&|r| r.rmsd_um.vs_paper.2)),
+        str_col(control_gain::effect, rows.iter().map(|r| r.effect.name().to_string()).collect()),
+        f64_col(control_gain::strength, col(&|r| r.strength)),
+        str_col(control_gain::controller, rows.iter().map(|r| r.predictor.name().to_string()).collect()),
+        i64_col(control_gain::printers, rows.iter().map(|r| r.trials as i64).collect()),
+        f64_col(control_gain::desired_um, col(&|r| r.desired_um)),
+        f64_col(control_gain::mean_error_um, col(&|r| r.mean_error_um.mean.0)),
+        f64_col(control_gain::mean_error_ci_lo, col(&|r| r.mean_error_um.mean.1)),
+        f64_col(control_gain::mean_error_ci_hi, col(&|r| r.mean_error_um.mean.2)),
+        f64_col(control_gain::rmsd_um, col(&|r| r.rmsd_um.mean.0)),
+        f64_col(control_gain::rmsd_ci_lo, col(&|r| r.rmsd_um.mean.1)),
+        f64_col(control_gain::rmsd_ci_hi, col(&|r| r.rmsd_um.mean.2)),
+        f64_col(control_gain::average_height_um, col(&|r| r.average_height_um.mean.0)),
+        f64_col(control_gain::average_height_ci_lo, col(&|r| r.average_height_um.mean.1)),
+        f64_col(control_gain::average_height_ci_hi, col(&|r| r.average_height_um.mean.2)),
+        f64_col(control_gain::mean_error_vs_paper_um, col(&|r| r.mean_error_um.vs_paper.0)),
+        f64_col(control_gain::mean_error_vs_paper_ci_lo, col(&|r| r.mean_error_um.vs_paper.1)),
+        f64_col(control_gain::mean_error_vs_paper_ci_hi, col(&|r| r.mean_error_um.vs_paper.2)),
+        f64_col(control_gain::rmsd_vs_paper_um, col(&|r| r.rmsd_um.vs_paper.0)),
+        f64_col(control_gain::rmsd_vs_paper_ci_lo, col(&|r| r.rmsd_um.vs_paper.1)),
+        f64_col(control_gain::rmsd_vs_paper_ci_hi, col(&|r| r.rmsd_um.vs_paper.2)),
     ])
 }
 
 fn trials_frame(rows: &[ControlRow]) -> Result<polars::prelude::DataFrame, StageError> {
     let col = |f: &dyn Fn(&ControlRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     frame(vec![
-        str_col("effect", rows.iter().map(|r| r.effect.name().to_string()).collect()),
-        f64_col("strength", col(&|r| r.strength)),
-        i64_col("printer", rows.iter().map(|r| r.trial as i64).collect()),
-        str_col("seed", rows.iter().map(|r| format!("{:016x}", r.seed)).collect()),
-        str_col("named", rows.iter().map(|r| r.named.clone()).collect()),
-        str_col("controller", rows.iter().map(|r| r.predictor.name().to_string()).collect()),
-        i64_col("layers_printed", rows.iter().map(|r| r.layers_printed as i64).collect()),
-        f64_col("desired_um", col(&|r| r.desired_um)),
-        f64_col("mean_error_um", col(&|r| r.metrics.mean_error_um)),
-        f64_col("rmsd_um", col(&|r| r.metrics.rmsd_um)),
-        f64_col("std_um", col(&|r| r.metrics.std_um)),
-        f64_col("average_height_um", col(&|r| r.metrics.average_height_um)),
+        str_col(control_trials::effect, rows.iter().map(|r| r.effect.name().to_string()).collect()),
+        f64_col(control_trials::strength, col(&|r| r.strength)),
+        i64_col(control_trials::printer, rows.iter().map(|r| r.trial as i64).collect()),
+        str_col(control_trials::seed, rows.iter().map(|r| format!("{:016x}", r.seed)).collect()),
+        str_col(control_trials::named, rows.iter().map(|r| r.named.clone()).collect()),
+        str_col(control_trials::controller, rows.iter().map(|r| r.predictor.name().to_string()).collect()),
+        i64_col(control_trials::layers_printed, rows.iter().map(|r| r.layers_printed as i64).collect()),
+        f64_col(control_trials::desired_um, col(&|r| r.desired_um)),
+        f64_col(control_trials::mean_error_um, col(&|r| r.metrics.mean_error_um)),
+        f64_col(control_trials::rmsd_um, col(&|r| r.metrics.rmsd_um)),
+        f64_col(control_trials::std_um, col(&|r| r.metrics.std_um)),
+        f64_col(control_trials::average_height_um, col(&|r| r.metrics.average_height_um)),
     ])
 }

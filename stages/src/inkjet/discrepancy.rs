@@ -25,20 +25,20 @@ use models::inkjet::discrepancy::{InkjetModel, InkjetPrint, PrintParts};
 use models::inkjet::printer::Effect;
 use models::inkjet::{DropletCoeffs, Grid};
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
+use tables::discrepancy::inkjet::{causes, extension, gain, power_draws, power_part, residuals, ENGINE};
+use tables::discrepancy::power;
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, study_settings, DiscrepancyTables, Domain, DrawRow, EngineParams, FalseAlarm,
+    draws_frame as shared_draws_frame, study_settings, DiscrepancyTables, DrawRow, EngineParams, FalseAlarm,
 };
 use crate::effects::strength_list;
 use crate::parts::{
     data_set_units, merge_study, merge_tables, study_unit_draws, study_units, write_study_part, StudySize, UnitSize,
 };
-
-/// The ink-jet tables' names: one discovery per dataset, heights in µm.
-const INKJET: Domain = Domain { set_column: "dataset", unit: "um" };
 
 pipeline::params! {
     /// How the ink-jet discrepancy search groups a print's layers and how many causes it
@@ -78,6 +78,7 @@ impl Stage for DiscrepancyStage {
         inputs: &[SCANS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&residuals::TABLE, &causes::TABLE, &extension::TABLE, &gain::TABLE];
 
     fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
         p.engine.settings(p.search.max_rounds, 0).map(|_| ())
@@ -102,7 +103,7 @@ impl Split for DiscrepancyStage {
         let p = DiscrepancyParams::from_params(&ctx.params);
         let settings = p.engine.settings(p.search.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let per_group = p.search.layers_per_group as usize;
-        let mut tables = DiscrepancyTables::new(INKJET, settings.alpha);
+        let mut tables = DiscrepancyTables::new(&ENGINE, settings.alpha);
         let input = ctx.inputs_of(&SCANS)[index].clone();
         let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
         let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
@@ -119,7 +120,7 @@ impl Split for DiscrepancyStage {
     }
 
     fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
-        merge_tables(ctx, parts, &DiscrepancyTables::NAMES)
+        merge_tables(ctx, parts, &ENGINE.tables())
     }
 }
 
@@ -198,6 +199,7 @@ impl Stage for DiscoveryPowerStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&power::TABLE, &power_draws::TABLE, &power_part::TABLE];
 
     fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
         p.cells(&STUDIED).map(|_| ())

@@ -230,18 +230,18 @@ mod tests {
             part_top_um: Vec::new(),
         };
 
-        let summary = summary_frame("cuboid", "closed_loop", 20.0, &outcome).unwrap();
-        assert_eq!(summary.height(), 1);
-        assert_eq!(summary.column("layers").unwrap().i64().unwrap().get(0), Some(7));
-        assert_eq!(summary.column("rmsd_um").unwrap().f64().unwrap().get(0), Some(2.5));
-        assert_eq!(summary.column("scenario").unwrap().str().unwrap().get(0), Some("cuboid"));
+        let table = summary_frame("cuboid", "closed_loop", 20.0, &outcome).unwrap();
+        assert_eq!(table.height(), 1);
+        assert_eq!(table.column(summary::layers).unwrap().i64().unwrap().get(0), Some(7));
+        assert_eq!(table.column(summary::rmsd_um).unwrap().f64().unwrap().get(0), Some(2.5));
+        assert_eq!(table.column(summary::scenario).unwrap().str().unwrap().get(0), Some("cuboid"));
 
         let map = height_map_frame(&outcome.final_heights).unwrap();
         assert_eq!(map.height(), 6);
         // Row-major: index 4 is cell (1, 1) at (10, 10) µm.
-        assert_eq!(map.column("x_index").unwrap().i64().unwrap().get(4), Some(1));
-        assert_eq!(map.column("y_index").unwrap().i64().unwrap().get(4), Some(1));
-        assert_eq!(map.column("y_um").unwrap().f64().unwrap().get(4), Some(10.0));
-        assert_eq!(map.column("height_um").unwrap().f64().unwrap().get(4), Some(5.0));
+        assert_eq!(map.column(height_map::x_index).unwrap().i64().unwrap().get(4), Some(1));
+        assert_eq!(map.column(height_map::y_index).unwrap().i64().unwrap().get(4), Some(1));
+        assert_eq!(map.column(height_map::y_um).unwrap().f64().unwrap().get(4), Some(10.0));
+        assert_eq!(map.column(height_map::height_um).unwrap().f64().unwrap().get(4), Some(5.0));
     }
 }

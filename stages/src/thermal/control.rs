@@ -36,6 +36,7 @@ use discrepancy::stats::{mix_seed, t_interval};
 use models::thermal::discrepancy::TAU_MISMATCH;
 use models::thermal::metrics::{print_quality, IdealBead, PrintQuality};
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
@@ -43,12 +44,13 @@ use polars::prelude::DataFrame;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use tables::thermal::{control_gain, control_part, control_trials};
 
 use super::common::trajectory_of;
 use super::compensate::{compensate, CompensateParams, MonitorInputs};
 use super::filmed_print::{named_list, FilmedPrint, Filming, FilmingParams};
 use crate::effects::strength_list;
-use crate::parts::{listed, read_parts, PART_TABLE};
+use crate::parts::{listed, read_parts};
 use crate::table::{f64_col, f64s, frame, i64_col, ints, str_col, strs};
 
 /// The `thermal.control_gain` stage kind.
@@ -105,6 +107,7 @@ impl Stage for ControlGainStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&control_gain::TABLE, &control_trials::TABLE, &control_part::TABLE];
 
     fn check(p: &ControlGainParams) -> Result<(), ParamError> {
         p.strengths()?;
@@ -141,14 +144,14 @@ impl Split for ControlGainStage {
         let scratch = ctx.output_dir().join("scratch");
         let trial = design.trial(cell, strength, print, &scratch)?;
         std::fs::remove_dir_all(&scratch).ok();
-        ctx.write_table(PART_TABLE, &mut trials_frame(&[trial])?)?;
+        ctx.write_table(control_part::TABLE.name, &mut trials_frame(&[trial])?)?;
         Ok(())
     }
 
     fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
         let trials = trials_from_frame(&read_parts(parts)?, &ctx.output_dir().join("parts"))?;
-        ctx.write_table("control_gain", &mut gain_frame(&trials)?)?;
-        ctx.write_table("control_trials", &mut trials_frame(&trials)?)?;
+        ctx.write_table(control_gain::TABLE.name, &mut gain_frame(&trials)?)?;
+        ctx.write_table(control_trials::TABLE.name, &mut trials_frame(&trials)?)?;
         Ok(())
     }
 }
@@ -243,15 +246,53 @@ impl Design {
     }
 }
 
-/// One metric of a print: its column name and how to read it.
-type Metric = (&'static str, fn(&PrintQuality) -> f64);
+/// One metric of a print: its column of `control_trials` (and of the parts), its six
+/// columns of `control_gain` (the mean and its interval, the paired difference to
+/// `paper` and its interval) and how to read it.
+type Metric = (&'static str, [&'static str; 6], fn(&PrintQuality) -> f64);
 
 /// The three metrics of Sec. 3.3, in table order.
-const METRICS: [Metric; 3] = [
-    ("mean_oe_pct", |q| q.mean_oe_pct),
-    ("contour_rms_mm", |q| q.contour_rms_mm),
-    ("contour_max_mm", |q| q.contour_max_mm),
-];
+const METRICS: [Metric; 3] = {
+    use control_gain as g;
+    [
+        (
+            control_trials::mean_oe_pct,
+            [
+                g::mean_oe_pct,
+                g::mean_oe_pct_ci_lo,
+                g::mean_oe_pct_ci_hi,
+                g::mean_oe_pct_vs_paper,
+                g::mean_oe_pct_vs_paper_ci_lo,
+                g::mean_oe_pct_vs_paper_ci_hi,
+            ],
+            |q| q.mean_oe_pct,
+        ),
+        (
+            control_trials::contour_rms_mm,
+            [
+                g::contour_rms_mm,
+                g::contour_rms_mm_ci_lo,
+                g::contour_rms_mm_ci_hi,
+                g::contour_rms_mm_vs_paper,
+                g::contour_rms_mm_vs_paper_ci_lo,
+                g::contour_rms_mm_vs_paper_ci_hi,
+            ],
+            |q| q.contour_rms_mm,
+        ),
+        (
+            control_trials::contour_max_mm,
+            [
+                g::contour_max_mm,
+                g::contour_max_mm_ci_lo,
+                g::contour_max_mm_ci_hi,
+                g::contour_max_mm_vs_paper,
+                g::contour_max_mm_vs_paper_ci_lo,
+                g::contour_max_mm_vs_paper_ci_hi,
+            ],
+            |q| q.contour_max_mm,
+        ),
+    ]
+};
 
 /// `control_gain.parquet`: per strength and controller, each metric's mean over prints
 /// with its 95 % Student-t interval, and the paired difference to `paper`.
@@ -259,13 +300,8 @@ fn gain_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError
     let mut strengths: Vec<f64> = trials.iter().map(|t| t.strength).collect();
     strengths.dedup();
     let (mut strength, mut controller, mut prints, mut named) = (vec![], vec![], vec![], vec![]);
-    let mut columns: Vec<(String, Vec<f64>)> = METRICS
-        .iter()
-        .flat_map(|(m, _)| {
-            ["", "_ci_lo", "_ci_hi", "_vs_paper", "_vs_paper_ci_lo", "_vs_paper_ci_hi"]
-                .map(|suffix| (format!("{m}{suffix}"), Vec::new()))
-        })
-        .collect();
+    let mut columns: Vec<(&str, Vec<f64>)> =
+        METRICS.iter().flat_map(|(_, gain, _)| gain.map(|name| (name, Vec::new()))).collect();
     for s in strengths {
         let these: Vec<&Trial> = trials.iter().filter(|t| t.strength == s).collect();
         for (c, name) in CONTROLLERS.iter().enumerate() {
@@ -273,7 +309,7 @@ fn gain_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError
             controller.push(name.to_string());
             prints.push(these.len() as i64);
             named.push(these.iter().filter(|t| t.fitted.is_some()).count() as i64);
-            for (m, (_, metric)) in METRICS.iter().enumerate() {
+            for (m, (_, _, metric)) in METRICS.iter().enumerate() {
                 let values: Vec<f64> = these.iter().map(|t| metric(&t.quality[c])).collect();
                 let paired: Vec<f64> = these.iter().map(|t| metric(&t.quality[c]) - metric(&t.quality[1])).collect();
                 let (mean, diff) = (t_interval(&values), t_interval(&paired));
@@ -284,53 +320,55 @@ fn gain_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError
         }
     }
     let mut cols = vec![
-        str_col("effect", vec![EFFECT.to_string(); strength.len()]),
-        f64_col("strength", strength),
-        str_col("controller", controller),
-        i64_col("prints", prints),
-        i64_col("tau_named", named),
+        str_col(control_gain::effect, vec![EFFECT.to_string(); strength.len()]),
+        f64_col(control_gain::strength, strength),
+        str_col(control_gain::controller, controller),
+        i64_col(control_gain::prints, prints),
+        i64_col(control_gain::tau_named, named),
     ];
-    cols.extend(columns.into_iter().map(|(name, values)| f64_col(&name, values)));
+    cols.extend(columns.into_iter().map(|(name, values)| f64_col(name, values)));
     frame(cols)
 }
 
-/// `control_trials.parquet`: one row per print and controller.
+/// `control_trials.parquet` (and a unit's `part.parquet`, the same columns): one row
+/// per print and controller.
 fn trials_frame(trials: &[Trial]) -> Result<polars::prelude::DataFrame, StageError> {
     let rows: Vec<(&Trial, usize)> = trials.iter().flat_map(|t| (0..3).map(move |c| (t, c))).collect();
     let fitted = |k: usize| -> Vec<f64> {
         rows.iter().map(|(t, _)| t.fitted.map_or(f64::NAN, |f| [f.0, f.1, f.2][k])).collect()
     };
     let mut cols = vec![
-        str_col("effect", vec![EFFECT.to_string(); rows.len()]),
-        f64_col("strength", rows.iter().map(|(t, _)| t.strength).collect()),
-        i64_col("print", rows.iter().map(|(t, _)| t.print as i64).collect()),
-        str_col("seed", rows.iter().map(|(t, _)| format!("{:016x}", t.seed)).collect()),
-        str_col("named", rows.iter().map(|(t, _)| t.named.clone()).collect()),
-        f64_col("tau_excess", fitted(0)),
-        f64_col("tau_excess_ci_lo", fitted(1)),
-        f64_col("tau_excess_ci_hi", fitted(2)),
-        str_col("controller", rows.iter().map(|(_, c)| CONTROLLERS[*c].to_string()).collect()),
+        str_col(control_trials::effect, vec![EFFECT.to_string(); rows.len()]),
+        f64_col(control_trials::strength, rows.iter().map(|(t, _)| t.strength).collect()),
+        i64_col(control_trials::print, rows.iter().map(|(t, _)| t.print as i64).collect()),
+        str_col(control_trials::seed, rows.iter().map(|(t, _)| format!("{:016x}", t.seed)).collect()),
+        str_col(control_trials::named, rows.iter().map(|(t, _)| t.named.clone()).collect()),
+        f64_col(control_trials::tau_excess, fitted(0)),
+        f64_col(control_trials::tau_excess_ci_lo, fitted(1)),
+        f64_col(control_trials::tau_excess_ci_hi, fitted(2)),
+        str_col(control_trials::controller, rows.iter().map(|(_, c)| CONTROLLERS[*c].to_string()).collect()),
     ];
-    for (name, metric) in METRICS {
+    for (name, _, metric) in METRICS {
         cols.push(f64_col(name, rows.iter().map(|(t, c)| metric(&t.quality[*c])).collect()));
     }
     frame(cols)
 }
 
-/// The trials of [`trials_frame`]'s rows (three per print, in [`CONTROLLERS`] order),
-/// exactly: a `tau_excess` of NaN is a print on which the engine did not name τ.
+/// The trials of [`trials_frame`]'s rows (the merged parts: three per print, in
+/// [`CONTROLLERS`] order), exactly: a `tau_excess` of NaN is a print on which the engine did not name τ.
 fn trials_from_frame(all: &DataFrame, file: &Path) -> Result<Vec<Trial>, StageError> {
     let bad = |row: usize, expected: String| StageError::BadInput {
         file: file.to_path_buf(),
         location: Some(format!("row {row}")),
         expected,
     };
-    let (strength, print) = (f64s(all, "strength", file)?, ints(all, "print", file)?);
+    use control_part as c;
+    let (strength, print) = (f64s(all, c::strength, file)?, ints(all, c::print, file)?);
     let (seed, named, controller) =
-        (strs(all, "seed", file)?, strs(all, "named", file)?, strs(all, "controller", file)?);
-    let [tau, tau_lo, tau_hi] = ["tau_excess", "tau_excess_ci_lo", "tau_excess_ci_hi"].map(|c| f64s(all, c, file));
+        (strs(all, c::seed, file)?, strs(all, c::named, file)?, strs(all, c::controller, file)?);
+    let [tau, tau_lo, tau_hi] = [c::tau_excess, c::tau_excess_ci_lo, c::tau_excess_ci_hi].map(|c| f64s(all, c, file));
     let (tau, tau_lo, tau_hi) = (tau?, tau_lo?, tau_hi?);
-    let [oe, rms, max] = METRICS.map(|(name, _)| f64s(all, name, file));
+    let [oe, rms, max] = [c::mean_oe_pct, c::contour_rms_mm, c::contour_max_mm].map(|c| f64s(all, c, file));
     let (oe, rms, max) = (oe?, rms?, max?);
     if !all.height().is_multiple_of(CONTROLLERS.len()) {
         return Err(bad(all.height(), format!("{} rows per print", CONTROLLERS.len())));

@@ -23,10 +23,13 @@ use discrepancy::stats::mix_seed;
 use discrepancy::Mechanism;
 use models::thermal::discrepancy::{candidate_index, CANDIDATES};
 use pipeline::params::{ParamError, StageParams};
+use pipeline::schema::Table;
 use pipeline::stage::{Output, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
 use rayon::prelude::*;
+use tables::discrepancy::power;
+use tables::discrepancy::thermal::{power_draws, power_part};
 
 use super::filmed_print::{named_list, FilmedPrint, Filming, FilmingParams};
 use crate::discrepancy_tables::{draws_frame, DrawRow};
@@ -109,6 +112,7 @@ impl Stage for DiscoveryPowerStage {
         inputs: &[],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&power::TABLE, &power_draws::TABLE, &power_part::TABLE];
 
     fn check(p: &DiscoveryPowerParams) -> Result<(), ParamError> {
         p.cells()?;

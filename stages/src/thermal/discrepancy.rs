@@ -22,19 +22,17 @@ use models::thermal::discrepancy::{
     ThermalRecord, WidthObservation,
 };
 use pipeline::params::{ParamError, StageParams};
-use pipeline::schema::Reads;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::units::run_split;
 use pipeline::{Params, Split, StageContext, StageError, Unit};
 use polars::prelude::DataFrame;
 
 use super::common::{bools, f64s, ints, open_sequence, read_table, trajectory_of};
-use crate::discrepancy_tables::{DiscrepancyTables, Domain, EngineParams};
+use crate::discrepancy_tables::{DiscrepancyTables, EngineParams};
 use crate::parts::{data_set_units, merge_tables};
+use tables::discrepancy::thermal::{causes, extension, gain, residuals, ENGINE};
 use tables::thermal::{frames, widths};
-
-/// The thermal tables' names: one discovery per dataset, residuals in noise std's.
-const THERMAL: Domain = Domain { set_column: "dataset", unit: "sd" };
 
 /// The `thermal.discrepancy` stage kind.
 pub struct DiscrepancyStage;
@@ -109,6 +107,7 @@ impl Stage for DiscrepancyStage {
         inputs: &[PRINTS],
         output: Output::Tables,
     };
+    const WRITES: &'static [&'static Table] = &[&residuals::TABLE, &causes::TABLE, &extension::TABLE, &gain::TABLE];
 
     fn check(p: &DiscrepancyParams) -> Result<(), ParamError> {
         p.engine.settings(p.max_rounds, 0).map(|_| ())
@@ -144,7 +143,7 @@ impl Split for DiscrepancyStage {
             });
         }
         let settings = p.engine.settings(p.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
-        let mut tables = DiscrepancyTables::new(THERMAL, settings.alpha);
+        let mut tables = DiscrepancyTables::new(&ENGINE, settings.alpha);
         let (sequence, monitor) = (prints[2 * index], prints[2 * index + 1]);
         let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, p.width_clearance.width_clearance_mm)?);
         let blocks = model.record().layer_groups();
@@ -159,7 +158,7 @@ impl Split for DiscrepancyStage {
     }
 
     fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
-        merge_tables(ctx, parts, &DiscrepancyTables::NAMES)
+        merge_tables(ctx, parts, &ENGINE.tables())
     }
 }
 

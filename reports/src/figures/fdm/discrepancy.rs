@@ -17,8 +17,11 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use pipeline::params::NoParams;
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::discrepancy::fdm::{gain, predictions, residuals};
+use tables::discrepancy::power;
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -53,12 +56,57 @@ pipeline::params! {
     }
 }
 
-/// The engine run whose results the residuals and lines figures draw.
-const DISCREPANCY: Input = Input::one(
+/// What both figures read of the engine run: the extended model's name.
+const EXTENDED_NAME: Reads = Reads { table: &gain::TABLE, columns: &[gain::printer, gain::extended_model] };
+
+/// The engine run whose held-out residuals the residuals figure draws.
+const DISCREPANCY_RESIDUALS: Input = Input::one(
     "discrepancy",
     &[Source::Stage("fdm.discrepancy")],
-    "the engine's held-out residuals, predictions and gain (`residuals.parquet`, `predictions.parquet`, `gain.parquet`)",
-);
+    "the engine's held-out residuals and gain (`residuals.parquet`, `gain.parquet`)",
+)
+.reading(&[
+    Reads {
+        table: &residuals::TABLE,
+        columns: &[
+            residuals::printer,
+            residuals::model,
+            residuals::variable,
+            residuals::unit,
+            residuals::label,
+            residuals::bin_lo,
+            residuals::bin_hi,
+            residuals::mean_residual_mm,
+            residuals::ci_lo_mm,
+            residuals::ci_hi_mm,
+            residuals::structure,
+        ],
+    },
+    EXTENDED_NAME,
+]);
+
+/// The engine run whose held-out predictions the lines figure draws.
+const DISCREPANCY_LINES: Input = Input::one(
+    "discrepancy",
+    &[Source::Stage("fdm.discrepancy")],
+    "the engine's held-out predictions and gain (`predictions.parquet`, `gain.parquet`)",
+)
+.reading(&[
+    Reads {
+        table: &predictions::TABLE,
+        columns: &[
+            predictions::printer,
+            predictions::condition,
+            predictions::accel_mm_s2,
+            predictions::feed_mm_s,
+            predictions::position_mm,
+            predictions::measured_width_mm,
+            predictions::baseline_width_mm,
+            predictions::extended_width_mm,
+        ],
+    },
+    EXTENDED_NAME,
+]);
 
 /// The power studies drawn together.
 const POWER: Input = Input::many(
@@ -66,7 +114,23 @@ const POWER: Input = Input::many(
     1,
     &[Source::Stage("fdm.discovery_power")],
     "power studies (`power.parquet`), their bases drawn side by side",
-);
+)
+.reading(&[Reads {
+    table: &power::TABLE,
+    columns: &[
+        power::base,
+        power::own_causes,
+        power::effect,
+        power::noise,
+        power::strength,
+        power::correct_rate,
+        power::correct_ci_lo,
+        power::correct_ci_hi,
+        power::false_alarm_rate,
+        power::false_alarm_ci_hi,
+        power::draws,
+    ],
+}]);
 
 /// The `figure.fdm_discrepancy_residuals` stage kind.
 pub struct DiscrepancyResidualsFigure;
@@ -84,15 +148,15 @@ impl Stage for DiscrepancyResidualsFigure {
         version: 1,
         summary: "Held-out residuals of the lag model and the extended model against every candidate variable, bin means with 95 % intervals → discrepancy_residuals.png/.svg",
         implements: "DESIGN §7 step 1 (show)",
-        inputs: &[DISCREPANCY],
+        inputs: &[DISCREPANCY_RESIDUALS],
         output: Output::Tables,
     };
 
     fn run(&self, ctx: &mut StageContext, p: &ResidualsParams) -> Result<(), StageError> {
         let printer = &p.printer;
-        let dir = &ctx.input(&DISCREPANCY).dir;
-        let panels = read_residuals(&dir.join("residuals.parquet"), printer)?;
-        let extended = read_extended_name(&dir.join("gain.parquet"), printer)?;
+        let dir = &ctx.input(&DISCREPANCY_RESIDUALS).dir;
+        let panels = read_residuals(&dir.join(residuals::TABLE.file()), printer)?;
+        let extended = read_extended_name(&dir.join(gain::TABLE.file()), printer)?;
         let title = if extended == LAG_MODEL {
             format!("{printer}: held-out residual (measured − predicted) of the lag model (no cause named)")
         } else {
@@ -119,13 +183,15 @@ struct ResidualPanel {
 }
 
 fn read_residuals(path: &Path, printer: &str) -> Result<Vec<ResidualPanel>, StageError> {
+    use residuals as r;
     let df = read_parquet(path)?;
     let (printers, models, variables) =
-        (strs(&df, "printer", path)?, strs(&df, "model", path)?, strs(&df, "variable", path)?);
-    let (units, labels) = (strs(&df, "unit", path)?, strs(&df, "label", path)?);
-    let (lo, hi, mean) = (f64s(&df, "bin_lo", path)?, f64s(&df, "bin_hi", path)?, f64s(&df, "mean_residual_mm", path)?);
+        (strs(&df, r::printer, path)?, strs(&df, r::model, path)?, strs(&df, r::variable, path)?);
+    let (units, labels) = (strs(&df, r::unit, path)?, strs(&df, r::label, path)?);
+    let (lo, hi, mean) =
+        (f64s(&df, r::bin_lo, path)?, f64s(&df, r::bin_hi, path)?, f64s(&df, r::mean_residual_mm, path)?);
     let (ci_lo, ci_hi, structure) =
-        (f64s(&df, "ci_lo_mm", path)?, f64s(&df, "ci_hi_mm", path)?, f64s(&df, "structure", path)?);
+        (f64s(&df, r::ci_lo_mm, path)?, f64s(&df, r::ci_hi_mm, path)?, f64s(&df, r::structure, path)?);
     let mut panels: Vec<ResidualPanel> = Vec::new();
     for i in (0..df.height()).filter(|&i| printers[i] == printer) {
         let index = match panels.iter().position(|p| p.variable == variables[i]) {
@@ -151,7 +217,7 @@ fn read_residuals(path: &Path, printer: &str) -> Result<Vec<ResidualPanel>, Stag
         }
     }
     if panels.is_empty() {
-        return Err(no_rows(path, "printer", &format!("printer `{printer}`")));
+        return Err(no_rows(path, r::printer, &format!("printer `{printer}`")));
     }
     Ok(panels)
 }
@@ -159,11 +225,11 @@ fn read_residuals(path: &Path, printer: &str) -> Result<Vec<ResidualPanel>, Stag
 /// `lag_model + width_cap` (or `lag_model`) from `gain.parquet`.
 fn read_extended_name(path: &Path, printer: &str) -> Result<String, StageError> {
     let df = read_parquet(path)?;
-    let (printers, names) = (strs(&df, "printer", path)?, strs(&df, "extended_model", path)?);
+    let (printers, names) = (strs(&df, gain::printer, path)?, strs(&df, gain::extended_model, path)?);
     (0..df.height())
         .find(|&i| printers[i] == printer)
         .map(|i| names[i].clone())
-        .ok_or_else(|| no_rows(path, "printer", &format!("printer `{printer}`")))
+        .ok_or_else(|| no_rows(path, gain::printer, &format!("printer `{printer}`")))
 }
 
 fn draw_residuals<DB: DrawingBackend>(
@@ -282,15 +348,15 @@ impl Stage for DiscrepancyLinesFigure {
         version: 1,
         summary: "Measured vs lag model vs extended model along the lines the lag model predicts worst (held out) → discrepancy_lines.png/.svg",
         implements: "DESIGN §7 steps 3-4 (extend, gain), in the style of paper 000 Fig. 6",
-        inputs: &[DISCREPANCY],
+        inputs: &[DISCREPANCY_LINES],
         output: Output::Tables,
     };
 
     fn run(&self, ctx: &mut StageContext, p: &LinesParams) -> Result<(), StageError> {
         let printer = &p.printer;
-        let dir = &ctx.input(&DISCREPANCY).dir;
-        let lines = read_lines(&dir.join("predictions.parquet"), printer)?;
-        let extended = read_extended_name(&dir.join("gain.parquet"), printer)?;
+        let dir = &ctx.input(&DISCREPANCY_LINES).dir;
+        let lines = read_lines(&dir.join(predictions::TABLE.file()), printer)?;
+        let extended = read_extended_name(&dir.join(gain::TABLE.file()), printer)?;
         let worst = worst_lines(lines, p.lines);
         let title = if extended == LAG_MODEL {
             format!("{printer}: the lines the lag model predicts worst, held out (no cause named)")
@@ -324,14 +390,15 @@ impl LinePredictions {
 }
 
 fn read_lines(path: &Path, printer: &str) -> Result<Vec<LinePredictions>, StageError> {
+    use predictions as p;
     let df = read_parquet(path)?;
-    let (printers, conditions) = (strs(&df, "printer", path)?, strs(&df, "condition", path)?);
+    let (printers, conditions) = (strs(&df, p::printer, path)?, strs(&df, p::condition, path)?);
     let (accel, feed, pos) =
-        (f64s(&df, "accel_mm_s2", path)?, f64s(&df, "feed_mm_s", path)?, f64s(&df, "position_mm", path)?);
+        (f64s(&df, p::accel_mm_s2, path)?, f64s(&df, p::feed_mm_s, path)?, f64s(&df, p::position_mm, path)?);
     let (meas, base, ext) = (
-        f64s(&df, "measured_width_mm", path)?,
-        f64s(&df, "baseline_width_mm", path)?,
-        f64s(&df, "extended_width_mm", path)?,
+        f64s(&df, p::measured_width_mm, path)?,
+        f64s(&df, p::baseline_width_mm, path)?,
+        f64s(&df, p::extended_width_mm, path)?,
     );
     let mut lines: Vec<LinePredictions> = Vec::new();
     for i in (0..df.height()).filter(|&i| printers[i] == printer) {
@@ -348,7 +415,7 @@ fn read_lines(path: &Path, printer: &str) -> Result<Vec<LinePredictions>, StageE
         }
     }
     if lines.is_empty() {
-        return Err(no_rows(path, "printer", &format!("printer `{printer}`")));
+        return Err(no_rows(path, p::printer, &format!("printer `{printer}`")));
     }
     Ok(lines)
 }
@@ -435,7 +502,7 @@ impl Stage for DiscoveryPowerFigure {
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let mut bases: Vec<PowerBase> = Vec::new();
         for input in ctx.inputs_of(&POWER) {
-            for b in read_power(&input.dir.join("power.parquet"))? {
+            for b in read_power(&input.dir.join(power::TABLE.file()))? {
                 match bases.iter_mut().find(|x| x.base == b.base) {
                     Some(x) => {
                         x.curves.extend(b.curves);
@@ -464,12 +531,16 @@ struct PowerBase {
 
 fn read_power(path: &Path) -> Result<Vec<PowerBase>, StageError> {
     let df = read_parquet(path)?;
-    let (bases, own, effects) = (strs(&df, "base", path)?, strs(&df, "own_causes", path)?, strs(&df, "effect", path)?);
-    let noise = strs(&df, "noise", path)?;
-    let (strength, rate) = (f64s(&df, "strength", path)?, f64s(&df, "correct_rate", path)?);
-    let (lo, hi) = (f64s(&df, "correct_ci_lo", path)?, f64s(&df, "correct_ci_hi", path)?);
-    let (fa, fa_hi, draws) =
-        (f64s(&df, "false_alarm_rate", path)?, f64s(&df, "false_alarm_ci_hi", path)?, ints(&df, "draws", path)?);
+    let (bases, own, effects) =
+        (strs(&df, power::base, path)?, strs(&df, power::own_causes, path)?, strs(&df, power::effect, path)?);
+    let noise = strs(&df, power::noise, path)?;
+    let (strength, rate) = (f64s(&df, power::strength, path)?, f64s(&df, power::correct_rate, path)?);
+    let (lo, hi) = (f64s(&df, power::correct_ci_lo, path)?, f64s(&df, power::correct_ci_hi, path)?);
+    let (fa, fa_hi, draws) = (
+        f64s(&df, power::false_alarm_rate, path)?,
+        f64s(&df, power::false_alarm_ci_hi, path)?,
+        ints(&df, power::draws, path)?,
+    );
     let mut out: Vec<PowerBase> = Vec::new();
     for i in 0..df.height() {
         if out.last().is_none_or(|b| b.base != bases[i]) {
@@ -493,7 +564,7 @@ fn read_power(path: &Path) -> Result<Vec<PowerBase>, StageError> {
         }
     }
     if out.is_empty() {
-        return Err(no_rows(path, "base", "any base"));
+        return Err(no_rows(path, power::base, "any base"));
     }
     Ok(out)
 }
@@ -623,7 +694,7 @@ fn draw_power_panel<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use crate::figures::test_util::{assert_drawn, declared, noise, write_declared};
     use polars::df;
 
     #[test]
@@ -664,10 +735,12 @@ mod tests {
         let n = mean.len();
         let ci_lo: Vec<f64> = mean.iter().map(|v| v - 0.01).collect();
         let ci_hi: Vec<f64> = mean.iter().map(|v| v + 0.01).collect();
-        df!("printer" => vec!["taz5"; n], "model" => model, "variable" => variable, "unit" => unit, "label" => label,
-            "bin_lo" => lo, "bin_hi" => hi, "mean_residual_mm" => mean, "ci_lo_mm" => ci_lo, "ci_hi_mm" => ci_hi,
-            "structure" => vec![0.3; n])
-        .unwrap()
+        use residuals as r;
+        let table = df!(r::printer => vec!["taz5"; n], r::model => model, r::variable => variable, r::unit => unit,
+            r::label => label, r::bin_lo => lo, r::bin_hi => hi, r::mean_residual_mm => mean, r::ci_lo_mm => ci_lo,
+            r::ci_hi_mm => ci_hi, r::structure => vec![0.3; n])
+        .unwrap();
+        declared(&r::TABLE, table)
     }
 
     #[test]
@@ -686,35 +759,28 @@ mod tests {
             }
         }
         let n = pos.len();
-        write_table(
-            dir.path(),
-            "predictions",
-            df!(
-            "printer" => vec!["taz5"; n], "condition" => cond, "accel_mm_s2" => vec![400.0; n],
-            "feed_mm_s" => vec![50.0; n], "position_mm" => pos, "measured_width_mm" => meas,
-            "baseline_width_mm" => base, "extended_width_mm" => ext)
-            .unwrap(),
-        );
-        write_table(
-            dir.path(),
-            "gain",
-            df!("printer" => ["taz5"], "extended_model" => ["lag_model + width_cap"]).unwrap(),
-        );
+        use predictions as pred;
+        let lines = df!(
+            pred::printer => vec!["taz5"; n], pred::condition => cond, pred::accel_mm_s2 => vec![400.0; n],
+            pred::feed_mm_s => vec![50.0; n], pred::position_mm => pos, pred::measured_width_mm => meas,
+            pred::baseline_width_mm => base, pred::extended_width_mm => ext)
+        .unwrap();
+        write_declared(dir.path(), &pred::TABLE, lines);
+        let gains = df!(gain::printer => ["taz5"], gain::extended_model => ["lag_model + width_cap"]).unwrap();
+        write_declared(dir.path(), &gain::TABLE, declared(&gain::TABLE, gains));
         let bins = 12;
-        write_table(dir.path(), "residuals", residuals_table(bins));
-        write_table(
-            dir.path(),
-            "power",
-            df!(
-            "base" => ["taz5"; 4], "noise" => ["measured", "measured", "measured", "white"], "own_causes" => ["width_cap"; 4],
-            "effect" => ["none", "bed_tilt", "bed_tilt", "gear_eccentricity"], "strength" => [0.0, 0.02, 0.1, 0.05],
-            "draws" => [100i64, 20, 20, 20], "correct_rate" => [0.0, 0.1, 0.9, 0.6],
-            "correct_ci_lo" => [0.0, 0.01, 0.7, 0.4], "correct_ci_hi" => [0.04, 0.3, 0.99, 0.8],
-            "false_alarm_rate" => [0.01, 0.0, 0.0, 0.05], "false_alarm_ci_hi" => [0.05, 0.17, 0.17, 0.25])
-            .unwrap(),
-        );
+        write_declared(dir.path(), &residuals::TABLE, residuals_table(bins));
+        let study = df!(
+            power::base => ["taz5"; 4], power::noise => ["measured", "measured", "measured", "white"],
+            power::own_causes => ["width_cap"; 4], power::effect => ["none", "bed_tilt", "bed_tilt", "gear_eccentricity"],
+            power::strength => [0.0, 0.02, 0.1, 0.05], power::draws => [100i64, 20, 20, 20],
+            power::correct_rate => [0.0, 0.1, 0.9, 0.6], power::correct_ci_lo => [0.0, 0.01, 0.7, 0.4],
+            power::correct_ci_hi => [0.04, 0.3, 0.99, 0.8], power::false_alarm_rate => [0.01, 0.0, 0.0, 0.05],
+            power::false_alarm_ci_hi => [0.05, 0.17, 0.17, 0.25])
+        .unwrap();
+        write_declared(dir.path(), &power::TABLE, declared(&power::TABLE, study));
         let out = tempfile::tempdir().unwrap();
-        let p = read_residuals(&dir.path().join("residuals.parquet"), "taz5").unwrap();
+        let p = read_residuals(&dir.path().join(residuals::TABLE.file()), "taz5").unwrap();
         assert_eq!(p.len(), 3);
         assert_eq!(p[2].labels.len(), bins);
         let stem = out.path().join("r");
@@ -726,7 +792,7 @@ mod tests {
         )
         .unwrap();
         assert_drawn(&stem);
-        let lines = worst_lines(read_lines(&dir.path().join("predictions.parquet"), "taz5").unwrap(), 2);
+        let lines = worst_lines(read_lines(&dir.path().join(predictions::TABLE.file()), "taz5").unwrap(), 2);
         let stem = out.path().join("l");
         draw_png_and_svg(
             &stem,
@@ -736,11 +802,11 @@ mod tests {
         )
         .unwrap();
         assert_drawn(&stem);
-        let bases = read_power(&dir.path().join("power.parquet")).unwrap();
+        let bases = read_power(&dir.path().join(power::TABLE.file())).unwrap();
         assert_eq!(bases[0].null, vec![("measured".to_string(), 100, 0.01, 0.05)]);
         let stem = out.path().join("p");
         draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, "t", &bases), |a| draw_power(a, "t", &bases)).unwrap();
         assert_drawn(&stem);
-        assert!(read_residuals(&dir.path().join("residuals.parquet"), "taz6").is_err());
+        assert!(read_residuals(&dir.path().join(residuals::TABLE.file()), "taz6").is_err());
     }
 }

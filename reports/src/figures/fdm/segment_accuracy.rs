@@ -62,7 +62,7 @@ impl Stage for SegmentAccuracyFigure {
         if points.is_empty() {
             return Err(StageError::BadInput {
                 file: path,
-                location: Some("rmse_mm".into()),
+                location: Some(segment_accuracy::rmse_mm.into()),
                 expected: "expected at least one measured photo".into(),
             });
         }

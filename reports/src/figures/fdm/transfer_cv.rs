@@ -11,8 +11,10 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::transfer_cv;
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -33,7 +35,11 @@ const TRANSFER_CV: Input = Input::one(
     "transfer_cv",
     &[Source::Stage("fdm.transfer_cv")],
     "the held-out RMSE per training-set size and method (`transfer_cv.parquet`)",
-);
+)
+.reading(&[Reads {
+    table: &transfer_cv::TABLE,
+    columns: &[transfer_cv::n_train, transfer_cv::method, transfer_cv::rmse_mm],
+}]);
 
 /// The baseline every transfer method is compared with.
 const SINGLE: &str = "single";
@@ -101,16 +107,16 @@ impl Stage for TransferCvFigure {
 
 /// Reads `<dir>/transfer_cv.parquet`, dropping non-finite RMSEs.
 pub fn load(dir: &Path) -> Result<TransferCv, StageError> {
-    let path = dir.join("transfer_cv.parquet");
+    let path = dir.join(transfer_cv::TABLE.file());
     let df = read_parquet(&path)?;
-    let (n_train, methods) = (ints(&df, "n_train", &path)?, strs(&df, "method", &path)?);
-    let rmse = f64s(&df, "rmse_mm", &path)?;
+    let (n_train, methods) = (ints(&df, transfer_cv::n_train, &path)?, strs(&df, transfer_cv::method, &path)?);
+    let rmse = f64s(&df, transfer_cv::rmse_mm, &path)?;
     let mut rmse_mm: BTreeMap<(i64, String), Vec<f64>> = BTreeMap::new();
     for i in (0..df.height()).filter(|&i| rmse[i].is_finite()) {
         rmse_mm.entry((n_train[i], methods[i].clone())).or_default().push(rmse[i]);
     }
     if rmse_mm.is_empty() {
-        return Err(no_rows(&path, "rmse_mm", "a finite RMSE"));
+        return Err(no_rows(&path, transfer_cv::rmse_mm, "a finite RMSE"));
     }
     let mut n: Vec<i64> = rmse_mm.keys().map(|k| k.0).collect();
     n.dedup();
@@ -360,7 +366,7 @@ fn draw_improvement<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, noise, write_table};
+    use crate::figures::test_util::{assert_drawn, noise, write_declared};
     use polars::df;
 
     #[test]
@@ -415,8 +421,9 @@ mod tests {
             }
         }
         let lambda = vec![1.0; rmse.len()];
-        df!("n_train" => n_train, "subset" => subset, "test_condition" => test, "method" => method,
-            "rmse_mm" => rmse, "lambda" => lambda)
+        use transfer_cv as t;
+        df!(t::n_train => n_train, t::subset => subset, t::test_condition => test, t::method => method,
+            t::rmse_mm => rmse, t::lambda => lambda)
         .expect("frame")
     }
 
@@ -427,7 +434,7 @@ mod tests {
     #[test]
     fn draws_box_plots_and_improvement() {
         let dir = tempfile::tempdir().expect("tempdir");
-        write_table(dir.path(), "transfer_cv", cv_table());
+        write_declared(dir.path(), &transfer_cv::TABLE, cv_table());
         let cv = load(dir.path()).expect("loads");
         assert_eq!(cv.n_train, (1..=8).collect::<Vec<_>>());
         assert_eq!(cv.methods, ["single", "transfer_zero_mean", "transfer_source_mean"]);

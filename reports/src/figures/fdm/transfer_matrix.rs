@@ -14,8 +14,10 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::transfer_matrix;
 
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
@@ -36,7 +38,22 @@ const MATRIX: Input = Input::one(
     "matrix",
     &[Source::Stage("fdm.transfer_matrix")],
     "the median improvements with their intervals per task, n and method (`transfer_matrix.parquet`)",
-);
+)
+.reading(READS);
+
+/// What [`load`] reads of `transfer_matrix.parquet`.
+pub const READS: &[Reads] = &[Reads {
+    table: &transfer_matrix::TABLE,
+    columns: &[
+        transfer_matrix::sources,
+        transfer_matrix::target,
+        transfer_matrix::method,
+        transfer_matrix::n_train,
+        transfer_matrix::improvement_pct,
+        transfer_matrix::ci_lo_pct,
+        transfer_matrix::ci_hi_pct,
+    ],
+}];
 
 /// Figure size in pixels (panels in a grid of two columns).
 const PANEL_PX: (u32, u32) = (760, 520);
@@ -89,13 +106,14 @@ impl Stage for TransferMatrixFigure {
 
 /// Reads `<dir>/transfer_matrix.parquet`.
 pub fn load(dir: &Path) -> Result<Matrix, StageError> {
-    let path = dir.join("transfer_matrix.parquet");
+    use transfer_matrix as t;
+    let path = dir.join(t::TABLE.file());
     let df = read_parquet(&path)?;
     let (sources, target, method) =
-        (strs(&df, "sources", &path)?, strs(&df, "target", &path)?, strs(&df, "method", &path)?);
-    let n_train = ints(&df, "n_train", &path)?;
+        (strs(&df, t::sources, &path)?, strs(&df, t::target, &path)?, strs(&df, t::method, &path)?);
+    let n_train = ints(&df, t::n_train, &path)?;
     let (imp, lo, hi) =
-        (f64s(&df, "improvement_pct", &path)?, f64s(&df, "ci_lo_pct", &path)?, f64s(&df, "ci_hi_pct", &path)?);
+        (f64s(&df, t::improvement_pct, &path)?, f64s(&df, t::ci_lo_pct, &path)?, f64s(&df, t::ci_hi_pct, &path)?);
     let mut matrix = Matrix::new();
     for i in (0..df.height()).filter(|&i| imp[i].is_finite() && method[i] != "single") {
         matrix.entry(target[i].clone()).or_default().push(Cell {
@@ -107,7 +125,7 @@ pub fn load(dir: &Path) -> Result<Matrix, StageError> {
         });
     }
     if matrix.is_empty() {
-        return Err(no_rows(&path, "improvement_pct", "a finite improvement of a transfer method"));
+        return Err(no_rows(&path, t::improvement_pct, "a finite improvement of a transfer method"));
     }
     Ok(matrix)
 }
@@ -198,8 +216,9 @@ fn series(cells: &[Cell], source: &str, method: &str) -> Vec<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::figures::test_util::{assert_drawn, write_table};
+    use crate::figures::test_util::{assert_drawn, declared, write_declared};
     use polars::df;
+    use tables::fdm::transfer_matrix as t;
 
     #[test]
     fn draws_one_panel_per_target_and_rejects_an_empty_table() {
@@ -222,24 +241,25 @@ mod tests {
         type Row<'a> = (&'a str, &'a str, i64, &'a str, f64);
         let col = |f: &dyn Fn(&Row) -> String| rows.iter().map(f).collect::<Vec<String>>();
         let table = df!(
-            "sources" => col(&|r| r.0.to_string()),
-            "target" => col(&|r| r.1.to_string()),
-            "n_train" => rows.iter().map(|r| r.2).collect::<Vec<i64>>(),
-            "method" => col(&|r| r.3.to_string()),
-            "median_rmse_mm" => rows.iter().map(|_| 0.05).collect::<Vec<f64>>(),
-            "improvement_pct" => rows.iter().map(|r| r.4).collect::<Vec<f64>>(),
-            "ci_lo_pct" => rows.iter().map(|r| r.4 - 3.0).collect::<Vec<f64>>(),
-            "ci_hi_pct" => rows.iter().map(|r| r.4 + 3.0).collect::<Vec<f64>>(),
+            t::sources => col(&|r| r.0.to_string()),
+            t::target => col(&|r| r.1.to_string()),
+            t::n_train => rows.iter().map(|r| r.2).collect::<Vec<i64>>(),
+            t::method => col(&|r| r.3.to_string()),
+            t::median_rmse_mm => rows.iter().map(|_| 0.05).collect::<Vec<f64>>(),
+            t::improvement_pct => rows.iter().map(|r| r.4).collect::<Vec<f64>>(),
+            t::ci_lo_pct => rows.iter().map(|r| r.4 - 3.0).collect::<Vec<f64>>(),
+            t::ci_hi_pct => rows.iter().map(|r| r.4 + 3.0).collect::<Vec<f64>>(),
         )
         .unwrap();
-        write_table(dir, "transfer_matrix", table.clone());
+        let table = declared(&t::TABLE, table);
+        write_declared(dir, &t::TABLE, table.clone());
         let matrix = load(dir).unwrap();
         assert_eq!(matrix.keys().collect::<Vec<_>>(), ["a", "b"]);
         assert!(matrix["b"].iter().all(|c| c.method != "single"), "single is the baseline, not a series");
         let stem = dir.join("transfer_matrix");
         draw_png_and_svg(&stem, (1520, 1100), |a| draw(a, "t", &matrix), |a| draw(a, "t", &matrix)).expect("draws");
         assert_drawn(&stem);
-        write_table(dir, "transfer_matrix", table.head(Some(0)));
+        write_declared(dir, &t::TABLE, table.head(Some(0)));
         assert!(load(dir).is_err());
     }
 }
