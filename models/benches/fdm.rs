@@ -5,15 +5,15 @@
 //! 510 training subsets of 9 target lines × 3 methods, 9 source lines), and the transfer
 //! matrix among four printers at full size (issue 18: every ordered pair and each
 //! printer from the three others, 5 methods, all nine lines per printer, every subset,
-//! each target as the stage's work unit). Inputs are built outside the timed closures.
+//! each target as the stage's work unit, and the summary's 2000 bootstrap draws). Inputs are built outside the timed closures.
 
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
 use models::fdm::synthetic::perturbed_lines;
 use models::fdm::{
-    default_tasks, fit, leave_one_out, transfer_cv, transfer_matrix_for_target, transfer_source_mean, MeasuredLine,
-    PiecewiseParams, SourcePrior, StudyPrinter, TransferParams,
+    default_tasks, fit, leave_one_out, summarise, transfer_cv, transfer_matrix_for_target, transfer_source_mean,
+    MeasuredLine, PiecewiseParams, SourcePrior, StudyPrinter, TransferParams,
 };
 
 /// A Taz-5-like (blob) or Taz-6-like model's lines; `bump` perturbs the widths per line
@@ -67,7 +67,8 @@ fn bench_transfer_matrix(c: &mut Criterion) {
     // Four printers: the Taz-5-like and Taz-6-like models, and each with 1.3× wider
     // beads (another nozzle); all nine lines each, the λ grid in whole decades as the
     // stage's, every target printer's work unit in turn as `fdm.transfer_matrix` runs
-    // them (`examples/transfer_matrix_full.rs` runs the same on the measured lines).
+    // them, then the summary with the stage's 2000 bootstrap draws
+    // (`examples/transfer_matrix_full.rs` runs the fits on the measured lines).
     let printers_lines = [
         perturbed_lines(true, 0.01, 1.0),
         perturbed_lines(false, 0.012, 1.0),
@@ -96,9 +97,10 @@ fn bench_transfer_matrix(c: &mut Criterion) {
     g.sample_size(10).sampling_mode(SamplingMode::Flat).measurement_time(Duration::from_secs(120));
     g.bench_function("four_printers_9_lines_16_tasks_5_methods", |b| {
         b.iter(|| {
-            (0..printers.len())
-                .map(|t| transfer_matrix_for_target(&printers, &tasks, &transfer, t).unwrap().len())
-                .sum::<usize>()
+            let rows: Vec<_> = (0..printers.len())
+                .flat_map(|t| transfer_matrix_for_target(&printers, &tasks, &transfer, t).unwrap())
+                .collect();
+            summarise(&rows, 2000, 1).len()
         })
     });
     g.finish();
