@@ -227,7 +227,7 @@ macro_rules! engine_tables {
 /// Declares a power study's `power_draws` (one row per draw: what was hidden, what the
 /// engine named, its fitted strength, then each candidate's first-round p-value, `p`)
 /// and its work units' `power_part` (the same rows with the bookkeeping columns `part`,
-/// then `covered`).
+/// then `covered`), both through [`draw_table`].
 macro_rules! draw_tables {
     (
         stage: $stage:literal,
@@ -235,10 +235,43 @@ macro_rules! draw_tables {
         p: [$($p:ident $pdoc:literal),* $(,)?],
         part: [$($(#[doc = $xdoc:literal])* $x:ident: $xt:ident $xu:literal),* $(,)?] $(,)?
     ) => {
-        pipeline::table! {
+        draw_table! {
             #[doc = $stage]
             #[doc = ": one row per draw of the power study."]
-            pub mod power_draws = "power_draws" {
+            mod power_draws = "power_draws",
+            strength_unit: $su,
+            p: [$($p $pdoc),*],
+            then: [],
+        }
+
+        draw_table! {
+            #[doc = $stage]
+            #[doc = ": one work unit's draws (`part.parquet`), the rows of `power_draws` with the merge's bookkeeping."]
+            mod power_part = "part",
+            strength_unit: $su,
+            p: [$($p $pdoc),*],
+            then: [
+                $( $(#[doc = $xdoc])* $x: $xt $xu, )*
+                /// Whether the strength's interval covered the injected value (null: no interval); the summary needs it, `power_draws` does not carry it.
+                covered: Bool "",
+            ],
+        }
+    };
+}
+
+/// One table of a power study's draws: the columns every draw has, each candidate's
+/// first-round p-value (`p`), then the columns `then`.
+macro_rules! draw_table {
+    (
+        $(#[doc = $doc:literal])*
+        mod $module:ident = $file:literal,
+        strength_unit: $su:literal,
+        p: [$($p:ident $pdoc:literal),* $(,)?],
+        then: [$($(#[doc = $tdoc:literal])* $t:ident: $tt:ident $tu:literal),* $(,)?] $(,)?
+    ) => {
+        pipeline::table! {
+            $(#[doc = $doc])*
+            pub mod $module = $file {
                 /// The base the draws are made of (a printer, or the virtual print's description).
                 base: Str "",
                 /// The hidden effect (`none` for a null draw).
@@ -267,44 +300,7 @@ macro_rules! draw_tables {
                     #[doc = " (for the null's validity check)."]
                     $p: Float64 "1",
                 )*
-            }
-        }
-
-        pipeline::table! {
-            #[doc = $stage]
-            #[doc = ": one work unit's draws (`part.parquet`), the rows of `power_draws` with the merge's bookkeeping."]
-            pub mod power_part = "part" {
-                /// The base the draws are made of.
-                base: Str "",
-                /// The hidden effect (`none` for a null draw).
-                effect: Str "",
-                /// Its strength.
-                strength: Float64 $su,
-                /// Draw index within its (effect, strength).
-                draw: Int64 "1",
-                /// The draw's seed, in hex.
-                seed: Str "",
-                /// The strength the draw carries (signed).
-                injected: Float64 $su,
-                /// The mechanisms named, `+`-joined (`none`).
-                named: Str "",
-                /// `correct`, `wrong` or `none`.
-                outcome: Str "",
-                /// The fitted strength, when correct.
-                estimate: Float64 $su,
-                /// Lower end of its 95 % interval.
-                ci_lo: Float64 $su,
-                /// Upper end of that interval.
-                ci_hi: Float64 $su,
-                $(
-                    #[doc = "First-round sign-flip p-value of the candidate "]
-                    #[doc = $pdoc]
-                    #[doc = " (for the null's validity check)."]
-                    $p: Float64 "1",
-                )*
-                $( $(#[doc = $xdoc])* $x: $xt $xu, )*
-                /// Whether the strength's interval covered the injected value (null: no interval); the summary needs it, `power_draws` does not carry it.
-                covered: Bool "",
+                $( $(#[doc = $tdoc])* $t: $tt $tu, )*
             }
         }
     };
