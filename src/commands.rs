@@ -7,7 +7,7 @@ use pipeline::execute::{open_out_dir, run_plan, run_plan_locked, RunOptions};
 use pipeline::graph::{render, GraphFormat};
 use pipeline::plan::sources_text;
 use pipeline::schema::Reads;
-use pipeline::stage::Count;
+use pipeline::stage::{Count, Input};
 use pipeline::{Plan, Registry, StageKind};
 
 use crate::cli::{
@@ -158,7 +158,7 @@ fn kind_text(kind: &dyn StageKind) -> String {
             count_text(input.count),
             sources_text(input.takes),
             input.doc,
-            reads_text(input.reads)
+            role_reads_text(input)
         );
     }
     for p in kind.params() {
@@ -187,7 +187,7 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
                 input.role,
                 count_text(input.count),
                 sources_text(input.takes),
-                format!("{}{}", input.doc, reads_text(input.reads)).replace('|', "\\|")
+                format!("{}{}", input.doc, role_reads_text(input)).replace('|', "\\|")
             );
         }
         s += "\n";
@@ -202,7 +202,16 @@ fn kind_markdown(kind: &dyn StageKind) -> String {
     s + "\n"
 }
 
-/// "; reads `t.parquet` (a, b)" for each declared table a role reads (checked at plan time).
+/// "; reads `t.parquet` (a, b)" for each declared table a role reads, and "; from a
+/// `k`: reads …" for what it reads from an upstream kind `k` (checked at plan time).
+fn role_reads_text(input: &Input) -> String {
+    let by_kind = input
+        .reads_by_kind
+        .iter()
+        .map(|(kind, reads)| format!("; from a `{kind}`{}", reads_text(reads).replacen("; reads", ", reads", 1)));
+    reads_text(input.reads) + &by_kind.collect::<String>()
+}
+
 fn reads_text(reads: &[Reads]) -> String {
     reads.iter().map(|r| format!("; reads `{}` ({})", r.table.file(), r.columns.join(", "))).collect()
 }

@@ -269,7 +269,7 @@ fn plan_stage(
         .collect();
     let wiring = Wiring { registry, datasets, stages: planned };
     for ((input, role), given) in inputs.iter().zip(&roles).zip(&raw.inputs) {
-        if let Err(why) = wiring.check_reads(role.reads, *input) {
+        if let Err(why) = wiring.check_reads(role.reads, *input).and_then(|()| wiring.check_kind_reads(role, *input)) {
             return Err((
                 "inputs".into(),
                 format!(
@@ -440,6 +440,16 @@ impl Wiring<'_> {
             }
         }
         Ok(())
+    }
+
+    /// [`Wiring::check_reads`] of what `role` reads from an upstream of `input`'s kind.
+    fn check_kind_reads(&self, role: &Input, input: InputRef) -> Result<(), String> {
+        let InputRef::Stage(i) = input else { return Ok(()) };
+        let kind = self.stages[i].kind;
+        match role.reads_by_kind.iter().find(|(k, _)| *k == kind) {
+            Some((_, reads)) => self.check_reads(reads, input),
+            None => Ok(()),
+        }
     }
 
     /// Whether stage `i` writes the table `read` reads, with its columns (an error
@@ -760,6 +770,30 @@ mod tests {
         }
     }
 
+    /// A role taking two kinds, reading `w` (with `b`) from the writer and `other` from the other.
+    struct KindReader;
+
+    const MIXED: Input = Input::many("mixed", 1, &[Source::Stage("test.writer"), Source::Stage("test.other")], "mixed")
+        .reading_by_kind(&[
+            ("test.writer", &[Reads { table: &expected::TABLE, columns: &[expected::a, expected::b] }]),
+            ("test.other", &[Reads { table: &other::TABLE, columns: &[other::c] }]),
+        ]);
+
+    impl Stage for KindReader {
+        type Params = crate::params::NoParams;
+        const INFO: &'static StageInfo = &StageInfo {
+            name: "test.kind_reader",
+            version: 1,
+            summary: "reads per kind",
+            implements: "tests",
+            inputs: &[MIXED],
+            output: Output::Tables,
+        };
+        fn run(&self, _: &mut StageContext, _: &crate::params::NoParams) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
     fn plan(text: &str) -> Result<Plan, SpecError> {
         let mut registry = Registry::new();
         registry.register(Box::new(OtherWriter));
@@ -769,6 +803,7 @@ mod tests {
         registry.register(Box::new(Picky));
         registry.register(Box::new(Writer));
         registry.register(Box::new(Reader));
+        registry.register(Box::new(KindReader));
         let file = Path::new("t.toml");
         Plan::check(file, parse_spec(file, text)?, &registry, |_| None)
     }
@@ -904,6 +939,20 @@ mod tests {
             err.message,
             "role `w` of `test.reader_a` reads `w.parquet`, which no input of the `test.concat` stage writes; \
              got `c`, a `test.concat` stage"
+        );
+    }
+
+    #[test]
+    fn a_role_taking_several_kinds_checks_what_it_reads_from_each_kind() {
+        let head = "[run]\nname = \"d\"\n[stage.w]\nkind = \"test.writer\"\n[stage.o]\nkind = \"test.other\"\n";
+        let read = |inputs: &str| plan(&format!("{head}[stage.r]\nkind = \"test.kind_reader\"\ninputs = [{inputs}]\n"));
+        assert!(read("\"o\"").is_ok(), "the other kind writes what is read from it");
+        let err = read("\"o\", \"w\"").unwrap_err();
+        assert_eq!(err.location, "stage.r.inputs");
+        assert_eq!(
+            err.message,
+            "role `mixed` of `test.kind_reader` reads column `b` of `w.parquet`, which a `test.writer` stage does not \
+             write; got `w`, a `test.writer` stage"
         );
     }
 }

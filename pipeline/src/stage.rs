@@ -45,27 +45,37 @@ pub struct Input {
     /// The declared tables (and their columns) the stage reads from it; the planner
     /// checks that an upstream stage writes them ([`Stage::WRITES`]).
     pub reads: &'static [Reads],
+    /// For a role that takes several kinds and reads different tables from each: per
+    /// upstream kind, what the stage reads from an input of that kind (checked as
+    /// `reads` is, on the inputs of that kind only).
+    pub reads_by_kind: &'static [(&'static str, &'static [Reads])],
 }
 
 impl Input {
     /// One input of this role.
     pub const fn one(role: &'static str, takes: &'static [Source], doc: &'static str) -> Self {
-        Self { role, takes, count: Count::One, doc, reads: &[] }
+        Self { role, takes, count: Count::One, doc, reads: &[], reads_by_kind: &[] }
     }
 
     /// At most one input of this role.
     pub const fn optional(role: &'static str, takes: &'static [Source], doc: &'static str) -> Self {
-        Self { role, takes, count: Count::Optional, doc, reads: &[] }
+        Self { role, takes, count: Count::Optional, doc, reads: &[], reads_by_kind: &[] }
     }
 
     /// At least `min` inputs of this role.
     pub const fn many(role: &'static str, min: usize, takes: &'static [Source], doc: &'static str) -> Self {
-        Self { role, takes, count: Count::Many { min }, doc, reads: &[] }
+        Self { role, takes, count: Count::Many { min }, doc, reads: &[], reads_by_kind: &[] }
     }
 
     /// The same role, reading these columns of these declared tables.
     pub const fn reading(self, reads: &'static [Reads]) -> Self {
         Self { reads, ..self }
+    }
+
+    /// The same role, reading from an input of each listed upstream kind what is listed
+    /// beside it.
+    pub const fn reading_by_kind(self, reads_by_kind: &'static [(&'static str, &'static [Reads])]) -> Self {
+        Self { reads_by_kind, ..self }
     }
 }
 

@@ -102,14 +102,37 @@ const DISCREPANCY: Input = Input::one(
 ));
 
 /// The power studies and the engine runs on other baselines, told apart by their tables
-/// (so the role declares no reads: a power study writes no `causes`, an engine run no
-/// `power`).
+/// (a power study writes no `causes`, an engine run no `power`), each checked for what
+/// is read from its kind.
 const OTHERS: Input = Input::many(
     "others",
     1,
     &[Source::Stage("fdm.discovery_power"), Source::Stage("fdm.discrepancy")],
     "power studies (`power.parquet`) and engine runs on another baseline (`causes.parquet`), in any order",
-);
+)
+.reading_by_kind(&[("fdm.discovery_power", POWER_READS), ("fdm.discrepancy", engine_reads!(fdm))]);
+
+/// What [`PowerRow::read`] reads of a power study, any domain's.
+pub(super) const POWER_READS: &[Reads] = &[Reads {
+    table: &power::TABLE,
+    columns: &[
+        power::base,
+        power::own_causes,
+        power::effect,
+        power::noise,
+        power::strength,
+        power::draws,
+        power::wrong,
+        power::covered,
+        power::with_interval,
+        power::correct_rate,
+        power::correct_ci_lo,
+        power::correct_ci_hi,
+        power::false_alarm_rate,
+        power::false_alarm_ci_lo,
+        power::false_alarm_ci_hi,
+    ],
+}];
 
 impl Stage for DiscrepancyFdmSection {
     type Params = NoParams;

@@ -11,14 +11,14 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Table;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use tables::inkjet::control_gain;
 use tables::report::comparison;
 
 use super::discrepancy_fdm::{
-    causes_table, engine_reads, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow,
+    causes_table, engine_reads, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow, POWER_READS,
 };
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -64,7 +64,35 @@ const STUDIES: Input = Input::many(
     0,
     &[Source::Stage("inkjet.discovery_power"), Source::Stage("inkjet.control_gain")],
     "a power study (`power.parquet`) and a control study (`control_gain.parquet`), in any order",
-);
+)
+.reading_by_kind(&[("inkjet.discovery_power", POWER_READS), ("inkjet.control_gain", CONTROL_READS)]);
+
+/// What [`ControlRow::read`] reads of a control study.
+const CONTROL_READS: &[Reads] = &[Reads {
+    table: &control_gain::TABLE,
+    columns: &{
+        use control_gain as c;
+        [
+            c::effect,
+            c::controller,
+            c::strength,
+            c::desired_um,
+            c::printers,
+            c::mean_error_um,
+            c::mean_error_ci_lo,
+            c::mean_error_ci_hi,
+            c::rmsd_um,
+            c::rmsd_ci_lo,
+            c::rmsd_ci_hi,
+            c::average_height_um,
+            c::average_height_ci_lo,
+            c::average_height_ci_hi,
+            c::rmsd_vs_paper_um,
+            c::rmsd_vs_paper_ci_lo,
+            c::rmsd_vs_paper_ci_hi,
+        ]
+    },
+}];
 
 impl Stage for DiscrepancyInkjetSection {
     type Params = NoParams;

@@ -13,12 +13,13 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Table;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use tables::report::comparison;
+use tables::thermal::control_gain;
 
-use super::discrepancy_fdm::{engine_reads, Cause, GainRow, Names, Param, PowerRow};
+use super::discrepancy_fdm::{engine_reads, Cause, GainRow, Names, Param, PowerRow, POWER_READS};
 use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
 use super::{comparison_frame, Row};
 use crate::html::escape;
@@ -56,7 +57,51 @@ const STUDIES: Input = Input::many(
     0,
     &[Source::Stage("thermal.discovery_power"), Source::Stage("thermal.control_gain")],
     "a power study (`power.parquet`) and a control study (`control_gain.parquet`), in any order",
-);
+)
+.reading_by_kind(&[("thermal.discovery_power", POWER_READS), ("thermal.control_gain", CONTROL_READS)]);
+
+/// The `(mean, low, high)` columns of each score [`ControlRow::read`] reads.
+const CONTROL_TRIPLES: [[&str; 3]; 5] = {
+    use control_gain as c;
+    [
+        [c::mean_oe_pct, c::mean_oe_pct_ci_lo, c::mean_oe_pct_ci_hi],
+        [c::contour_rms_mm, c::contour_rms_mm_ci_lo, c::contour_rms_mm_ci_hi],
+        [c::contour_max_mm, c::contour_max_mm_ci_lo, c::contour_max_mm_ci_hi],
+        [c::mean_oe_pct_vs_paper, c::mean_oe_pct_vs_paper_ci_lo, c::mean_oe_pct_vs_paper_ci_hi],
+        [c::contour_rms_mm_vs_paper, c::contour_rms_mm_vs_paper_ci_lo, c::contour_rms_mm_vs_paper_ci_hi],
+    ]
+};
+
+/// What [`ControlRow::read`] reads of a control study.
+const CONTROL_READS: &[Reads] = &[Reads {
+    table: &control_gain::TABLE,
+    columns: &{
+        use control_gain as c;
+        let t = CONTROL_TRIPLES;
+        [
+            c::effect,
+            c::controller,
+            c::strength,
+            c::prints,
+            c::tau_named,
+            t[0][0],
+            t[0][1],
+            t[0][2],
+            t[1][0],
+            t[1][1],
+            t[1][2],
+            t[2][0],
+            t[2][1],
+            t[2][2],
+            t[3][0],
+            t[3][1],
+            t[3][2],
+            t[4][0],
+            t[4][1],
+            t[4][2],
+        ]
+    },
+}];
 
 impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
@@ -146,12 +191,12 @@ struct ControlRow {
 impl ControlRow {
     fn read(path: &Path) -> Result<Vec<Self>, StageError> {
         let df = read_parquet(path)?;
-        let triple = |name: &str| f64_triples(&df, [name, &format!("{name}_ci_lo"), &format!("{name}_ci_hi")], path);
-        let (effect, controller) = (strs(&df, "effect", path)?, strs(&df, "controller", path)?);
+        use control_gain as c;
+        let (effect, controller) = (strs(&df, c::effect, path)?, strs(&df, c::controller, path)?);
         let (strength, prints, named) =
-            (f64s(&df, "strength", path)?, ints(&df, "prints", path)?, ints(&df, "tau_named", path)?);
-        let (oe, rms, max) = (triple("mean_oe_pct")?, triple("contour_rms_mm")?, triple("contour_max_mm")?);
-        let (oe_vs, rms_vs) = (triple("mean_oe_pct_vs_paper")?, triple("contour_rms_mm_vs_paper")?);
+            (f64s(&df, c::strength, path)?, ints(&df, c::prints, path)?, ints(&df, c::tau_named, path)?);
+        let [oe, rms, max, oe_vs, rms_vs] = CONTROL_TRIPLES.map(|names| f64_triples(&df, names, path));
+        let (oe, rms, max, oe_vs, rms_vs) = (oe?, rms?, max?, oe_vs?, rms_vs?);
         Ok((0..df.height())
             .map(|i| Self {
                 effect: effect[i].clone(),
