@@ -279,16 +279,27 @@ fn base_label<M: Model>(model: &M, extensions: &[String]) -> String {
     std::iter::once(model.name().to_string()).chain(extensions.iter().cloned()).collect::<Vec<_>>().join(" + ")
 }
 
-/// A power study's summary (`power.parquet`): one row per effect and strength.
-pub(crate) fn power_frame(base: &str, rows: &[PowerRow]) -> Result<DataFrame, StageError> {
-    let n = rows.len();
-    let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
-    let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|r| f(r) as i64).collect::<Vec<i64>>();
+/// Whose draws a power summary's rows count: the base, the draws' noise and the causes
+/// the engine names on the base as measured (`none`).
+pub(crate) struct PowerOf<'a> {
+    pub(crate) base: &'a str,
+    pub(crate) noise: &'a str,
+    pub(crate) own_causes: &'a str,
+}
+
+/// A power study's summary (`power.parquet`): per base, in order, one row per effect
+/// and strength.
+pub(crate) fn power_frame(summaries: &[(PowerOf<'_>, Vec<PowerRow>)]) -> Result<DataFrame, StageError> {
+    let rows: Vec<(&PowerOf, &PowerRow)> =
+        summaries.iter().flat_map(|(of, rows)| rows.iter().map(move |r| (of, r))).collect();
+    let text = |f: &dyn Fn(&PowerOf) -> String| rows.iter().map(|(of, _)| f(of)).collect::<Vec<String>>();
+    let col = |f: &dyn Fn(&PowerRow) -> f64| rows.iter().map(|(_, r)| f(r)).collect::<Vec<f64>>();
+    let int = |f: &dyn Fn(&PowerRow) -> usize| rows.iter().map(|(_, r)| f(r) as i64).collect::<Vec<i64>>();
     frame(vec![
-        str_col(power::base, vec![base.to_string(); n]),
-        str_col(power::noise, vec!["virtual".to_string(); n]),
-        str_col(power::own_causes, vec!["none".to_string(); n]),
-        str_col(power::effect, rows.iter().map(|r| r.effect.to_string()).collect()),
+        str_col(power::base, text(&|of| of.base.to_string())),
+        str_col(power::noise, text(&|of| of.noise.to_string())),
+        str_col(power::own_causes, text(&|of| of.own_causes.to_string())),
+        str_col(power::effect, rows.iter().map(|(_, r)| r.effect.to_string()).collect()),
         f64_col(power::strength, col(&|r| r.strength)),
         i64_col(power::draws, int(&|r| r.draws)),
         i64_col(power::correct, int(&|r| r.correct)),

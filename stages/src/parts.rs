@@ -18,7 +18,7 @@ use polars::prelude::{DataFrame, IntoColumn, NamedFrom, PlSmallStr, Series};
 use tables::discrepancy::fdm::{power_draws, power_part};
 use tables::discrepancy::power;
 
-use crate::discrepancy_tables::power_frame;
+use crate::discrepancy_tables::{power_frame, PowerOf};
 use crate::table::{f64s, opt_bools, strs};
 
 /// The file of a unit's part in its folder (each split kind declares its part's columns
@@ -82,7 +82,8 @@ pub fn merge_study(ctx: &mut StageContext, parts: &[PathBuf], effects: &[&'stati
         })
         .collect::<Result<Vec<_>, StageError>>()?;
     let label = base.first().cloned().unwrap_or_default();
-    ctx.write_table(power::TABLE.name, &mut power_frame(&label, &summarize(&scores))?)?;
+    let of = PowerOf { base: &label, noise: "virtual", own_causes: "none" };
+    ctx.write_table(power::TABLE.name, &mut power_frame(&[(of, summarize(&scores))])?)?;
     ctx.write_table(power_draws::TABLE.name, &mut without(&all, &[power_part::covered])?)?;
     Ok(())
 }

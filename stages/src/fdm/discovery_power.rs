@@ -17,7 +17,7 @@
 
 use std::path::PathBuf;
 
-use discrepancy::power::{DrawScore, Outcome};
+use discrepancy::power::{summarize, DrawScore, Outcome};
 use discrepancy::stats::mix_seed;
 use models::fdm::discrepancy::inject::{Effect, InjectSettings};
 use models::fdm::discrepancy::power::{names, run_draw_range, Base, DrawResult, Noise, PowerDesign};
@@ -31,7 +31,7 @@ use polars::prelude::{IntoColumn, NamedFrom, Series};
 use tables::discrepancy::fdm::{power_draws, power_part};
 use tables::discrepancy::power;
 
-use crate::discrepancy_tables::study_settings;
+use crate::discrepancy_tables::{power_frame, study_settings, PowerOf};
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, LagBaseline, StartBlob};
 use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize};
@@ -167,7 +167,7 @@ impl Split for DiscoveryPowerStage {
     fn merge(&self, ctx: &mut StageContext, parts: &[PathBuf]) -> Result<(), StageError> {
         let p = DiscoveryPowerParams::from_params(&ctx.params);
         let all = read_parts(parts)?;
-        let mut power = power_rows(ctx, p.noise(), &all)?.into_frame()?;
+        let mut power = power_table(ctx, p.noise(), &all)?;
         ctx.write_table(power::TABLE.name, &mut power)?;
         let mut per_draw = without(&all, &PART_ONLY)?;
         ctx.write_table(power_draws::TABLE.name, &mut per_draw)?;
@@ -176,7 +176,11 @@ impl Split for DiscoveryPowerStage {
 }
 
 /// The power table of the stacked parts: per base, in order, its draws summarised.
-fn power_rows(ctx: &StageContext, noise: Noise, all: &polars::prelude::DataFrame) -> Result<PowerRows, StageError> {
+fn power_table(
+    ctx: &StageContext,
+    noise: Noise,
+    all: &polars::prelude::DataFrame,
+) -> Result<polars::prelude::DataFrame, StageError> {
     let bad = |what: &str, value: &str| StageError::BadInput {
         file: ctx.output_dir().join("parts"),
         location: None,
@@ -193,7 +197,7 @@ fn power_rows(ctx: &StageContext, noise: Noise, all: &polars::prelude::DataFrame
             labels.push(b);
         }
     }
-    let mut rows = PowerRows::default();
+    let mut summaries = Vec::new();
     for label in labels {
         let mut scores = Vec::new();
         for i in (0..base.len()).filter(|&i| base[i] == label) {
@@ -205,9 +209,9 @@ fn power_rows(ctx: &StageContext, noise: Noise, all: &polars::prelude::DataFrame
             });
         }
         let own_causes = &own[base.iter().position(|b| b == label).expect("a label of the rows")];
-        rows.add(label, own_causes, noise, &scores);
+        summaries.push((PowerOf { base: label, noise: noise.name(), own_causes }, summarize(&scores)));
     }
-    Ok(rows)
+    power_frame(&summaries)
 }
 
 /// The study's design from the parameters.
@@ -228,75 +232,6 @@ fn design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError
         inject: InjectSettings { smoothing_mm: p.lag.smoothing_mm, gear_period_mm: None },
         noise: p.noise(),
     })
-}
-
-/// Columns of `power.parquet` (`tables::discrepancy::power`).
-#[derive(Default)]
-struct PowerRows {
-    noise: Vec<String>,
-    base: Vec<String>,
-    own: Vec<String>,
-    effect: Vec<String>,
-    strength: Vec<f64>,
-    draws: Vec<i64>,
-    correct: Vec<i64>,
-    wrong: Vec<i64>,
-    none: Vec<i64>,
-    rate: [Vec<f64>; 3],
-    false_alarm: [Vec<f64>; 3],
-    covered: Vec<i64>,
-    with_interval: Vec<i64>,
-    coverage: [Vec<f64>; 3],
-}
-
-impl PowerRows {
-    fn add(&mut self, base: &str, own_causes: &str, noise: Noise, scores: &[DrawScore]) {
-        for row in discrepancy::power::summarize(scores) {
-            self.noise.push(noise.name().into());
-            self.base.push(base.into());
-            self.own.push(own_causes.into());
-            self.effect.push(row.effect.into());
-            self.strength.push(row.strength);
-            self.draws.push(row.draws as i64);
-            self.correct.push(row.correct as i64);
-            self.wrong.push(row.wrong as i64);
-            self.none.push(row.none as i64);
-            push3(&mut self.rate, row.correct_rate);
-            push3(&mut self.false_alarm, row.false_alarm_rate);
-            let (covered, with) = row.covered;
-            self.covered.push(covered as i64);
-            self.with_interval.push(with as i64);
-            push3(&mut self.coverage, row.coverage_rate());
-        }
-    }
-
-    fn into_frame(self) -> Result<polars::prelude::DataFrame, StageError> {
-        let [rate, rate_lo, rate_hi] = self.rate;
-        let [fa, fa_lo, fa_hi] = self.false_alarm;
-        let [cov, cov_lo, cov_hi] = self.coverage;
-        frame(vec![
-            str_col(power::base, self.base),
-            str_col(power::noise, self.noise),
-            str_col(power::own_causes, self.own),
-            str_col(power::effect, self.effect),
-            f64_col(power::strength, self.strength),
-            i64_col(power::draws, self.draws),
-            i64_col(power::correct, self.correct),
-            i64_col(power::wrong, self.wrong),
-            i64_col(power::none, self.none),
-            f64_col(power::correct_rate, rate),
-            f64_col(power::correct_ci_lo, rate_lo),
-            f64_col(power::correct_ci_hi, rate_hi),
-            f64_col(power::false_alarm_rate, fa),
-            f64_col(power::false_alarm_ci_lo, fa_lo),
-            f64_col(power::false_alarm_ci_hi, fa_hi),
-            i64_col(power::covered, self.covered),
-            i64_col(power::with_interval, self.with_interval),
-            f64_col(power::coverage_rate, cov),
-            f64_col(power::coverage_ci_lo, cov_lo),
-            f64_col(power::coverage_ci_hi, cov_hi),
-        ])
-    }
 }
 
 fn push3(columns: &mut [Vec<f64>; 3], (a, b, c): (f64, f64, f64)) {
