@@ -14,6 +14,13 @@
 //! together, and the CPU overlaps what one solve alone would leave it waiting for. A
 //! lane whose configuration is done takes the next one, so lanes idle only at the end,
 //! and only the lanes' states are live (a small working set).
+//!
+//! Known limitation: the fixed point reached depends on where the iteration starts. It
+//! starts from every line's bp3 as the data place it (the paper's step 3), and under a
+//! prior, above all a zero-mean one, a start from a neighbouring grid pair's solution
+//! often ends at a different fixed point with a lower penalised objective and a lower
+//! training SSE. So a fit with a prior is the fixed point of this start, not the best one
+//! the iteration can reach; a deterministic multi-start is the open fix.
 
 use std::borrow::Borrow;
 
