@@ -116,14 +116,16 @@ pub(crate) fn fit_on_grid(
         return Err(FitError::NotEnoughData("empty grid or λ list".into()));
     }
     let prepared = prepare_lines(lines, params)?;
-    let n_lambda = if prior.is_some() { lambdas.len() } else { 1 };
-    let configs: Vec<ChainPrior> =
-        lambdas[..n_lambda].iter().map(|&l| prior.map(|p| WeightedPrior::new(p, l))).collect();
+    // With a prior, the fit without one comes first: the solves with the prior are also
+    // started where it ends (see `chains`), as in every other grid search.
+    let (n_lambda, first) = if prior.is_some() { (lambdas.len(), 1) } else { (1, 0) };
+    let weighted = lambdas[..n_lambda].iter().map(|&l| prior.map(|p| WeightedPrior::new(p, l)));
+    let configs: Vec<ChainPrior> = std::iter::repeat_n(None, first).chain(weighted).collect();
     let outcomes: Vec<Result<GridOutcome, FitError>> = grid
         .par_iter()
         .map_init(|| Scratch::new(&prepared), |scratch, &(ra, rf)| evaluate_pair(params, ra, rf, scratch, &configs))
         .collect();
-    (0..n_lambda).map(|k| best_fit(&prepared, params, &outcomes, k, lambdas[k])).collect()
+    (0..n_lambda).map(|k| best_fit(&prepared, params, &outcomes, first + k, lambdas[k])).collect()
 }
 
 /// A measured line with what the fit derives from the data alone.
@@ -986,7 +988,7 @@ fn load_lane(
     }
 }
 
-/// The best grid pair for the `k`-th λ, turned into a fitted model.
+/// The best grid pair for configuration `k` (its prior at `lambda`), turned into a fitted model.
 fn best_fit(
     prepared: &[PreparedLine],
     params: &PiecewiseValidParams,

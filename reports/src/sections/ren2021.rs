@@ -281,8 +281,11 @@ nominal width c per printer cannot follow: this limits every method on the Taz 6
     )
 }
 
+/// The values with their sign to one decimal, and those that round to zero as `0.0`
+/// (no `-0.0` for a loss that rounds away).
 fn signed_list(values: &[f64]) -> String {
-    values.iter().map(|v| format!("{v:+.1}")).collect::<Vec<_>>().join(" and ")
+    let signed = |v: f64| if (v * 10.0).round() == 0.0 { "0.0".to_string() } else { format!("{v:+.1}") };
+    values.iter().map(|&v| signed(v)).collect::<Vec<_>>().join(" and ")
 }
 
 fn at_edge(r: f64) -> bool {
@@ -300,6 +303,11 @@ fn extremes(loo: &LooMap, printer: &str, model: &str) -> (String, String) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn signed_values_that_round_to_zero_read_0_0() {
+        assert_eq!(signed_list(&[-0.004, 14.8, -2.96, 0.04]), "0.0 and +14.8 and -3.0 and 0.0");
+    }
 
     #[test]
     fn paper_table_ii_median_is_0_045() {
