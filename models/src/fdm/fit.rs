@@ -778,14 +778,19 @@ impl<'p, L: Borrow<LineAtPair<'p>>> ChainProblem<'_, L> {
             .sum()
     }
 
+    /// The partition of line `k` under the chain of `theta` (bp3 from the model).
+    fn model_key(&self, k: usize, theta: &[f64; NP]) -> PartitionKey {
+        let lf = &self.data[k];
+        partition_key(lf, self.line(k), chain_bp3(lf, self.blob, theta))
+    }
+
     /// SSE of p2-p5 for the chain of `theta` (bp3 from the model).
     fn sse(&self, theta: &[f64; NP]) -> f64 {
         self.data
             .iter()
             .enumerate()
             .map(|(k, lf)| {
-                let ls = self.line(k);
-                let st = line_state(lf, ls, self.blob, theta, partition_key(lf, ls, chain_bp3(lf, self.blob, theta)));
+                let st = line_state(lf, self.line(k), self.blob, theta, self.model_key(k, theta));
                 lf.p2.sse(st.w1, theta[BETA])
                     + st.m3.sse(st.w3, theta[GAMMA])
                     + st.m4.sse(theta[C], 0.0)

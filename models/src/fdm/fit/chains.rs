@@ -30,8 +30,8 @@ use std::borrow::Borrow;
 
 use super::super::small_linalg::LuBatch;
 use super::{
-    chain_bp3, fixed_rows, load_lane, partition_key, within_tolerance, ChainPrior, ChainProblem, Equations, FixedRow,
-    LineAtPair, PartitionKey, WeightedPrior, C, EQUILIBRATED, NP,
+    fixed_rows, load_lane, within_tolerance, ChainPrior, ChainProblem, Equations, FixedRow, LineAtPair, PartitionKey,
+    WeightedPrior, C, EQUILIBRATED, NP,
 };
 use crate::fdm::hyperparams::PiecewiseValidParams;
 
@@ -118,8 +118,7 @@ pub(super) fn solve_chains<'p, L: Borrow<LineAtPair<'p>>>(
     keys.resize(LANES * n, (0, false));
     let with_prior = |c: &usize| configs[*c].is_some();
     let run = Run { pb, configs, tolerance: p.tolerance, max_iterations: p.max_iterations, sse_p1 };
-    run.lanes((0..configs.len()).filter(|c| !with_prior(c)), None, (batch, data, lanes, keys), out);
-    run.lanes((0..configs.len()).filter(with_prior), None, (batch, data, lanes, keys), out);
+    run.lanes(0..configs.len(), None, (batch, data, lanes, keys), out);
     // The second start: the partition of the first solution without a prior, unless it
     // is the first start (which gives the same solves).
     let Some(anchor) = (0..configs.len()).find(|c| !with_prior(c)).filter(|&c| out[c].1.is_finite()) else {
@@ -127,9 +126,7 @@ pub(super) fn solve_chains<'p, L: Borrow<LineAtPair<'p>>>(
     };
     let theta = out[anchor].0;
     start.clear();
-    start.extend(
-        pb.data.iter().enumerate().map(|(k, lf)| partition_key(lf, pb.line(k), chain_bp3(lf, pb.blob, &theta))),
-    );
+    start.extend((0..n).map(|k| pb.model_key(k, &theta)));
     if start[..] == *pb.initial {
         return;
     }
@@ -218,8 +215,8 @@ fn with_p1((theta, sse): ([f64; NP], f64), sse_p1: f64) -> ([f64; NP], f64) {
 impl ChainState {
     /// The next of the `waiting` configurations before its first iteration (`c` at its
     /// initial value, the partition `start` in `keys`, the initial one if `None`), if any
-    /// is left. A configuration
-    /// whose fixed rows already make the LU solve fail is [`SINGULAR`] in `out` at once.
+    /// is left. A configuration whose fixed rows already make the LU solve fail is
+    /// [`SINGULAR`] in `out` at once.
     fn next<L>(
         (waiting, configs): (&mut impl Iterator<Item = usize>, &[ChainPrior]),
         pb: &ChainProblem<L>,
@@ -281,8 +278,8 @@ fn advance<'p, L: Borrow<LineAtPair<'p>>>(
     let it = state.it;
     state.it += 1;
     let mut moved = false;
-    for (k, (lf, key)) in pb.data.iter().zip(keys.iter_mut()).enumerate() {
-        let new = partition_key(lf, pb.line(k), chain_bp3(lf, pb.blob, &solved));
+    for (k, key) in keys.iter_mut().enumerate() {
+        let new = pb.model_key(k, &solved);
         moved |= new != *key;
         *key = new;
     }
@@ -376,8 +373,8 @@ mod tests {
             pin_unidentified(&mut a, &mut b, &theta);
             let Some(solved) = lu_solve(&a, &b) else { return (SINGULAR, End::Singular) };
             let mut moved = false;
-            for (k, (lf, key)) in pb.data.iter().zip(keys.iter_mut()).enumerate() {
-                let new = partition_key(lf, pb.line(k), chain_bp3(lf, pb.blob, &solved));
+            for (k, key) in keys.iter_mut().enumerate() {
+                let new = pb.model_key(k, &solved);
                 moved |= new != *key;
                 *key = new;
             }
@@ -486,11 +483,10 @@ mod tests {
                         // Without a prior from the initial partition; with one from
                         // where the solve without ends.
                         let (unweighted, _) = one_at_a_time(&pb, &None, &params, None);
-                        let anchor: Option<Vec<PartitionKey>> = unweighted.1.is_finite().then(|| {
-                            let keys = pb.data.iter().enumerate();
-                            keys.map(|(k, lf)| partition_key(lf, pb.line(k), chain_bp3(lf, blob, &unweighted.0)))
-                                .collect()
-                        });
+                        let anchor: Option<Vec<PartitionKey>> = unweighted
+                            .1
+                            .is_finite()
+                            .then(|| (0..pb.data.len()).map(|k| pb.model_key(k, &unweighted.0)).collect());
                         let anchor = anchor.filter(|a| a[..] != *pb.initial);
                         for (prior, got) in configs.iter().zip(&out) {
                             let (mut solved, mut end) = one_at_a_time(&pb, prior, &params, None);
