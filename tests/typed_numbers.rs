@@ -2,7 +2,7 @@
 //! reader sees is computed by a stage and names its source, and a doc describes a
 //! mechanism, not a figure that goes stale when the code changes. This test greps for
 //! the shapes a typed-in measurement takes (a result tied to a seed, a signed change in
-//! per cent, a range of a measured quantity, "measured on … N") in every crate's module
+//! per cent, a range of a measured quantity (`N-M mm`, `N to M mm`), "measured on … N") in every crate's module
 //! docs (`//!`) and in the report sections' code (their prose is string literals).
 //! What it allows is listed below, each with why it is not a measurement.
 
@@ -80,9 +80,11 @@ fn measured_shape(line: &str) -> Option<String> {
         if signed && next == Some(&'%') {
             return Some(chars[i - 1..end].iter().collect::<String>() + " %");
         }
-        // A range: N-M unit.
-        if end + 1 < chars.len() && (chars[end] == '-' || chars[end] == '–') {
-            if let Some(end2) = number_at(end + 1) {
+        // A range: N-M unit, or N to M unit.
+        let to = chars[end..].starts_with(&[' ', 't', 'o', ' ']);
+        let second = if to { end + 4 } else { end + 1 };
+        if second < chars.len() && (to || chars[end] == '-' || chars[end] == '–') {
+            if let Some(end2) = number_at(second) {
                 if unit_at(end2) {
                     let unit: String = chars[end2..]
                         .iter()
@@ -151,6 +153,7 @@ fn the_shapes_of_a_typed_in_measurement_are_recognised() {
         "//! 0.024-0.029 mm against the floor",
         "//! 45-53 frames skipped",
         "//! measured on the printer: 0.23 px",
+        "widths vary from 0.58 to 0.90 mm between conditions",
     ] {
         assert!(measured_shape(line).is_some(), "{line}");
     }
@@ -161,6 +164,7 @@ fn the_shapes_of_a_typed_in_measurement_are_recognised() {
         "//! the seed of the spec",
         "//! paper: 106.75 % → 31.73 %",
         "//! ΔV ∈ [−2, 4] mm/s",
+        "//! from 1 to 3 lines",
     ] {
         assert!(measured_shape(line).is_none(), "{line}: {:?}", measured_shape(line));
     }

@@ -272,7 +272,7 @@ own choices where the paper is silent (1 mm smoothing before locating bp1, Gauss
 the extrusion lag that the piecewise form does not contain shows through (the lag-model baseline has it, but a single time constant mis-sizes the end bulge on most lines).</p>\n\
 <p>Transfer: with 1-2 Taz 6 lines the paper's zero-mean prior improves the median by at most {:.1} % and the source-centred prior by at most {:.1} % (paper: up to 24 %); \
 at n = 7-8 the improvements are {} % (zero mean) and {} % (source mean) where the paper reports the gap closing. The zero-mean prior shrinks the nominal width c toward 0 \
-when λ is chosen on very few lines; centring the prior on the source estimates avoids that. The Taz 6's steady widths vary from 0.58 to 0.90 mm between conditions, which one \
+when λ is chosen on very few lines; centring the prior on the source estimates avoids that. The Taz 6's steady widths differ between conditions, which one \
 nominal width c per printer cannot follow: this limits every method on the Taz 6.</p>\n",
         best_imp("transfer_zero_mean"),
         best_imp("transfer_source_mean"),
