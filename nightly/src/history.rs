@@ -47,14 +47,109 @@ impl Table {
     /// Every table, in the order an append writes them (the marker last).
     pub const ALL: [Table; 4] = [Table::Runs, Table::Stages, Table::Numbers, Table::Nights];
 
+    /// The table's declaration: its folder name and its columns.
+    pub fn declaration(self) -> &'static pipeline::schema::Table {
+        match self {
+            Table::Runs => &runs::TABLE,
+            Table::Stages => &stages::TABLE,
+            Table::Numbers => &numbers::TABLE,
+            Table::Nights => &nights::TABLE,
+        }
+    }
+
     /// The table's folder name.
     pub fn name(self) -> &'static str {
-        match self {
-            Table::Runs => "runs",
-            Table::Stages => "stages",
-            Table::Numbers => "numbers",
-            Table::Nights => "nights",
-        }
+        self.declaration().name
+    }
+}
+
+pipeline::table! {
+    /// One row per spec and night.
+    pub mod runs = "runs" {
+        /// The night (`nights.night`).
+        night: Str "",
+        /// The spec's run name.
+        run: Str "",
+        /// The spec file, relative to the repository.
+        spec_file: Str "",
+        /// Whether the run succeeded.
+        ok: Bool "",
+        /// Its error (empty when ok).
+        error: Str "",
+        /// Wall time of the whole run.
+        wall_time_s: Float64 "s",
+    }
+}
+
+pipeline::table! {
+    /// One row per stage and night.
+    pub mod stages = "stages" {
+        /// The night (`nights.night`).
+        night: Str "",
+        /// The spec's run name.
+        run: Str "",
+        /// The stage's name in its spec.
+        stage: Str "",
+        /// The stage kind.
+        kind: Str "",
+        /// The kind's version.
+        kind_version: Int64 "1",
+        /// `run` (a nightly forces every stage).
+        status: Str "",
+        /// Its wall time.
+        wall_time_s: Float64 "s",
+        /// Its CPU time, user + system over all threads (null where not measured).
+        cpu_time_s: Float64 "s",
+        /// Its peak resident memory (null where the system does not report it).
+        peak_rss_bytes: Int64 "B",
+        /// Rows it wrote.
+        rows: Int64 "1",
+    }
+}
+
+pipeline::table! {
+    /// One row per compared number and night.
+    pub mod numbers = "numbers" {
+        /// The night (`nights.night`).
+        night: Str "",
+        /// The spec's run name.
+        run: Str "",
+        /// The stage that wrote it.
+        stage: Str "",
+        /// Its file in the stage folder.
+        table: Str "",
+        /// What it is: `section/item` of a comparison, `KEY/strength=S/correct_rate` of a power table, `KEY/round=R/verdict`.
+        metric: Str "",
+        /// The paper's value (null where the paper has none).
+        paper_value: Float64 "",
+        /// Our value (null for a verdict).
+        value: Float64 "",
+        /// The verdict: `named MECHANISM`, `none`, `too_few_groups` (null for a number).
+        text: Str "",
+        /// The value's unit.
+        unit: Str "",
+        /// Where it comes from.
+        source: Str "",
+    }
+}
+
+pipeline::table! {
+    /// One row per night: the commit marker, written last.
+    pub mod nights = "nights" {
+        /// The night: its start (UTC) and commit, `YYYYMMDDTHHMMSSZ-COMMIT`.
+        night: Str "",
+        /// Its start, Unix time.
+        started_unix_s: Int64 "s",
+        /// Its end, Unix time.
+        finished_unix_s: Int64 "s",
+        /// The commit it ran.
+        commit: Str "",
+        /// The machine.
+        host: Str "",
+        /// Its cores.
+        cores: Int64 "1",
+        /// The amrepro version.
+        tool_version: Str "",
     }
 }
 
@@ -109,6 +204,7 @@ pub fn append(dir: &Path, night: &Night) -> Result<PathBuf, HistoryError> {
             Table::Nights => nights_frame(&night.info),
         }
         .map_err(|source| StageError::Table { path: path.clone(), source })?;
+        table.declaration().check_frame(&frame).map_err(StageError::Declaration)?;
         write_parquet(&path, &mut frame, &meta)?;
         marker = path;
     }
@@ -200,8 +296,12 @@ fn text(name: &str, values: impl Iterator<Item = String>) -> Column {
     Series::new(name.into(), values.collect::<Vec<String>>()).into_column()
 }
 
+/// Every table's first column, the night to join on (the same name in each declaration;
+/// a test checks it).
+const NIGHT: &str = nights::night;
+
 fn night_column(night: &Night, rows: usize) -> Column {
-    text("night", std::iter::repeat_n(night.info.night.clone(), rows))
+    text(NIGHT, std::iter::repeat_n(night.info.night.clone(), rows))
 }
 
 fn frame(columns: Vec<Column>) -> Result<DataFrame, polars::error::PolarsError> {
@@ -212,26 +312,29 @@ fn frame(columns: Vec<Column>) -> Result<DataFrame, polars::error::PolarsError> 
 fn nights_frame(info: &NightInfo) -> Result<DataFrame, polars::error::PolarsError> {
     let one = |name: &str, v: &str| text(name, std::iter::once(v.to_string()));
     frame(vec![
-        one("night", &info.night),
-        Series::new("started_unix_s".into(), [info.started_unix_s]).into_column(),
-        Series::new("finished_unix_s".into(), [info.finished_unix_s]).into_column(),
-        one("commit", &info.commit),
-        one("host", &info.host),
-        Series::new("cores".into(), [info.cores]).into_column(),
-        one("tool_version", &info.tool_version),
+        one(nights::night, &info.night),
+        Series::new(nights::started_unix_s.into(), [info.started_unix_s]).into_column(),
+        Series::new(nights::finished_unix_s.into(), [info.finished_unix_s]).into_column(),
+        one(nights::commit, &info.commit),
+        one(nights::host, &info.host),
+        Series::new(nights::cores.into(), [info.cores]).into_column(),
+        one(nights::tool_version, &info.tool_version),
     ])
 }
 
 fn read_nights(path: &Path) -> Result<Vec<NightInfo>, StageError> {
     let df = read_parquet(path)?;
     let (night, commit, host, tool) = (
-        strs(&df, "night", path)?,
-        strs(&df, "commit", path)?,
-        strs(&df, "host", path)?,
-        strs(&df, "tool_version", path)?,
+        strs(&df, nights::night, path)?,
+        strs(&df, nights::commit, path)?,
+        strs(&df, nights::host, path)?,
+        strs(&df, nights::tool_version, path)?,
     );
-    let (started, finished, cores) =
-        (ints(&df, "started_unix_s", path)?, ints(&df, "finished_unix_s", path)?, ints(&df, "cores", path)?);
+    let (started, finished, cores) = (
+        ints(&df, nights::started_unix_s, path)?,
+        ints(&df, nights::finished_unix_s, path)?,
+        ints(&df, nights::cores, path)?,
+    );
     let date = date_of_partition(path)?;
     Ok((0..df.height())
         .map(|i| NightInfo {
@@ -260,18 +363,22 @@ fn runs_frame(night: &Night) -> Result<DataFrame, polars::error::PolarsError> {
     let rows = &night.runs;
     frame(vec![
         night_column(night, rows.len()),
-        text("run", rows.iter().map(|r| r.run.clone())),
-        text("spec_file", rows.iter().map(|r| r.spec_file.clone())),
-        Series::new("ok".into(), rows.iter().map(|r| r.ok).collect::<Vec<bool>>()).into_column(),
-        text("error", rows.iter().map(|r| r.error.clone())),
-        Series::new("wall_time_s".into(), rows.iter().map(|r| r.wall_time_s).collect::<Vec<f64>>()).into_column(),
+        text(runs::run, rows.iter().map(|r| r.run.clone())),
+        text(runs::spec_file, rows.iter().map(|r| r.spec_file.clone())),
+        Series::new(runs::ok.into(), rows.iter().map(|r| r.ok).collect::<Vec<bool>>()).into_column(),
+        text(runs::error, rows.iter().map(|r| r.error.clone())),
+        Series::new(runs::wall_time_s.into(), rows.iter().map(|r| r.wall_time_s).collect::<Vec<f64>>()).into_column(),
     ])
 }
 
 fn read_runs(df: &DataFrame, path: &Path) -> Result<Vec<RunRow>, StageError> {
-    let (run, spec, ok, error) =
-        (strs(df, "run", path)?, strs(df, "spec_file", path)?, bools(df, "ok", path)?, strs(df, "error", path)?);
-    let wall = opt_f64s(df, "wall_time_s", path)?;
+    let (run, spec, ok, error) = (
+        strs(df, runs::run, path)?,
+        strs(df, runs::spec_file, path)?,
+        bools(df, runs::ok, path)?,
+        strs(df, runs::error, path)?,
+    );
+    let wall = opt_f64s(df, runs::wall_time_s, path)?;
     Ok((0..df.height())
         .map(|i| RunRow {
             run: run[i].clone(),
@@ -293,24 +400,31 @@ fn stages_frame(night: &Night) -> Result<DataFrame, polars::error::PolarsError> 
     };
     frame(vec![
         night_column(night, rows.len()),
-        text("run", rows.iter().map(|r| r.run.clone())),
-        text("stage", rows.iter().map(|r| r.stage.clone())),
-        text("kind", rows.iter().map(|r| r.kind.clone())),
-        i64s("kind_version", |r| Some(r.kind_version)),
-        text("status", rows.iter().map(|r| r.status.clone())),
-        f64s("wall_time_s", |r| Some(r.wall_time_s)),
-        f64s("cpu_time_s", |r| r.cpu_time_s),
-        i64s("peak_rss_bytes", |r| r.peak_rss_bytes),
-        i64s("rows", |r| Some(r.rows)),
+        text(stages::run, rows.iter().map(|r| r.run.clone())),
+        text(stages::stage, rows.iter().map(|r| r.stage.clone())),
+        text(stages::kind, rows.iter().map(|r| r.kind.clone())),
+        i64s(stages::kind_version, |r| Some(r.kind_version)),
+        text(stages::status, rows.iter().map(|r| r.status.clone())),
+        f64s(stages::wall_time_s, |r| Some(r.wall_time_s)),
+        f64s(stages::cpu_time_s, |r| r.cpu_time_s),
+        i64s(stages::peak_rss_bytes, |r| r.peak_rss_bytes),
+        i64s(stages::rows, |r| Some(r.rows)),
     ])
 }
 
 fn read_stages(df: &DataFrame, path: &Path) -> Result<Vec<StageRow>, StageError> {
-    let (run, stage, kind, status) =
-        (strs(df, "run", path)?, strs(df, "stage", path)?, strs(df, "kind", path)?, strs(df, "status", path)?);
-    let (version, rows) = (ints(df, "kind_version", path)?, ints(df, "rows", path)?);
-    let (wall, cpu, peak) =
-        (opt_f64s(df, "wall_time_s", path)?, opt_f64s(df, "cpu_time_s", path)?, opt_ints(df, "peak_rss_bytes", path)?);
+    let (run, stage, kind, status) = (
+        strs(df, stages::run, path)?,
+        strs(df, stages::stage, path)?,
+        strs(df, stages::kind, path)?,
+        strs(df, stages::status, path)?,
+    );
+    let (version, rows) = (ints(df, stages::kind_version, path)?, ints(df, stages::rows, path)?);
+    let (wall, cpu, peak) = (
+        opt_f64s(df, stages::wall_time_s, path)?,
+        opt_f64s(df, stages::cpu_time_s, path)?,
+        opt_ints(df, stages::peak_rss_bytes, path)?,
+    );
     Ok((0..df.height())
         .map(|i| StageRow {
             run: run[i].clone(),
@@ -333,24 +447,32 @@ fn numbers_frame(night: &Night) -> Result<DataFrame, polars::error::PolarsError>
     };
     frame(vec![
         night_column(night, rows.len()),
-        text("run", rows.iter().map(|r| r.run.clone())),
-        text("stage", rows.iter().map(|r| r.stage.clone())),
-        text("table", rows.iter().map(|r| r.table.clone())),
-        text("metric", rows.iter().map(|r| r.metric.clone())),
-        f64s("paper_value", |r| r.paper_value),
-        f64s("value", |r| r.value),
-        Series::new("text".into(), rows.iter().map(|r| r.text.clone()).collect::<Vec<Option<String>>>()).into_column(),
-        text("unit", rows.iter().map(|r| r.unit.clone())),
-        text("source", rows.iter().map(|r| r.source.clone())),
+        text(numbers::run, rows.iter().map(|r| r.run.clone())),
+        text(numbers::stage, rows.iter().map(|r| r.stage.clone())),
+        text(numbers::table, rows.iter().map(|r| r.table.clone())),
+        text(numbers::metric, rows.iter().map(|r| r.metric.clone())),
+        f64s(numbers::paper_value, |r| r.paper_value),
+        f64s(numbers::value, |r| r.value),
+        Series::new(numbers::text.into(), rows.iter().map(|r| r.text.clone()).collect::<Vec<Option<String>>>())
+            .into_column(),
+        text(numbers::unit, rows.iter().map(|r| r.unit.clone())),
+        text(numbers::source, rows.iter().map(|r| r.source.clone())),
     ])
 }
 
 fn read_numbers(df: &DataFrame, path: &Path) -> Result<Vec<NumberRow>, StageError> {
-    let (run, stage, table, metric) =
-        (strs(df, "run", path)?, strs(df, "stage", path)?, strs(df, "table", path)?, strs(df, "metric", path)?);
-    let (paper, value, verdict) =
-        (opt_f64s(df, "paper_value", path)?, opt_f64s(df, "value", path)?, opt_strs(df, "text", path)?);
-    let (unit, source) = (strs(df, "unit", path)?, strs(df, "source", path)?);
+    let (run, stage, table, metric) = (
+        strs(df, numbers::run, path)?,
+        strs(df, numbers::stage, path)?,
+        strs(df, numbers::table, path)?,
+        strs(df, numbers::metric, path)?,
+    );
+    let (paper, value, verdict) = (
+        opt_f64s(df, numbers::paper_value, path)?,
+        opt_f64s(df, numbers::value, path)?,
+        opt_strs(df, numbers::text, path)?,
+    );
+    let (unit, source) = (strs(df, numbers::unit, path)?, strs(df, numbers::source, path)?);
     Ok((0..df.height())
         .map(|i| NumberRow {
             run: run[i].clone(),
@@ -409,6 +531,27 @@ pub(crate) mod tests {
                 number("table_ii/rmse", Some(0.1), Some(value), None),
                 number("taz5/round=1", None, None, Some("named width_cap")),
             ],
+        }
+    }
+
+    #[test]
+    fn every_table_starts_with_the_night_and_the_guide_lists_its_columns() {
+        let guide = include_str!("../../docs/NIGHTLY.md");
+        for table in Table::ALL {
+            let declared = table.declaration();
+            assert_eq!(declared.columns[0].name, NIGHT, "{}", declared.name);
+            let row = guide
+                .lines()
+                .find(|l| l.starts_with(&format!("| `{}` |", declared.name)))
+                .unwrap_or_else(|| panic!("docs/NIGHTLY.md has no row for `{}`", declared.name));
+            for column in declared.columns {
+                assert!(
+                    row.contains(&format!("`{}`", column.name)),
+                    "docs/NIGHTLY.md: `{}` lacks `{}`",
+                    declared.name,
+                    column.name
+                );
+            }
         }
     }
 

@@ -72,36 +72,21 @@ const CONTROL_TRIPLES: [[&str; 3]; 5] = {
     ]
 };
 
-/// What [`ControlRow::read`] reads of a control study.
-const CONTROL_READS: &[Reads] = &[Reads {
-    table: &control_gain::TABLE,
-    columns: &{
-        use control_gain as c;
-        let t = CONTROL_TRIPLES;
-        [
-            c::effect,
-            c::controller,
-            c::strength,
-            c::prints,
-            c::tau_named,
-            t[0][0],
-            t[0][1],
-            t[0][2],
-            t[1][0],
-            t[1][1],
-            t[1][2],
-            t[2][0],
-            t[2][1],
-            t[2][2],
-            t[3][0],
-            t[3][1],
-            t[3][2],
-            t[4][0],
-            t[4][1],
-            t[4][2],
-        ]
-    },
-}];
+/// What [`ControlRow::read`] reads of a control study: its five describing columns,
+/// then every score's triple of [`CONTROL_TRIPLES`] in order.
+const CONTROL_READS: &[Reads] = &[Reads { table: &control_gain::TABLE, columns: &control_columns() }];
+
+const fn control_columns() -> [&'static str; 5 + 3 * CONTROL_TRIPLES.len()] {
+    use control_gain as c;
+    let head = [c::effect, c::controller, c::strength, c::prints, c::tau_named];
+    let mut columns = [""; 5 + 3 * CONTROL_TRIPLES.len()];
+    let mut k = 0;
+    while k < columns.len() {
+        columns[k] = if k < head.len() { head[k] } else { CONTROL_TRIPLES[(k - head.len()) / 3][(k - head.len()) % 3] };
+        k += 1;
+    }
+    columns
+}
 
 impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
