@@ -139,7 +139,7 @@ impl Stage for Lu2015Section {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.lu2015",
-        version: 2,
+        version: 3,
         summary: "Paper 002 vs ours: cylinder (Figs 11-12), cuboid (Table II, 3 and 4 layers), exact recovery (Sec. IV-C), pipe junction edge deformation (Figs 13-15), model residuals on virtual scans per effect → section.html, comparison.parquet",
         implements: "paper 002 Figs 11-15, Table II, Sec. IV-C, Sec. V-D-1",
         inputs: &[SUMMARY, RECOVERY, EDGE_DEFORMATION, SCAN_RESIDUALS],

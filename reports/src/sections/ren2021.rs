@@ -14,7 +14,7 @@ use pipeline::params::NoParams;
 use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::fdm::{loo, transfer_cv};
+use tables::fdm::{loo, loo_predictions, transfer_cv};
 use tables::report::comparison;
 
 use models::stats::finite_median;
@@ -32,10 +32,22 @@ const LOO: Input = Input::one(
     &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")],
     "the held-out RMSE per printer, model and condition (`loo.parquet`)",
 )
-.reading(&[Reads {
-    table: &loo::TABLE,
-    columns: &[loo::printer, loo::model, loo::condition, loo::rmse_mm, loo::r_a, loo::r_f],
-}]);
+.reading(&[
+    Reads {
+        table: &loo::TABLE,
+        columns: &[loo::printer, loo::model, loo::condition, loo::rmse_mm, loo::r_a, loo::r_f],
+    },
+    Reads {
+        table: &loo_predictions::TABLE,
+        columns: &[
+            loo_predictions::printer,
+            loo_predictions::condition,
+            loo_predictions::model,
+            loo_predictions::position_mm,
+            loo_predictions::measured_width_mm,
+        ],
+    },
+]);
 
 /// The transfer learning beside Fig. 9.
 const TRANSFER: Input = Input::one(
@@ -71,7 +83,7 @@ impl Stage for Ren2021Section {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.ren2021",
-        version: 1,
+        version: 2,
         summary: "Paper 000 vs ours: Table II and Fig. 9 side by side, with a paragraph on the differences → section.html, comparison.parquet",
         implements: "paper 000 Table II, Fig. 9, Sec. IV",
         inputs: &[LOO, TRANSFER],
@@ -81,13 +93,14 @@ impl Stage for Ren2021Section {
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
         let loo = read_loo(&ctx.input(&LOO).dir.join(loo::TABLE.file()))?;
+        let steady = steady_widths(&ctx.input(&LOO).dir.join(loo_predictions::TABLE.file()), "taz6")?;
         let medians = transfer_medians(&ctx.input(&TRANSFER).dir.join(transfer_cv::TABLE.file()))?;
         let (loo_rows, loo_html) = table_ii(&loo);
         let (fig9_rows, fig9_html) = fig9(&medians);
         let mut html = String::from("<h3>Paper 000 vs ours</h3>\n");
         html += &loo_html;
         html += &fig9_html;
-        html += &discussion(&loo, &medians);
+        html += &discussion(&loo, &medians, &steady);
         let rows: Vec<Row> = loo_rows.into_iter().chain(fig9_rows).collect();
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
@@ -106,6 +119,35 @@ fn read_loo(path: &Path) -> Result<LooMap, StageError> {
 }
 
 /// Median held-out RMSE per (method, n_train).
+/// Each measured line's steady width on `printer`: the median measured width over the
+/// middle half of the line's length (where every Table I condition cruises), by
+/// condition, read from the held-out predictions' measured widths (one model's rows,
+/// as every model lists the same samples).
+fn steady_widths(path: &Path, printer: &str) -> Result<BTreeMap<String, f64>, StageError> {
+    let df = read_parquet(path)?;
+    let (printers, conditions, models) = (
+        strs(&df, loo_predictions::printer, path)?,
+        strs(&df, loo_predictions::condition, path)?,
+        strs(&df, loo_predictions::model, path)?,
+    );
+    let (x, w) = (f64s(&df, loo_predictions::position_mm, path)?, f64s(&df, loo_predictions::measured_width_mm, path)?);
+    let mut lines: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let first_model = (0..df.height()).find(|&i| printers[i] == printer).map(|i| models[i].clone());
+    for i in (0..df.height()).filter(|&i| printers[i] == printer && Some(&models[i]) == first_model.as_ref()) {
+        lines.entry(conditions[i].clone()).or_default().push((x[i], w[i]));
+    }
+    Ok(lines
+        .into_iter()
+        .map(|(condition, samples)| {
+            let (lo, hi) =
+                samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| (a.min(s.0), b.max(s.0)));
+            let (from, to) = (lo + 0.25 * (hi - lo), lo + 0.75 * (hi - lo));
+            let middle = samples.iter().filter(|s| s.0 >= from && s.0 <= to).map(|s| s.1);
+            (condition, finite_median(middle))
+        })
+        .collect())
+}
+
 fn transfer_medians(path: &Path) -> Result<BTreeMap<(String, i64), f64>, StageError> {
     let df = read_parquet(path)?;
     let method = strs(&df, transfer_cv::method, path)?;
@@ -254,7 +296,7 @@ fn fig9(medians: &BTreeMap<(String, i64), f64>) -> (Vec<Row>, String) {
     (rows, html)
 }
 
-fn discussion(loo: &LooMap, medians: &BTreeMap<(String, i64), f64>) -> String {
+fn discussion(loo: &LooMap, medians: &BTreeMap<(String, i64), f64>, taz6_steady: &BTreeMap<String, f64>) -> String {
     let summary = loo_summary(loo);
     let ours_median = summary[0].2;
     let (worst, best) = extremes(loo, "taz5", "piecewise");
@@ -263,6 +305,16 @@ fn discussion(loo: &LooMap, medians: &BTreeMap<(String, i64), f64>) -> String {
     let best_imp =
         |m: &str| [1, 2].iter().filter_map(|n| improvement_pct(medians, m, *n)).fold(f64::NEG_INFINITY, f64::max);
     let late_imp = |m: &str| [7, 8].iter().filter_map(|n| improvement_pct(medians, m, *n)).collect::<Vec<_>>();
+    let steady: Vec<f64> = taz6_steady.values().copied().filter(|w| w.is_finite()).collect();
+    let (lo, hi) = steady.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &w| (a.min(w), b.max(w)));
+    let steady_range = if steady.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (the median over the middle half of each line runs from {lo:.2} to {hi:.2} mm over its {} lines; fdm/loo_predictions.parquet)",
+            steady.len()
+        )
+    };
     format!(
         "<h4>Where and why ours differs</h4>\n<p>On the same measured Taz 5 lines our leave-one-out median RMSE is {ours_median:.3} mm against the paper's 0.045 mm; \
 our worst line is {worst} (paper: S800F9000, 150 mm/s) and our best {best} (paper: S400F3000, 50 mm/s). Our fit uses nothing of the held-out line but its G-code kinematics \
@@ -272,7 +324,7 @@ own choices where the paper is silent (1 mm smoothing before locating bp1, Gauss
 the extrusion lag that the piecewise form does not contain shows through (the lag-model baseline has it, but a single time constant mis-sizes the end bulge on most lines).</p>\n\
 <p>Transfer: with 1-2 Taz 6 lines the paper's zero-mean prior improves the median by at most {:.1} % and the source-centred prior by at most {:.1} % (paper: up to 24 %); \
 at n = 7-8 the improvements are {} % (zero mean) and {} % (source mean) where the paper reports the gap closing. The zero-mean prior shrinks the nominal width c toward 0 \
-when λ is chosen on very few lines; centring the prior on the source estimates avoids that. The Taz 6's steady widths differ between conditions, which one \
+when λ is chosen on very few lines; centring the prior on the source estimates avoids that. The Taz 6's steady widths differ between conditions{steady_range}, which one \
 nominal width c per printer cannot follow: this limits every method on the Taz 6.</p>\n",
         best_imp("transfer_zero_mean"),
         best_imp("transfer_source_mean"),
@@ -303,6 +355,45 @@ fn extremes(loo: &LooMap, printer: &str, model: &str) -> (String, String) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::figures::test_util::write_declared;
+    use polars::prelude::df;
+
+    #[test]
+    fn a_steady_width_is_the_median_over_the_middle_half_of_its_line() {
+        // Line A of taz6: widths 1..=9 at 0..=8 mm, whose middle half (2-6 mm) has
+        // median 5; line B rises then falls, its middle 0.7, 0.9, 0.8, 0.8, 0.7 → 0.8. Another
+        // printer's and another model's rows are not read.
+        let x: Vec<f64> = (0..9).map(f64::from).collect();
+        let a: Vec<f64> = (1..=9).map(f64::from).collect();
+        let b = [0.1, 0.2, 0.7, 0.9, 0.8, 0.8, 0.7, 0.2, 0.1];
+        let lines = [
+            ("taz6", "A", "lag", &a[..]),
+            ("taz6", "B", "lag", &b[..]),
+            ("taz6", "A", "piecewise", &b[..]),
+            ("taz5", "A", "lag", &b[..]),
+        ];
+        let rows: Vec<(&str, &str, &str, f64, f64)> = lines
+            .iter()
+            .flat_map(|&(printer, condition, model, widths)| {
+                x.iter().zip(widths).map(move |(&xi, &wi)| (printer, condition, model, xi, wi))
+            })
+            .collect();
+        let frame = df!(
+            loo_predictions::printer => rows.iter().map(|r| r.0).collect::<Vec<_>>(),
+            loo_predictions::condition => rows.iter().map(|r| r.1).collect::<Vec<_>>(),
+            loo_predictions::model => rows.iter().map(|r| r.2).collect::<Vec<_>>(),
+            loo_predictions::position_mm => rows.iter().map(|r| r.3).collect::<Vec<_>>(),
+            loo_predictions::measured_width_mm => rows.iter().map(|r| r.4).collect::<Vec<_>>(),
+            loo_predictions::predicted_width_mm => vec![0.0; rows.len()],
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        write_declared(dir.path(), &loo_predictions::TABLE, frame);
+        let steady = steady_widths(&dir.path().join(loo_predictions::TABLE.file()), "taz6").unwrap();
+        assert_eq!(steady.len(), 2);
+        assert_eq!((steady["A"], steady["B"]), (5.0, 0.8));
+        assert!(steady_widths(&dir.path().join(loo_predictions::TABLE.file()), "taz7").unwrap().is_empty());
+    }
 
     #[test]
     fn signed_values_that_round_to_zero_read_0_0() {
