@@ -84,7 +84,7 @@ impl Stage for TransferMatrixFigure {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_transfer_matrix",
-        version: 1,
+        version: 2,
         summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg",
         implements: "paper 000 Fig. 9 over several printers",
         inputs: &[MATRIX],
@@ -148,7 +148,7 @@ fn draw_panel<DB: DrawingBackend>(
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let n_max = cells.iter().map(|c| c.n_train).max().unwrap_or(1) as f64;
     // Head room above the data for the legend (upper left, where n is small).
-    let data_top = cells.iter().map(|c| c.ci_pct.1.max(c.improvement_pct)).fold(10.0, f64::max).min(100.0);
+    let data_top = drawn_top_pct(cells).clamp(10.0, 100.0);
     let top = data_top + LEGEND_ROOM * (data_top - FLOOR_PCT);
     let y = |v: f64| v.max(FLOOR_PCT);
     let mut chart = ChartBuilder::on(area)
@@ -200,6 +200,18 @@ fn draw_panel<DB: DrawingBackend>(
         }))?;
     }
     draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// The highest value a panel draws: the single-source lines (source-centred and
+/// guarded), the co-learning line and its intervals' tops; not the methods it leaves
+/// out (the zero-mean prior) nor the intervals it does not draw.
+fn drawn_top_pct(cells: &[Cell]) -> f64 {
+    let drawn = cells.iter().filter_map(|c| match c.method.as_str() {
+        "transfer_source_mean" | "guarded" if !c.sources.contains('+') => Some(c.improvement_pct),
+        "co_learning" => Some(c.improvement_pct.max(c.ci_pct.1)),
+        _ => None,
+    });
+    drawn.filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// `(n, improvement)` of one single-source method, ascending in `n`.
@@ -261,5 +273,26 @@ mod tests {
         assert_drawn(&stem);
         write_declared(dir, &t::TABLE, table.head(Some(0)));
         assert!(load(dir).is_err());
+    }
+
+    #[test]
+    fn the_axis_top_is_the_highest_value_drawn() {
+        let cell = |sources: &str, method: &str, improvement_pct: f64, ci_hi: f64| Cell {
+            sources: sources.into(),
+            n_train: 2,
+            method: method.into(),
+            improvement_pct,
+            ci_pct: (improvement_pct - 1.0, ci_hi),
+        };
+        // The zero-mean line is not drawn, nor the single-source intervals: only the
+        // lines and the co-learning interval lift the top.
+        let mut cells = vec![
+            cell("a", "transfer_zero_mean", 90.0, 95.0),
+            cell("a", "transfer_source_mean", 12.0, 80.0),
+            cell("a", "guarded", 15.0, 70.0),
+        ];
+        assert_eq!(drawn_top_pct(&cells), 15.0);
+        cells.push(cell("a+b", "co_learning", 14.0, 33.0));
+        assert_eq!(drawn_top_pct(&cells), 33.0);
     }
 }
