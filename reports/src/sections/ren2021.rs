@@ -30,7 +30,7 @@ pub struct Ren2021Section;
 const LOO: Input = Input::one(
     "loo",
     &[Source::Stage("fdm.piecewise_loo"), Source::Stage("fdm.lag_model")],
-    "the held-out RMSE per printer, model and condition (`loo.parquet`)",
+    "the held-out RMSE per printer, model and condition (`loo.parquet`) and the measured widths beside the predictions (`loo_predictions.parquet`)",
 )
 .reading(&[
     Reads {
@@ -118,7 +118,6 @@ fn read_loo(path: &Path) -> Result<LooMap, StageError> {
         .collect())
 }
 
-/// Median held-out RMSE per (method, n_train).
 /// Each measured line's steady width on `printer`: the median measured width over the
 /// middle half of the line's length (where every Table I condition cruises), by
 /// condition, read from the held-out predictions' measured widths (one model's rows,
@@ -148,6 +147,7 @@ fn steady_widths(path: &Path, printer: &str) -> Result<BTreeMap<String, f64>, St
         .collect())
 }
 
+/// Median held-out RMSE per (method, n_train).
 fn transfer_medians(path: &Path) -> Result<BTreeMap<(String, i64), f64>, StageError> {
     let df = read_parquet(path)?;
     let method = strs(&df, transfer_cv::method, path)?;
