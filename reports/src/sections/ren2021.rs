@@ -20,6 +20,7 @@ use tables::report::comparison;
 use models::stats::finite_median;
 
 use super::{comparison_frame, Row};
+use crate::figures::fdm::loo_predictions::{read_samples, SAMPLE_READS};
 use crate::html::{escape, format_sig};
 use crate::read::{f64s, ints, read_parquet, strs};
 
@@ -37,16 +38,7 @@ const LOO: Input = Input::one(
         table: &loo::TABLE,
         columns: &[loo::printer, loo::model, loo::condition, loo::rmse_mm, loo::r_a, loo::r_f],
     },
-    Reads {
-        table: &loo_predictions::TABLE,
-        columns: &[
-            loo_predictions::printer,
-            loo_predictions::condition,
-            loo_predictions::model,
-            loo_predictions::position_mm,
-            loo_predictions::measured_width_mm,
-        ],
-    },
+    SAMPLE_READS,
 ]);
 
 /// The transfer learning beside Fig. 9.
@@ -123,25 +115,16 @@ fn read_loo(path: &Path) -> Result<LooMap, StageError> {
 /// condition, read from the held-out predictions' measured widths (one model's rows,
 /// as every model lists the same samples).
 fn steady_widths(path: &Path, printer: &str) -> Result<BTreeMap<String, f64>, StageError> {
-    let df = read_parquet(path)?;
-    let (printers, conditions, models) = (
-        strs(&df, loo_predictions::printer, path)?,
-        strs(&df, loo_predictions::condition, path)?,
-        strs(&df, loo_predictions::model, path)?,
-    );
-    let (x, w) = (f64s(&df, loo_predictions::position_mm, path)?, f64s(&df, loo_predictions::measured_width_mm, path)?);
-    let mut lines: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    let first_model = (0..df.height()).find(|&i| printers[i] == printer).map(|i| models[i].clone());
-    for i in (0..df.height()).filter(|&i| printers[i] == printer && Some(&models[i]) == first_model.as_ref()) {
-        lines.entry(conditions[i].clone()).or_default().push((x[i], w[i]));
-    }
-    Ok(lines
+    let samples = read_samples(path, printer)?;
+    let one_model = samples.keys().map(|(_, model)| model.clone()).min();
+    Ok(samples
         .into_iter()
-        .map(|(condition, samples)| {
-            let (lo, hi) =
-                samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), s| (a.min(s.0), b.max(s.0)));
+        .filter(|((_, model), _)| Some(model) == one_model.as_ref())
+        .map(|((condition, _), line)| {
+            // `read_samples` sorts each line by position.
+            let (lo, hi) = (line.first().map_or(f64::NAN, |s| s[0]), line.last().map_or(f64::NAN, |s| s[0]));
             let (from, to) = (lo + 0.25 * (hi - lo), lo + 0.75 * (hi - lo));
-            let middle = samples.iter().filter(|s| s.0 >= from && s.0 <= to).map(|s| s.1);
+            let middle = line.iter().filter(|s| s[0] >= from && s[0] <= to).map(|s| s[1]);
             (condition, finite_median(middle))
         })
         .collect())

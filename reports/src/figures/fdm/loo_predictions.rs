@@ -44,18 +44,21 @@ const LOO: Input = Input::one(
         table: &loo::TABLE,
         columns: &[loo::printer, loo::condition, loo::model, loo::accel_mm_s2, loo::feed_mm_s, loo::rmse_mm],
     },
-    Reads {
-        table: &loo_predictions::TABLE,
-        columns: &[
-            loo_predictions::printer,
-            loo_predictions::condition,
-            loo_predictions::model,
-            loo_predictions::position_mm,
-            loo_predictions::measured_width_mm,
-            loo_predictions::predicted_width_mm,
-        ],
-    },
+    SAMPLE_READS,
 ]);
+
+/// What [`read_samples`] reads of `loo_predictions.parquet`.
+pub(crate) const SAMPLE_READS: Reads = Reads {
+    table: &loo_predictions::TABLE,
+    columns: &[
+        loo_predictions::printer,
+        loo_predictions::condition,
+        loo_predictions::model,
+        loo_predictions::position_mm,
+        loo_predictions::measured_width_mm,
+        loo_predictions::predicted_width_mm,
+    ],
+};
 
 /// The lag baseline's name in the `model` column.
 const LAG_MODEL: &str = "lag";
@@ -108,7 +111,7 @@ pub struct LooFigureData {
 }
 
 /// Samples of one (condition, model): (position, measured, predicted) in mm.
-type Samples = BTreeMap<(String, String), Vec<[f64; 3]>>;
+pub(crate) type Samples = BTreeMap<(String, String), Vec<[f64; 3]>>;
 
 impl Stage for LooPredictionsFigure {
     type Params = LooPredictionsParams;
@@ -181,7 +184,9 @@ fn read_folds(path: &Path, printer: &str) -> Result<Vec<FoldSummary>, StageError
         .collect())
 }
 
-fn read_samples(path: &Path, printer: &str) -> Result<Samples, StageError> {
+/// Every held-out line of `printer` in `loo_predictions.parquet` ([`SAMPLE_READS`]), by
+/// (condition, model), its samples in position order.
+pub(crate) fn read_samples(path: &Path, printer: &str) -> Result<Samples, StageError> {
     let df = read_parquet(path)?;
     use loo_predictions as p;
     let (printers, conditions, models) =

@@ -3,7 +3,7 @@
 
 mod discrepancy;
 mod infill;
-mod loo_predictions;
+pub(crate) mod loo_predictions;
 mod r_surface;
 mod segment_accuracy;
 mod transfer_cv;

@@ -171,7 +171,7 @@ fn draw_panel<DB: DrawingBackend>(
     sources.dedup();
     for (k, source) in sources.iter().enumerate() {
         let colour = PALETTE[k % PALETTE.len()];
-        for (method, dashed) in [("transfer_source_mean", true), ("guarded", false)] {
+        for (method, dashed) in SINGLE_SOURCE_SERIES {
             let pts = series(cells, source, method);
             // Source-centred: dashed and lighter (the legend's swatch is lighter too).
             let style = if dashed { colour.mix(0.55).stroke_width(2) } else { colour.stroke_width(3) };
@@ -186,7 +186,7 @@ fn draw_panel<DB: DrawingBackend>(
             chart.draw_series(clipped.map(|p| TriangleMarker::new((p.0, FLOOR_PCT + 1.5), 6, colour.filled())))?;
         }
     }
-    let co: Vec<&Cell> = cells.iter().filter(|c| c.method == "co_learning").collect();
+    let co: Vec<&Cell> = cells.iter().filter(|c| c.method == CO_LEARNING).collect();
     if !co.is_empty() {
         let style = BLACK.stroke_width(3);
         let pts: Vec<(f64, f64)> = co.iter().map(|c| (c.n_train as f64, y(c.improvement_pct))).collect();
@@ -202,13 +202,21 @@ fn draw_panel<DB: DrawingBackend>(
     draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
 }
 
+/// The single-source methods a panel draws per source, each with whether its line is
+/// dashed (the source-centred prior) or solid (the guard).
+const SINGLE_SOURCE_SERIES: [(&str, bool); 2] = [("transfer_source_mean", true), ("guarded", false)];
+
+/// The co-learning method, drawn with its intervals.
+const CO_LEARNING: &str = "co_learning";
+
 /// The highest value a panel draws: the single-source lines (source-centred and
 /// guarded), the co-learning line and its intervals' tops; not the methods it leaves
 /// out (the zero-mean prior) nor the intervals it does not draw.
 fn drawn_top_pct(cells: &[Cell]) -> f64 {
+    let single_source = |c: &Cell| !c.sources.contains('+') && SINGLE_SOURCE_SERIES.iter().any(|(m, _)| *m == c.method);
     let drawn = cells.iter().filter_map(|c| match c.method.as_str() {
-        "transfer_source_mean" | "guarded" if !c.sources.contains('+') => Some(c.improvement_pct),
-        "co_learning" => Some(c.improvement_pct.max(c.ci_pct.1)),
+        CO_LEARNING => Some(c.improvement_pct.max(c.ci_pct.1)),
+        _ if single_source(c) => Some(c.improvement_pct),
         _ => None,
     });
     drawn.filter(|v| v.is_finite()).fold(f64::NEG_INFINITY, f64::max)
