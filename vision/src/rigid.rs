@@ -25,9 +25,20 @@
 //! each other by about 5δ mm, the same way: the two corners of a frame then confirm the
 //! turned mount: re-pairing from the fitted mount's arms and fitting again drifts
 //! instead of settling. [`predict_corners_with_arms_into`] therefore takes the
-//! positions from the fitted mount and the arm directions from a fixed one (the nominal
-//! mount; its error, at most ±0.5° tilt and ±0.3° roll, turns an arm by ~0.005 rad at
-//! most); the fit-and-re-pair rounds then settle.
+//! positions from the fitted mount and the arm directions from a fixed one, and the
+//! fit-and-re-pair rounds then settle.
+//!
+//! Which fixed mount: first the nominal one, then, once, the mount those rounds settle
+//! on (`thermal.monitor`'s localiser runs the rounds twice). The nominal mount's error,
+//! up to ±0.5° of tilt and ±0.3° of roll, turns every arm of a print by up to
+//! ~0.005 rad, which moves every vertex the same way by ~0.01 mm and the nozzles with
+//! them: a capture-time error shared by every frame of the print, which follows the
+//! true mount's tilt and roll, and which no interval computed within one print can see
+//! (the thermal discrepancy engine's delay interval was too narrow across prints
+//! because of it). Arms oriented by the settled mount, which is off by far less, remove
+//! it. Only once: every further re-orientation moves the rotation the corners hardly
+//! constrain a little further (the loop above, damped), and against the virtual
+//! printer's truth it carried the capture times past the true ones.
 
 use crate::frame::ThermalFrame;
 use crate::homography::Homography;

@@ -30,12 +30,13 @@
 //!
 //! **Candidates** (each a small parametric extension with its physics):
 //! - `camera_latency`: a constant delay between the recorded and the true capture time,
-//!   offset = `d` (the printer's effect). Known limitation: the monitor's eq. 30
-//!   estimates share part of their error across all layers of a print (measured against
-//!   the virtual printer's truth, the per-print mean error scatters more than
-//!   independent frames would; its source is not pinned down), which the delete-one-layer
-//!   jackknife cannot see, so `d`'s interval is too narrow across prints; the power
-//!   study's coverage column measures it.
+//!   offset = `d` (the printer's effect). Its delete-one-layer jackknife interval
+//!   assumes that the monitor's eq. 30 errors do not share a part across the layers of
+//!   a print; a part they all share (a mis-calibrated mount moves every frame's nozzle
+//!   the same way) would be invisible to it and make the interval too narrow across
+//!   prints. The monitor removes the largest such part it had (`vision::rigid`: the
+//!   corners' arms oriented by the fitted mount, not the nominal one); the power
+//!   study's coverage column measures what is left.
 //! - `clock_rate`: the camera's clock runs at a slightly different rate from the
 //!   printer's, offset = `r·t_r` within a layer (the printer does not have it).
 //! - `layer_heat_accumulation`: a fraction `f` of a layer's residual heat is carried

@@ -92,7 +92,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 3,
+        version: 4,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -155,8 +155,9 @@ melt squeezed out) have no candidate: near a corner the threshold contour of the
 it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; they measure how \
 the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: when the bead carries more flow for longer after a \
 corner, its threshold contour widens for longer still than its deposit does, so the τ fitted to contour widths runs above the printer's and its interval can \
-miss it (the power study's coverage column says how often). The camera delay's interval is too narrow for another reason: the monitor's capture-time \
-estimates (eq. 30) share part of their error across every layer of a print, and a jackknife over the print's layers cannot see an error they all share. Gain intervals are a bootstrap over layers.</p>\n"
+miss it (the power study's coverage column says how often). The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
+share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
+prints. Gain intervals are a bootstrap over layers.</p>\n"
     )
 }
 

@@ -120,7 +120,7 @@ impl Stage for MonitorStage {
     type Params = MonitorParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "thermal.monitor",
-        version: 11,
+        version: 12,
         summary: "Deposition directions, frame localisation and width extraction → directions, frames, detections, widths (+ Fig. 4 tables)",
         implements: "paper 003 eqs 1-32 (Secs 2.1-2.4), Sec. 3.2",
         inputs: &[roles::THERMAL_SEQUENCE],

@@ -19,7 +19,10 @@
 //!   through the latest mount, from the frame's nozzle under it (or the commanded
 //!   position at t_r when none is placed), with its arms oriented by the nominal mount
 //!   ([`crate::rigid`] says why), its ridge vertex is searched from the prediction, in the
-//!   band or not ([`crate::vertex`]), and the mount is fitted again. Each frame's nozzle
+//!   band or not ([`crate::vertex`]), and the mount is fitted again. When it has settled,
+//!   the rounds run once more with the arms oriented by the settled mount instead of the
+//!   nominal one (whose error would otherwise move every nozzle of the sequence the same
+//!   way, [`crate::rigid`]). Each frame's nozzle
 //!   is then the robust mean of its pairs' offsets under the last mount — one pair
 //!   suffices — and eq. 30 with the paper's window gives the capture time.
 //!   Why: the per-frame DLT needs four corners in the band, which about three frames in
@@ -82,7 +85,7 @@ pub use outcome::{DetectionRow, FrameOutcome, Located, MountRow, Placement};
 /// are read (mm): the newest bead is hottest near the nozzle and would pull the ridge.
 const READY_MARGIN_MM: f64 = 0.5;
 
-/// Most re-pairing rounds after the first mount fit.
+/// Most re-pairing rounds per orientation of the arms (nominal, then settled).
 const MAX_REPAIR_ROUNDS: usize = 4;
 
 /// The mount has settled when a round moves no pixel's plane point farther than this (mm).

@@ -1,7 +1,8 @@
 //! The rigid-mount estimator over a sequence, our extension of paper 003 Sec. 2.3
 //! ([`crate::mount`]: H(i) = T(n_i)·H_m): the mount fitted to the pass-1 pairs of every
 //! frame, then rounds that re-pair every young, readable corner from the latest mount's
-//! predictions and fit again until the mount settles; each frame's nozzle is then placed
+//! predictions and fit again until the mount settles, the corners' arms oriented by the
+//! nominal mount and then once by the settled one; each frame's nozzle is then placed
 //! from its pairs under the last mount (eq. 29) and timed by eq. 30, or, with no pair,
 //! by dead reckoning (module doc of [`super`]).
 
@@ -19,7 +20,7 @@ use crate::vertex::VertexParams;
 impl<S> Localiser<'_, S> {
     /// The rigid-mount estimator over the sequence: fit on pass-1 pairs, then re-pair
     /// every ready corner from the mount's predictions and fit again until the mount
-    /// settles, and place each frame's nozzle.
+    /// settles (arms nominal, then settled), and place each frame's nozzle.
     pub(super) fn localise_rigid_all(&self, ctx: &FrameContext<'_>, frames: &mut [FrameOutcome]) -> Vec<MountRow> {
         let nozzle_px = self.undistorter.undistort_px(ctx.nozzle_px);
         let start = match initial_mount(ctx) {
@@ -35,20 +36,11 @@ impl<S> Localiser<'_, S> {
         let first = self.fit(frames, nozzle_px, &start);
         let mut mount = first.as_ref().map_or(start, |f| f.mount);
         let mut fits = vec![Ok(nominal), first];
-        // Re-pair from the latest mount and fit again until the mount settles: the ridge
-        // searches start from its predictions (their arms keep the nominal directions).
-        for _ in 0..MAX_REPAIR_ROUNDS {
-            self.repair_all(ctx, frames, &mount, &start);
-            let next = self.fit(frames, nozzle_px, &mount);
-            let moved_mm = next.as_ref().map_or(0.0, |f| largest_gap_mm(&f.mount, &mount, self.undistorter.camera()));
-            if let Ok(f) = &next {
-                mount = f.mount;
-            }
-            fits.push(next);
-            if moved_mm <= MOUNT_SETTLED_MM {
-                break;
-            }
-        }
+        // Rounds with the arms oriented by the nominal mount, then once more by the mount
+        // they settle on ([`crate::rigid`] says why once).
+        self.settle(ctx, frames, (&mut mount, &start), &mut fits);
+        let settled = mount;
+        self.settle(ctx, frames, (&mut mount, &settled), &mut fits);
         // The last mount that could be fitted places each frame (the nominal mount
         // anchored at P_N⁽⁰⁾ when none could); the rows say which.
         let cornerless: Vec<usize> = (0..frames.len()).filter(|&i| self.place(ctx, &mut frames[i], &mount)).collect();
@@ -62,6 +54,31 @@ impl<S> Localiser<'_, S> {
             .collect()
     }
 
+    /// Re-pairs every frame from the latest `mount` (its ridge searches start from the
+    /// mount's predictions, their arms oriented by `arms`) and fits again, until the
+    /// mount settles or [`MAX_REPAIR_ROUNDS`] have run; each fit joins `fits`.
+    fn settle(
+        &self,
+        ctx: &FrameContext<'_>,
+        frames: &mut [FrameOutcome],
+        (mount, arms): (&mut Homography, &Homography),
+        fits: &mut Vec<Result<MountFit, String>>,
+    ) {
+        let nozzle_px = self.undistorter.undistort_px(ctx.nozzle_px);
+        for _ in 0..MAX_REPAIR_ROUNDS {
+            self.repair_all(ctx, frames, mount, arms);
+            let next = self.fit(frames, nozzle_px, mount);
+            let moved_mm = next.as_ref().map_or(0.0, |f| largest_gap_mm(&f.mount, mount, self.undistorter.camera()));
+            if let Ok(f) = &next {
+                *mount = f.mount;
+            }
+            fits.push(next);
+            if moved_mm <= MOUNT_SETTLED_MM {
+                break;
+            }
+        }
+    }
+
     /// The mount fitted to the current pairs of every frame.
     fn fit(&self, frames: &[FrameOutcome], nozzle_px: [f64; 2], start: &Homography) -> Result<MountFit, String> {
         let pairs: Vec<FramePairs<'_>> =
@@ -70,14 +87,8 @@ impl<S> Localiser<'_, S> {
     }
 
     /// One re-pairing round: every frame's pairs searched from the predictions of
-    /// `mount`, the arms oriented as the nominal mount `nominal` sees them.
-    fn repair_all(
-        &self,
-        ctx: &FrameContext<'_>,
-        frames: &mut [FrameOutcome],
-        mount: &Homography,
-        nominal: &Homography,
-    ) {
+    /// `mount`, the arms oriented as the fixed mount `arms` sees them.
+    fn repair_all(&self, ctx: &FrameContext<'_>, frames: &mut [FrameOutcome], mount: &Homography, arms: &Homography) {
         let vertex = self.params.vertex.unwrap_or_else(VertexParams::defaults);
         let (mut predicted, mut found) = (Vec::new(), CornerPairs::default());
         for f in frames.iter_mut() {
@@ -90,7 +101,7 @@ impl<S> Localiser<'_, S> {
                 .unwrap_or_else(|| ctx.trajectory.position_mm(t_r));
             let ready: Vec<PathCorner> =
                 self.path_corners.iter().copied().filter(|c| self.is_young_and_ready(c.id, t_r)).collect();
-            predict_corners_with_arms_into(mount, nominal, nozzle, &ready, &mut predicted);
+            predict_corners_with_arms_into(mount, arms, nozzle, &ready, &mut predicted);
             ridge_pairs_into(image, &predicted, &vertex, self.params.predicted_shift_px, &mut found);
             f.pairs = merged(&found, &f.pairs);
         }

@@ -61,6 +61,8 @@ const PANEL_PX: (u32, u32) = (760, 520);
 const FLOOR_PCT: f64 = -40.0;
 /// Extra y range above the data, as a fraction of the data's range, for the legend.
 const LEGEND_ROOM: f64 = 0.45;
+/// How far apart along n the clipped-value triangles of neighbouring series sit.
+const CLIPPED_DODGE: f64 = 0.06;
 
 /// One summary row of `transfer_matrix.parquet`.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,7 +86,7 @@ impl Stage for TransferMatrixFigure {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_transfer_matrix",
-        version: 2,
+        version: 3,
         summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg",
         implements: "paper 000 Fig. 9 over several printers",
         inputs: &[MATRIX],
@@ -169,9 +171,10 @@ fn draw_panel<DB: DrawingBackend>(
         cells.iter().filter(|c| !c.sources.contains('+')).map(|c| c.sources.as_str()).collect();
     sources.sort_unstable();
     sources.dedup();
+    let slots = (sources.len() * SINGLE_SOURCE_SERIES.len()) as f64;
     for (k, source) in sources.iter().enumerate() {
         let colour = PALETTE[k % PALETTE.len()];
-        for (method, dashed) in SINGLE_SOURCE_SERIES {
+        for (m, (method, dashed)) in SINGLE_SOURCE_SERIES.into_iter().enumerate() {
             let pts = series(cells, source, method);
             // Source-centred: dashed and lighter (the legend's swatch is lighter too).
             let style = if dashed { colour.mix(0.55).stroke_width(2) } else { colour.stroke_width(3) };
@@ -182,8 +185,13 @@ fn draw_panel<DB: DrawingBackend>(
                 chart.draw_series(LineSeries::new(pts.iter().map(|p| (p.0, y(p.1))), style))?
             };
             drawn.label(label).legend(move |(x, yy)| PathElement::new([(x, yy), (x + 20, yy)], style));
+            // Clipped values: a triangle on the floor in the series' colour, each series
+            // shifted a little along n so that several clipped at one n all show.
+            let slot = (k * SINGLE_SOURCE_SERIES.len() + m) as f64;
+            let dodge = CLIPPED_DODGE * (slot - (slots - 1.0) / 2.0);
+            let marker = if dashed { colour.mix(0.55).filled() } else { colour.filled() };
             let clipped = pts.iter().filter(|p| p.1 < FLOOR_PCT);
-            chart.draw_series(clipped.map(|p| TriangleMarker::new((p.0, FLOOR_PCT + 1.5), 6, colour.filled())))?;
+            chart.draw_series(clipped.map(|p| TriangleMarker::new((p.0 + dodge, FLOOR_PCT + 1.5), 6, marker)))?;
         }
     }
     let co: Vec<&Cell> = cells.iter().filter(|c| c.method == CO_LEARNING).collect();
