@@ -23,8 +23,8 @@
 //! s̄·δ/cos(θ/2) ≈ 2.6δ mm for a 45° corner, while the mount moves the predicted
 //! vertices of two neighbouring zigzag corners (5 mm apart across the part) relative to
 //! each other by about 5δ mm, the same way: the two corners of a frame then confirm the
-//! turned mount: re-pairing from the fitted mount's arms and fitting again drifts
-//! instead of settling. [`predict_corners_with_arms_into`] therefore takes the
+//! turned mount: re-pairing from the fitted mount's arms and fitting again keeps
+//! turning the mount (each time a little less) instead of settling. [`predict_corners_with_arms_into`] therefore takes the
 //! positions from the fitted mount and the arm directions from a fixed one, and the
 //! fit-and-re-pair rounds then settle.
 //!
@@ -37,7 +37,7 @@
 //! (the thermal discrepancy engine's delay interval was too narrow across prints
 //! because of it). Arms oriented by the settled mount, which is off by far less, remove
 //! it. Only once: every further re-orientation moves the rotation the corners hardly
-//! constrain a little further (the loop above, damped), and against the virtual
+//! constrain a little further (the loop above), and against the virtual
 //! printer's truth it carried the capture times past the true ones.
 
 use crate::frame::ThermalFrame;

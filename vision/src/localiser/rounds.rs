@@ -38,9 +38,9 @@ impl<S> Localiser<'_, S> {
         let mut fits = vec![Ok(nominal), first];
         // Rounds with the arms oriented by the nominal mount, then once more by the mount
         // they settle on ([`crate::rigid`] says why once).
-        self.settle(ctx, frames, (&mut mount, &start), &mut fits);
+        self.settle(ctx, frames, nozzle_px, (&mut mount, &start), &mut fits);
         let settled = mount;
-        self.settle(ctx, frames, (&mut mount, &settled), &mut fits);
+        self.settle(ctx, frames, nozzle_px, (&mut mount, &settled), &mut fits);
         // The last mount that could be fitted places each frame (the nominal mount
         // anchored at P_N⁽⁰⁾ when none could); the rows say which.
         let cornerless: Vec<usize> = (0..frames.len()).filter(|&i| self.place(ctx, &mut frames[i], &mount)).collect();
@@ -55,16 +55,17 @@ impl<S> Localiser<'_, S> {
     }
 
     /// Re-pairs every frame from the latest `mount` (its ridge searches start from the
-    /// mount's predictions, their arms oriented by `arms`) and fits again, until the
+    /// mount's predictions, their arms oriented by `arms`) and fits again (the mount
+    /// anchored at the undistorted nozzle pixel `nozzle_px`), until the
     /// mount settles or [`MAX_REPAIR_ROUNDS`] have run; each fit joins `fits`.
     fn settle(
         &self,
         ctx: &FrameContext<'_>,
         frames: &mut [FrameOutcome],
+        nozzle_px: [f64; 2],
         (mount, arms): (&mut Homography, &Homography),
         fits: &mut Vec<Result<MountFit, String>>,
     ) {
-        let nozzle_px = self.undistorter.undistort_px(ctx.nozzle_px);
         for _ in 0..MAX_REPAIR_ROUNDS {
             self.repair_all(ctx, frames, mount, arms);
             let next = self.fit(frames, nozzle_px, mount);
