@@ -46,7 +46,7 @@ fn names_what_the_lag_model_gets_wrong_on_the_real_lines() {
         (bools(&table, causes::named), f64s(&table, causes::p_adjusted), f64s(&table, causes::gain_pct));
     let gain_lo = f64s(&table, causes::gain_ci_lo_pct);
     // Round 1 scores all 7 candidates per printer; at most one is named per round, and a
-    // named one is significant after the max-T adjustment and helps.
+    // named one is significant after Holm and helps.
     let round: Vec<i64> = col(&table, causes::round).i64().unwrap().iter().map(|v| v.unwrap()).collect();
     for p in ["taz5", "taz6"] {
         let round_1 = (0..table.height()).filter(|&i| printer[i] == p && round[i] == 1).count();

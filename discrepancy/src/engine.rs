@@ -8,21 +8,16 @@
 //! dominates (a model whose groups join kinds of observation no mechanism shares sums
 //! a candidate's squared errors over the observations it can move only,
 //! [`Model::moved_by`]). A one-sided sign-flip test over the `G` groups gives each candidate a
-//! p-value, the step-down max-T adjustment over the same sign patterns (Westfall and
-//! Young) holds the family-wise false-alarm rate of the round's `m` candidates at α,
-//! and the cause named is the candidate with the largest held-out gain among those with
+//! p-value, Holm's step-down adjusts them for the `m` candidates of the round, and
+//! the cause named is the candidate with the largest held-out gain among those with
 //! adjusted p ≤ α. Why this test: it is exact under the one assumption that, with no
-//! effect, a held-out group is as likely to be helped as hurt (all candidates' gains of
-//! the group mirrored together), whatever the correlation of samples within a group.
-//! Why max-T and not Holm: the candidates of a round often read the same feature of a
-//! group (a line's slow swell helps a trend, a saturation and a width cap alike), and
-//! flipping all of a group's gains together measures how far their chances of a false
-//! alarm overlap, where Holm must count them as `m` separate chances (on the real
-//! lines' power study it names more hidden effects at the same null rate). A candidate
-//! the data cannot support (it overfits) has negative expected gain, so the test is
-//! conservative for it. When even the smallest attainable adjusted p-value, `2^-G`,
-//! exceeds `α`, the round's verdict is "too few groups" and nothing is named. The
-//! search stops at the first round with no significant candidate, or after `max_rounds`.
+//! effect, a held-out group is as likely to be helped as hurt, whatever the
+//! correlation of samples within a group; Holm needs no assumption on how the
+//! candidates' tests depend on each other. A candidate the data cannot support (it
+//! overfits) has negative expected gain, so the test is conservative for it. When
+//! even the smallest attainable p-value, `2^-G`, exceeds `α/m`, the round's verdict is
+//! "too few groups" and nothing is named. The search stops at the first round with no
+//! significant candidate, or after `max_rounds`.
 //!
 //! **Extend**: the final model is fitted on all groups; each parameter's 95 % interval
 //! is the delete-one-group jackknife of its cross-validation fold fits (the same fits
@@ -38,9 +33,7 @@ use crate::mechanism::{Nuisance, Parameter, Scale};
 use crate::model::{Group, Model, ModelError};
 use crate::show::{residual_structure, VariableStructure};
 use crate::split::{halves, training_indices};
-use crate::stats::{
-    bootstrap_ratio_interval, jackknife_interval, max_t_step_down, mix_seed, sign_flip_floor, sign_flip_p_value,
-};
+use crate::stats::{bootstrap_ratio_interval, holm, jackknife_interval, mix_seed, sign_flip_floor, sign_flip_p_value};
 
 /// Settings of a discovery run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -151,7 +144,7 @@ pub struct CandidateScore {
     pub log_gains: Vec<f64>,
     /// Sign-flip p-value.
     pub p_value: f64,
-    /// Step-down max-T adjusted p-value over the round's candidates.
+    /// Holm-adjusted p-value over the round's candidates.
     pub p_adjusted: f64,
     /// Whether this is the cause named in the round.
     pub named: bool,
@@ -166,7 +159,7 @@ pub enum Verdict {
     Named(usize),
     /// No candidate was significant.
     None,
-    /// `2^-G > α`: with these few groups no candidate could be named.
+    /// `2^-G > α/m`: with these few groups no candidate could be named.
     TooFewGroups,
 }
 
@@ -389,13 +382,11 @@ fn run_round<M: Model>(
             (Err(e), _) => score(c, current.errors(), Err(e), index, settings),
         })
         .collect();
-    let evidence: Vec<Option<&[f64]>> =
-        candidates.iter().map(|c| c.failure.is_none().then_some(c.log_gains.as_slice())).collect();
-    let adjusted = max_t_step_down(&evidence, mix_seed(settings.seed, index as u64, u64::MAX));
+    let adjusted = holm(&candidates.iter().map(|c| c.p_value).collect::<Vec<_>>());
     for (c, p) in candidates.iter_mut().zip(adjusted) {
         c.p_adjusted = p;
     }
-    let too_few = sign_flip_floor(groups.len()) > settings.alpha;
+    let too_few = sign_flip_floor(groups.len()) > settings.alpha / remaining.len() as f64;
     let best = candidates
         .iter()
         .enumerate()
@@ -606,8 +597,8 @@ mod tests {
 
     #[test]
     fn too_few_groups_names_nothing() {
-        // 4 groups: the floor 1/16 exceeds α = 0.05 even for a strong effect.
-        let groups = draw(4, 100, 0.05, 0.5, Hidden { slope: 1.0, ..Hidden::default() }, 4);
+        // 5 groups: the floor 1/32 exceeds α/3 = 0.0167 even for a strong effect.
+        let groups = draw(5, 100, 0.05, 0.5, Hidden { slope: 1.0, ..Hidden::default() }, 4);
         let d = discover(&Toy, &groups, &[], &settings(4)).unwrap();
         assert_eq!(d.rounds.len(), 1);
         assert_eq!(d.rounds[0].verdict, Verdict::TooFewGroups);

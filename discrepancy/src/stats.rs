@@ -7,9 +7,8 @@
 //!   only that, with no effect, each group's gain is as likely positive as negative —
 //!   no normality, no independence of samples within a group — and it is exact, so its
 //!   smallest p-value is `2^-G`: with too few groups nothing can be named.
-//! - [`max_t_step_down`]: the step-down max-T adjustment of several candidates'
-//!   sign-flip tests over the same patterns, which holds the family-wise error rate at
-//!   α and counts candidates that read the same evidence once.
+//! - [`holm`]: Holm's step-down adjustment, which holds the family-wise error rate at
+//!   α for any dependence between the candidates' tests.
 //! - [`jackknife_interval`]: delete-one-group jackknife with a Student-t quantile on
 //!   `G − 1` degrees of freedom; the replicates are the cross-validation's own fold fits.
 //! - [`bootstrap_ratio_interval`]: percentile bootstrap over groups of a pooled RMSE ratio.
@@ -67,75 +66,16 @@ pub fn sign_flip_floor(groups: usize) -> f64 {
     }
 }
 
-/// Step-down max-T adjusted p-values (Westfall & Young 1993, Algorithm 2.8) of the
-/// one-sided sign-flip tests of several candidates scored on the same groups, in the
-/// input order. `gains[c]` is candidate `c`'s per-group evidence, `None` for one that
-/// could not be scored (adjusted p = 1, left out of every maximum).
-///
-/// Each candidate's statistic is its gains' sum over their root sum of squares, which
-/// a sign flip does not change, so one candidate alone gets exactly its
-/// [`sign_flip_p_value`] and candidates of different spread are compared on one scale.
-/// Every sign pattern flips all candidates' gains of a group together, so the maxima
-/// keep however the candidates' evidence depends on each other: candidates that read
-/// the same feature of a group are not counted as independent chances of a false
-/// alarm, as Holm's bound (`m` times the smallest p-value) must count them.
-/// Candidates are taken in decreasing order of their statistic; the `j`-th is
-/// compared with the maximum, over the patterns, of the statistics of itself and every
-/// candidate after it, and the adjusted p-values are made non-decreasing in that order. This holds the family-wise error rate at α when,
-/// with no effect, a group's gains are as likely to be all mirrored as not (the
-/// sign-flip test's own assumption, for the candidates jointly). Exact up to
-/// [`EXACT_SIGN_FLIP_GROUPS`] groups, Monte Carlo beyond (the same patterns for all
-/// candidates), like [`sign_flip_p_value`].
-pub fn max_t_step_down(gains: &[Option<&[f64]>], seed: u64) -> Vec<f64> {
-    let scored: Vec<(usize, &[f64], f64)> = gains
-        .iter()
-        .enumerate()
-        .filter_map(|(c, g)| g.map(|g| (c, g, g.iter().map(|x| x * x).sum::<f64>().sqrt())))
-        .collect();
-    let mut adjusted = vec![1.0; gains.len()];
-    let Some(groups) = scored.iter().map(|(_, g, _)| g.len()).max() else { return adjusted };
-    let statistic = |g: &[f64], norm: f64, flip: &dyn Fn(usize) -> bool| -> f64 {
-        if norm > 0.0 {
-            g.iter().enumerate().map(|(i, x)| if flip(i) { -x } else { *x }).sum::<f64>() / norm
-        } else {
-            0.0
-        }
-    };
-    let mut order: Vec<(usize, &[f64], f64, f64)> =
-        scored.iter().map(|&(c, g, norm)| (c, g, norm, statistic(g, norm, &|_| false))).collect();
-    order.sort_by(|a, b| b.3.total_cmp(&a.3).then(a.0.cmp(&b.0)));
-    // The identity pattern must count whatever the rounding of the sums.
-    let tol = 1e-12 * (groups as f64).sqrt();
-    let mut counts = vec![0u64; order.len()];
-    let mut count_pattern = |flip: &dyn Fn(usize) -> bool| {
-        let mut running = f64::NEG_INFINITY;
-        for (j, &(_, g, norm, observed)) in order.iter().enumerate().rev() {
-            running = running.max(statistic(g, norm, flip));
-            if running >= observed - tol {
-                counts[j] += 1;
-            }
-        }
-    };
-    // Monte Carlo counts the observed pattern once more, as `sign_flip_p_value` does.
-    let (patterns, observed_added) = if groups <= EXACT_SIGN_FLIP_GROUPS {
-        for pattern in 0u64..(1u64 << groups) {
-            count_pattern(&|i| pattern >> i & 1 == 1);
-        }
-        (1u64 << groups, 0)
-    } else {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut flips = vec![false; groups];
-        for _ in 0..MONTE_CARLO_SIGN_FLIPS {
-            flips.iter_mut().for_each(|f| *f = rng.random::<bool>());
-            count_pattern(&|i| flips[i]);
-        }
-        (MONTE_CARLO_SIGN_FLIPS as u64, 1)
-    };
+/// Holm step-down adjusted p-values, in the input order.
+pub fn holm(p_values: &[f64]) -> Vec<f64> {
+    let m = p_values.len();
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| p_values[a].total_cmp(&p_values[b]));
+    let mut adjusted = vec![1.0; m];
     let mut running = 0.0f64;
-    for (&(c, ..), &k) in order.iter().zip(&counts) {
-        let p = (k + observed_added) as f64 / (patterns + observed_added) as f64;
-        running = running.max(p.min(1.0));
-        adjusted[c] = running;
+    for (rank, &i) in order.iter().enumerate() {
+        running = running.max(((m - rank) as f64 * p_values[i]).min(1.0));
+        adjusted[i] = running;
     }
     adjusted
 }
@@ -289,58 +229,10 @@ mod tests {
     }
 
     #[test]
-    fn max_t_matches_hand_computation() {
-        // Gains A = (2, 1), B = (1, −1); statistics sum/√(Σx²): A 3/√5, B 0. Over the
-        // four patterns A reads 3/√5, 1/√5, −1/√5, −3/√5 and B 0, √2, −√2, 0. A (first
-        // in order) is beaten or matched by max(A, B) in 2 patterns → 1/2; B by itself
-        // in 3 → 3/4. A failed candidate gets 1 and changes nothing.
-        let (a, b) = ([2.0, 1.0], [1.0, -1.0]);
-        let adj = max_t_step_down(&[Some(&a), None, Some(&b)], 0);
-        assert_eq!(adj, vec![0.5, 1.0, 0.75]);
-    }
-
-    #[test]
-    fn max_t_of_one_candidate_is_its_sign_flip_p_and_copies_cost_nothing() {
-        let gains = [1.0, 2.0, 3.0, -0.5, 4.0];
-        let alone = max_t_step_down(&[Some(&gains)], 0);
-        assert_eq!(alone, vec![sign_flip_p_value(&gains, 0)]);
-        // Two candidates that read the same evidence are one chance of a false alarm,
-        // not two: max-T keeps the p-value, where Holm would double it.
-        let twice = max_t_step_down(&[Some(&gains), Some(&gains)], 0);
-        assert_eq!(twice, vec![alone[0], alone[0]]);
-    }
-
-    #[test]
-    fn max_t_holds_the_family_wise_rate_under_a_symmetric_null() {
-        // 2000 null draws of 9 groups and 4 candidates whose gains share a group effect
-        // (correlated) and are symmetric about zero jointly. Any adjusted p ≤ α is a
-        // false alarm; its rate must stay within 3 binomial σ of α = 0.05 or below.
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let draws = 2000;
-        let alarms = (0..draws)
-            .filter(|&d| {
-                let candidates: Vec<Vec<f64>> = {
-                    let shared: Vec<f64> = (0..9).map(|_| rng.random::<f64>() - 0.5).collect();
-                    (0..4)
-                        .map(|_| shared.iter().map(|s| s + 0.5 * (rng.random::<f64>() - 0.5)).collect::<Vec<f64>>())
-                        .collect()
-                };
-                let refs: Vec<Option<&[f64]>> = candidates.iter().map(|c| Some(c.as_slice())).collect();
-                max_t_step_down(&refs, d).iter().any(|&p| p <= 0.05)
-            })
-            .count();
-        let rate = alarms as f64 / draws as f64;
-        assert!(rate <= 0.05 + 3.0 * (0.05 * 0.95 / draws as f64).sqrt(), "family-wise rate {rate}");
-    }
-
-    #[test]
-    fn max_t_monte_carlo_beyond_the_exact_limit_agrees_with_the_exact_count() {
-        // 22 groups (Monte Carlo) of one candidate: the p-value is close to the exact
-        // sign-flip one, also Monte Carlo here, within their sampling error.
-        let gains: Vec<f64> = (0..22).map(|i| (i as f64 * 0.7).sin() + 0.3).collect();
-        let mc = max_t_step_down(&[Some(&gains)], 9)[0];
-        let single = sign_flip_p_value(&gains, 9);
-        assert!((mc - single).abs() < 4.0 * (single / MONTE_CARLO_SIGN_FLIPS as f64).sqrt() + 1e-5, "{mc} {single}");
+    fn holm_matches_hand_computation() {
+        // Sorted 0.01, 0.02, 0.04 → 3·0.01, max(0.03, 2·0.02), max(0.04, 0.04).
+        let adj = holm(&[0.04, 0.01, 0.02]);
+        assert!((adj[1] - 0.03).abs() < 1e-15 && (adj[2] - 0.04).abs() < 1e-15 && (adj[0] - 0.04).abs() < 1e-15);
     }
 
     #[test]

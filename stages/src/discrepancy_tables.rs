@@ -23,7 +23,7 @@ use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 pipeline::params! {
     /// The family-wise false-alarm rate, as every discrepancy stage and study declares it.
     pub struct FalseAlarm {
-        /// Family-wise false-alarm rate of each round, over its candidates (step-down max-T).
+        /// Family-wise false-alarm rate of each round, over its candidates (Holm).
         pub alpha: f64 [0.001, 0.5] = 0.05,
     }
 }

@@ -139,7 +139,7 @@ macro_rules! engine_tables {
                 groups: Int64 "1",
                 /// One-sided sign-flip test over groups of ln(SSE before / SSE after).
                 p_value: Float64 "1",
-                /// Step-down max-T adjustment over the round's candidates (the same sign patterns for all).
+                /// Holm's step-down adjustment over the round's candidates.
                 p_adjusted: Float64 "1",
                 /// The family-wise false-alarm rate a round is held at.
                 alpha: Float64 "1",

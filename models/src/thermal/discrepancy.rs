@@ -75,9 +75,8 @@
 //! layers share nothing but the trajectory: each frame's fluctuation is its own, a
 //! temperature's noise belongs to the frame it is read in, and a layer's baseline
 //! profile comes from the other layers' readings of the same samples. An exact
-//! sign-flip test over G layers cannot reach p below 2^−G, so at least five filmed
-//! layers are needed before anything can be named at α = 0.05, and with so few only
-//! an effect that helps every layer could be.
+//! sign-flip test over G layers cannot reach p below 2^−G, so eight or more filmed
+//! layers are needed before anything can be named at α = 0.05 over five candidates.
 //!
 //! **Scales.** A group's squared error adds offsets (s), temperatures (°C) and widths
 //! (mm), so every observation is divided by its kind's noise scale, estimated robustly

@@ -138,7 +138,7 @@ impl Stage for DiscrepancyFdmSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_fdm",
-        version: 3,
+        version: 2,
         summary: "What the lag model gets wrong on the measured lines, the cause named, the extension and its gain, and the engine's power → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 000's Taz 5 / Taz 6 data",
         inputs: &[DISCREPANCY, OTHERS],
@@ -428,8 +428,7 @@ fn method(causes: &[Cause]) -> String {
 named physical mechanisms — a tilted bed, a drive gear's runout ripple, flow lost at high flow, a flow-dependent lag, a second slower lag path, a cap on the extra width \
 the bead takes, and actual acceleration and feed off the G-code's — and every candidate is scored by leave-one-line-out cross-validation on the {groups} printed lines \
 of a printer. Each held-out line contributes the log ratio of its squared error before and after; a one-sided sign-flip test over lines gives each candidate a p-value, \
-the step-down max-T adjustment over the same sign patterns (all candidates' gains of a line flipped together, so candidates that read the same evidence are not counted as \
-separate chances) holds the family-wise false-alarm rate of a round at α = {alpha}, and the cause named is the significant candidate with the largest held-out gain. \
+Holm's step-down holds the family-wise false-alarm rate of a round at α = {alpha}, and the cause named is the significant candidate with the largest held-out gain. \
 The extended model then becomes the baseline and the search repeats. A gear's phase belongs to one line only: it is estimated on one half of the held-out line and \
 scored on the other. Parameter intervals are delete-one-line jackknife intervals of the cross-validation's own fits; gain intervals are a bootstrap over lines.</p>\n"
     )
@@ -511,7 +510,7 @@ fn finding(g: &GainRow, causes: &[&Cause], structure: &[Structure]) -> String {
         let _ = write!(
             text,
             " In round {}, <b>{}</b> lowers the held-out RMSE of {} from {:.4} to {:.4} mm ({:+.1} %, 95 % interval {:+.1} to {:+.1} %), helping {} of {} lines; \
-its adjusted p-value is {:.4}.",
+its Holm-adjusted p-value is {:.4}.",
             c.round,
             escape(&c.mechanism),
             escape(&c.base_model),
@@ -558,7 +557,7 @@ its adjusted p-value is {:.4}.",
 pub(super) fn causes_table(causes: &[&Cause], names: &Names) -> String {
     let (unit, groups) = (names.unit_label, names.groups);
     let mut html = format!(
-        "<table><tr><th>round</th><th class=\"t\">candidate</th><th>held-out RMSE before ({unit})</th><th>after ({unit})</th><th>gain (%)</th><th>95 % interval (%)</th><th>{groups} helped</th><th>p</th><th>p, adjusted</th><th class=\"t\">outcome</th></tr>\n",
+        "<table><tr><th>round</th><th class=\"t\">candidate</th><th>held-out RMSE before ({unit})</th><th>after ({unit})</th><th>gain (%)</th><th>95 % interval (%)</th><th>{groups} helped</th><th>p</th><th>p, Holm</th><th class=\"t\">outcome</th></tr>\n",
     );
     for c in causes {
         let verdict = if c.named {

@@ -98,7 +98,7 @@ impl Stage for DiscrepancyInkjetSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_inkjet",
-        version: 3,
+        version: 2,
         summary: "What the layer-to-layer model gets wrong on ink-jet scans, the cause named, the extension and its gain, and (with a power study) how often hidden effects are named → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 002's layer-to-layer model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -143,8 +143,7 @@ volume variance as process noise), because fed the raw scan the model would shar
 cause. Six named mechanisms extend it in turn — curing shrinkage (equally, droplets below their nominal volume), a droplet volume drifting with the layer, levelling flow of \
 the fresh layer, a volume factor per nozzle, and two the virtual printer does not have: a miscalibrated split of h1, h2, h3 and an anisotropic spread — and each is scored by \
 cross-validation holding out blocks of consecutive layers. Each held-out block contributes the log ratio of its squared error before and after; a one-sided sign-flip test \
-over blocks gives each candidate a p-value, the step-down max-T adjustment over the same sign patterns (all candidates' gains of a block flipped together, so candidates \
-that read the same evidence are not counted as separate chances) holds the family-wise false-alarm rate of a round at α = {alpha}, and the cause named is the significant \
+over blocks gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate of a round at α = {alpha}, and the cause named is the significant \
 candidate with the largest held-out gain; the extended model then becomes the baseline and the search repeats. A tilted substrate has no candidate: the model predicts from \
 the measured surface, which already contains the tilt. Parameter intervals are delete-one-block jackknife intervals; gain intervals are a bootstrap over blocks.</p>\n"
     )

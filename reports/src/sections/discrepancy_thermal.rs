@@ -92,7 +92,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 5,
+        version: 4,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -149,8 +149,8 @@ excess over its substrate, which decays alike whatever the substrate's temperatu
 other than the nominal; the second and the fourth are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided by \
 its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. A group is a whole \
 filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \
-squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, the step-down max-T adjustment over the same sign patterns \
-holds the family-wise false-alarm rate of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
+squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate \
+of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
 melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge differs from the widths of eqs 5-11 by far more than they change \
 it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; they measure how \
 the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: when the bead carries more flow for longer after a \

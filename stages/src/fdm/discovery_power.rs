@@ -111,7 +111,7 @@ impl Stage for DiscoveryPowerStage {
     type Params = DiscoveryPowerParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.discovery_power",
-        version: 3,
+        version: 2,
         summary: "Power study of the discrepancy engine: effects hidden in surrogate draws of each measured base at a grid of strengths, plus null draws, scored against the injection → power.parquet, power_draws.parquet",
         implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 000's lines",
         inputs: &[roles::FDM_WIDTHS_MANY],

@@ -69,7 +69,7 @@ impl Stage for DiscrepancyStage {
     type Params = DiscrepancyParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.discrepancy",
-        version: 3,
+        version: 2,
         summary: "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)",
         implements: "DESIGN §7 on paper 000's lines (the lag model of DESIGN §5.1, or paper 000's piecewise model eqs 1-3, as the baseline)",
         inputs: &[roles::FDM_WIDTHS_MANY],

@@ -68,7 +68,7 @@ impl Stage for ControlGainStage {
     type Params = ControlGainParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "inkjet.control_gain",
-        version: 2,
+        version: 1,
         summary: "Closed-loop prints of paper 002's cylinder controlled with the paper's model, the engine's baseline and the extended model fitted on a calibration print of the same printer → control_gain.parquet, control_trials.parquet",
         implements: "paper 002 eq. 8 (Sec. IV-A) with the discrepancy engine's extended model (DESIGN §7)",
         inputs: &[],

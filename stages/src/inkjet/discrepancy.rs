@@ -72,7 +72,7 @@ impl Stage for DiscrepancyStage {
     type Params = DiscrepancyParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "inkjet.discrepancy",
-        version: 2,
+        version: 1,
         summary: "What the layer-to-layer model gets wrong on a print's scans, the cause named by grouped cross-validation among 6 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 002's layer-to-layer model (eqs 2-7) and the inkjet-scans format",
         inputs: &[SCANS],
@@ -193,7 +193,7 @@ impl Stage for DiscoveryPowerStage {
     type Params = DiscoveryPowerParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "inkjet.discovery_power",
-        version: 2,
+        version: 1,
         summary: "Power study of the discrepancy engine on virtual ink-jet prints: each effect hidden at a grid of strengths, plus null prints, scored against the printer's truth → power.parquet, power_draws.parquet",
         implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 002's layer-to-layer model",
         inputs: &[],
