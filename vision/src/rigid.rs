@@ -24,9 +24,10 @@
 //! vertices of two neighbouring zigzag corners (5 mm apart across the part) relative to
 //! each other by about 5δ mm, the same way: the two corners of a frame then confirm the
 //! turned mount: re-pairing from the fitted mount's arms and fitting again keeps
-//! turning the mount (each time a little less) instead of settling. [`predict_corners_with_arms_into`] therefore takes the
-//! positions from the fitted mount and the arm directions from a fixed one, and the
-//! fit-and-re-pair rounds then settle.
+//! turning the mount (each time a little less) instead of settling.
+//! [`predict_corners_with_arms_into`] therefore takes the positions from the fitted
+//! mount and the arm directions from a fixed one, and the fit-and-re-pair rounds then
+//! settle.
 //!
 //! Which fixed mount: first the nominal one, then, once, the mount those rounds settle
 //! on (`thermal.monitor`'s localiser runs the rounds twice). The nominal mount's error,

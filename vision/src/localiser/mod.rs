@@ -22,9 +22,9 @@
 //!   band or not ([`crate::vertex`]), and the mount is fitted again. When it has settled,
 //!   the rounds run once more with the arms oriented by the settled mount instead of the
 //!   nominal one (whose error would otherwise move every nozzle of the sequence the same
-//!   way, [`crate::rigid`]). Each frame's nozzle
-//!   is then the robust mean of its pairs' offsets under the last mount — one pair
-//!   suffices — and eq. 30 with the paper's window gives the capture time.
+//!   way, [`crate::rigid`]). Each frame's nozzle is then the robust mean of its pairs'
+//!   offsets under the last mount — one pair suffices — and eq. 30 with the paper's
+//!   window gives the capture time.
 //!   Why: the per-frame DLT needs four corners in the band, which about three frames in
 //!   four do not have, and its eight free parameters extrapolate the corners' errors
 //!   onto the nozzle; the rigid model has two unknowns per frame.

@@ -38,9 +38,9 @@ impl<S> Localiser<'_, S> {
         let mut fits = vec![Ok(nominal), first];
         // Rounds with the arms oriented by the nominal mount, then once more by the mount
         // they settle on ([`crate::rigid`] says why once).
-        self.settle(ctx, frames, nozzle_px, (&mut mount, &start), &mut fits);
+        self.settle(ctx, frames, nozzle_px, &mut mount, &start, &mut fits);
         let settled = mount;
-        self.settle(ctx, frames, nozzle_px, (&mut mount, &settled), &mut fits);
+        self.settle(ctx, frames, nozzle_px, &mut mount, &settled, &mut fits);
         // The last mount that could be fitted places each frame (the nominal mount
         // anchored at P_N⁽⁰⁾ when none could); the rows say which.
         let cornerless: Vec<usize> = (0..frames.len()).filter(|&i| self.place(ctx, &mut frames[i], &mount)).collect();
@@ -63,7 +63,8 @@ impl<S> Localiser<'_, S> {
         ctx: &FrameContext<'_>,
         frames: &mut [FrameOutcome],
         nozzle_px: [f64; 2],
-        (mount, arms): (&mut Homography, &Homography),
+        mount: &mut Homography,
+        arms: &Homography,
         fits: &mut Vec<Result<MountFit, String>>,
     ) {
         for _ in 0..MAX_REPAIR_ROUNDS {

@@ -176,8 +176,10 @@ fn draw_panel<DB: DrawingBackend>(
         let colour = PALETTE[k % PALETTE.len()];
         for (m, (method, dashed)) in SINGLE_SOURCE_SERIES.into_iter().enumerate() {
             let pts = series(cells, source, method);
-            // Source-centred: dashed and lighter (the legend's swatch is lighter too).
-            let style = if dashed { colour.mix(0.55).stroke_width(2) } else { colour.stroke_width(3) };
+            // Source-centred: dashed and lighter (the legend's swatch and the clipped-value
+            // triangles are lighter too).
+            let shade = if dashed { colour.mix(0.55) } else { colour.to_rgba() };
+            let style = shade.stroke_width(if dashed { 2 } else { 3 });
             let label = format!("{source}: {}", if dashed { "source-centred" } else { "guarded" });
             let drawn = if dashed {
                 chart.draw_series(DashedLineSeries::new(pts.iter().map(|p| (p.0, y(p.1))), 8, 5, style))?
@@ -189,9 +191,9 @@ fn draw_panel<DB: DrawingBackend>(
             // shifted a little along n so that several clipped at one n all show.
             let slot = (k * SINGLE_SOURCE_SERIES.len() + m) as f64;
             let dodge = CLIPPED_DODGE * (slot - (slots - 1.0) / 2.0);
-            let marker = if dashed { colour.mix(0.55).filled() } else { colour.filled() };
             let clipped = pts.iter().filter(|p| p.1 < FLOOR_PCT);
-            chart.draw_series(clipped.map(|p| TriangleMarker::new((p.0 + dodge, FLOOR_PCT + 1.5), 6, marker)))?;
+            chart
+                .draw_series(clipped.map(|p| TriangleMarker::new((p.0 + dodge, FLOOR_PCT + 1.5), 6, shade.filled())))?;
         }
     }
     let co: Vec<&Cell> = cells.iter().filter(|c| c.method == CO_LEARNING).collect();
