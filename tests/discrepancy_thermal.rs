@@ -34,9 +34,10 @@ fn the_shipped_spec_names_the_camera_latency_and_the_tau_error_and_nothing_wrong
     let groups = causes.column("groups").unwrap().i64().unwrap();
     assert!(groups.iter().all(|g| g == Some(8)));
     // The latency's interval covers what the camera did (10 ms). The τ excess is found
-    // near the 30 % printed, but its interval is known not to cover it: the contour's
-    // width follows the flow with a slower tail than eq. 34's lag alone, which reads as
-    // about a quarter more τ excess than printed (the power study's coverage column).
+    // near the 30 % printed, but its interval is known not to cover it: the widths are
+    // read at ages that vary along each straight run, which the contour line does not
+    // know and which read as more τ excess than printed (the power study's coverage
+    // column).
     let extension = read_table(&out.join("thermal_extension.parquet"));
     let (param, estimate) = (strings(&extension, "parameter"), floats(&extension, "estimate"));
     let (lo, hi) = (floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));

@@ -53,12 +53,19 @@
 //! - `tau_mismatch`: the flow reaches the nozzle with a time constant `τ0·(1 + m)`
 //!   instead of eq. 34's nominal τ0, so the thin stretch after every corner is longer or
 //!   shorter (the printer's effect); fitted with the contour line re-fitted at each `m`.
-//!   Known limitation: the contour line is linear and local, but a bead that carries
-//!   more flow for longer stays hot, and its contour wide, for longer still than its
-//!   deposit, so `m` fitted to contour widths runs above the printer's (fitted to the
-//!   deposit's true widths it does not) and its jackknife interval misses the truth; the
-//!   power study's coverage column measures it. A model of the contour's thermal
-//!   response would remove it.
+//!   Known limitation: the monitor reads each width at an age (its frame's estimated
+//!   capture time minus the sample's time) that varies along every straight run with
+//!   where the frames fall, and a cooling bead's contour contracts with age; the
+//!   contour line does not know the age, so the run's pattern of ages passes for a
+//!   longer lag, `m` fitted to contour widths runs above the printer's (fitted to the
+//!   deposit's true widths it does not) and its jackknife interval misses the truth;
+//!   the power study's coverage column measures it. Tried and not kept: a contour map
+//!   `a + b·(w − w0) + c·age` removes most of that bias, but the layers then agree so
+//!   closely that a small τ-like difference between the printer's straight-run
+//!   deposit and eq. 34's lag, present without any effect (the true widths show it
+//!   too), is named as a τ mismatch on many null prints. Keeping the age
+//!   needs that difference modelled, or a test of a relevant size of effect rather
+//!   than of none. A quadratic or cubic map in `w − w0` alone leaves the bias as it is.
 //!
 //! The other thermal effects that change the deposit (`heat_diffusion_widening`,
 //! `melt_squeeze_out`) have no candidate: they act at the corners, where the threshold

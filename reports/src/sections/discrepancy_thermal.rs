@@ -92,7 +92,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 4,
+        version: 5,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -153,9 +153,10 @@ squared error before and after, a one-sided sign-flip test over layers gives eac
 of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
 melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge differs from the widths of eqs 5-11 by far more than they change \
 it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; they measure how \
-the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: when the bead carries more flow for longer after a \
-corner, its threshold contour widens for longer still than its deposit does, so the τ fitted to contour widths runs above the printer's and its interval can \
-miss it (the power study's coverage column says how often). The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
+the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: the camera trails the nozzle, so the monitor \
+reads each width shortly after the bead was laid, at an age that varies along every straight run with where the frames fall, and a cooling \
+bead's contour contracts with age; the contour line does not know the age, the run's pattern of ages passes for a longer lag, and the τ fitted to contour \
+widths runs above the printer's, its interval missing it (the power study's coverage column says how often). The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
 share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
 prints. Gain intervals are a bootstrap over layers.</p>\n"
     )
