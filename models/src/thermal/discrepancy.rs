@@ -46,6 +46,23 @@
 //!   the nozzle-to-substrate difference. A bead on a substrate `s` warmer reads
 //!   `T = c + s·(T_noz − c)/(T_noz − T_bed)` where layer 0 reads `c`: the bead's excess
 //!   over its substrate decays by the same factor whatever the substrate's temperature.
+//!   Fitted with a weak prior: the first carried excess `s_1 = f·g·span` has a zero-mean
+//!   Gaussian prior of standard deviation `FIRST_SUBSTRATE_PRIOR_SD` of the span (a
+//!   bead a few tenths of a millimetre across keeps little of its excess through a
+//!   layer that takes seconds, so `s_1` should be a few degrees), one extra residual.
+//!   With layer 0 among the training layers it costs nothing: layer 0 pins the level.
+//!   Without it, as when layer 0 is the held-out group, the readings fix only the
+//!   products `(T_noz − c)·(1 − s_n/span)` of the later layers, which a common rescaling
+//!   leaves unchanged, so the level rests on the small differences between the first
+//!   few later layers (the carried excess saturates within a few layers), and a spread
+//!   between layers of under a degree can carry it toward the nozzle's temperature.
+//!   Held-out layer 0 was then predicted far worse than by the baseline, and as the
+//!   test sums log ratios, that one layer set the candidate's p-value near one half.
+//!   The prior removes those extrapolations, not the weakness: on the power study's
+//!   prints layer 0 is still often predicted several times worse than by the
+//!   baseline. What misleads the level is the layers' spread, which follows each
+//!   layer's flow (a larger bead holds more heat); modelling it, not a tighter prior,
+//!   is the next step.
 //! - `bed_warming`: the substrate warms by a fixed amount every layer (a heated chamber
 //!   or bed still settling), `s_n = w·n`, read through the same relation (the printer
 //!   does not have it).
@@ -552,6 +569,11 @@ pub static VARIABLES: [Variable; 3] = [
     },
 ];
 
+/// Standard deviation of the weak prior on the first carried substrate excess `s_1 = f·g·span`,
+/// as a fraction of the nozzle-to-bed difference `span` (module doc: 8 °C for a span of
+/// 155 °C).
+const FIRST_SUBSTRATE_PRIOR_SD: f64 = 0.05;
+
 /// The temperature part of a fit.
 struct SubstrateFit {
     heat: Option<(f64, f64)>,
@@ -674,9 +696,13 @@ impl ThermalModel {
             for (ri, t) in r.iter_mut().zip(&temps) {
                 *ri = (t.temp_c - self.record.reading(profile[t.sample], s[t.layer])) / scale;
             }
+            if let Some((f, g)) = h {
+                r[temps.len()] = f * g / FIRST_SUBSTRATE_PRIOR_SD;
+            }
             true
         };
-        let solution = minimize(residuals, &x0, &lo, &hi, temps.len(), &LmSettings::default())
+        let priors = usize::from(heat);
+        let solution = minimize(residuals, &x0, &lo, &hi, temps.len() + priors, &LmSettings::default())
             .ok_or_else(|| ModelError::Fit("the substrate mechanism cannot start from its initial values".into()))?;
         let (h, w) = unpack(&solution.x);
         let s = self.record.substrate_excess_c(h, w).expect("the solution was evaluated");
@@ -990,6 +1016,67 @@ mod tests {
         assert!((fit.tau_excess - 0.3).abs() < 0.01, "{}", fit.tau_excess);
         let (a, b) = fit.contour_line;
         assert!((a - W0_MM - 0.002).abs() < 1e-3 && (b - 1.1).abs() < 0.01, "{a} {b}");
+    }
+
+    /// Held-out squared error of `group` under `fit`, over all its observations (fits
+    /// that differ only in the substrate differ only in its temperatures).
+    fn held_out_sse(model: &ThermalModel, fit: &ThermalFit, group: &ThermalBlock) -> f64 {
+        let predicted = model.predict(fit, group, None).unwrap();
+        predicted.iter().zip(group.observed()).map(|(p, y)| (p - y).powi(2)).sum()
+    }
+
+    /// `record` with each layer's temperatures raised by `layer_c[layer]` and every
+    /// reading by a deterministic scatter of about `scatter_c`.
+    fn with_layer_spread(record: &ThermalRecord, layer_c: &[f64], scatter_c: f64) -> ThermalRecord {
+        let (flow, speed) = flow_and_speed(record.samples);
+        let temps: Vec<TemperatureObservation> = record
+            .temps
+            .iter()
+            .map(|t| {
+                let u =
+                    ((t.sample as f64 * 12.9898 + t.layer as f64 * 78.233).sin() * 43758.5453).rem_euclid(1.0) - 0.5;
+                TemperatureObservation { temp_c: t.temp_c + layer_c[t.layer] + scatter_c * 3.4 * u, ..*t }
+            })
+            .collect();
+        ThermalRecord::new(RecordParts {
+            frames: &record.frames,
+            temps: &temps,
+            widths: &record.widths,
+            deposition: deposition(&flow, &speed),
+            samples: record.samples,
+            layer_duration_s: record.layer_duration_s,
+            nozzle_temp_c: record.nozzle_temp_c,
+            bed_temp_c: record.bed_temp_c,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_carried_heat_the_training_layers_cannot_place_is_not_extrapolated_to_layer_zero() {
+        // 30 % of a layer's heat carried over, each layer a little off (a real print's
+        // layer-to-layer spread, under a degree) and 1 °C of scatter. Without layer 0
+        // the training layers fix little more than the differences between later
+        // layers, and this spread makes them favour a substrate near the nozzle's
+        // temperature (measured without the prior: layer 0 then predicted 2·10⁹ times
+        // worse than by the baseline). The prior keeps the level within reach.
+        let spread = [0.0, -0.5, 0.9, -0.2, 0.4, -0.8, 0.6, 0.2];
+        let record = with_layer_spread(&synthetic(8, 0.0, 0.0, Some((0.3, 0.2)), 0.0), &spread, 1.0);
+        let model = ThermalModel::new(record);
+        let blocks = model.record().layer_groups();
+        let train: Vec<&ThermalBlock> = blocks[1..].iter().collect();
+        let baseline = model.fit(&[], &train, None).unwrap();
+        let heat = model.fit(&[LAYER_HEAT_ACCUMULATION], &train, None).unwrap();
+        let (f, g) = heat.heat.unwrap();
+        assert!(f * g < 0.5, "first substrate excess {} of the span", f * g);
+        let (before, after) = (held_out_sse(&model, &baseline, &blocks[0]), held_out_sse(&model, &heat, &blocks[0]));
+        assert!(after < 10.0 * before, "{before} -> {after}");
+        // With layer 0 in the training set the level is pinned: on noiseless data the
+        // fit returns the printed parameters, the prior costs nothing.
+        let model = ThermalModel::new(synthetic(8, 0.0, 0.0, Some((0.2, 1.0)), 0.0));
+        let blocks = model.record().layer_groups();
+        let all: Vec<&ThermalBlock> = blocks.iter().collect();
+        let (f, g) = model.fit(&[LAYER_HEAT_ACCUMULATION], &all, None).unwrap().heat.unwrap();
+        assert!((f - 0.2).abs() < 0.01 && (g - 1.0).abs() < 0.01, "{f} {g}");
     }
 
     #[test]

@@ -92,7 +92,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 5,
+        version: 6,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -145,7 +145,8 @@ at the feed speed, away from every corner, in frames with a capture-time estimat
 the other layers read at the same sample; and on a straight run the width of the lagged flow spread over the path, read through a contour line fitted to the \
 training layers (a thinner bead holds less heat, so its threshold contour shrinks more than its deposit). Five named mechanisms extend it — a constant camera \
 latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
-excess over its substrate, which decays alike whatever the substrate's temperature), a substrate warming by a fixed amount per layer, and a flow time constant \
+excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
+layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \
 other than the nominal; the second and the fourth are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided by \
 its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. A group is a whole \
 filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \

@@ -106,7 +106,8 @@ impl Stage for DiscoveryPowerStage {
     const INFO: &'static StageInfo = &StageInfo {
         name: "thermal.discovery_power",
         // 3: the engine's noise scales use models::stats' median.
-        version: 3,
+        // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
+        version: 4,
         summary: "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet",
         implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models",
         inputs: &[],

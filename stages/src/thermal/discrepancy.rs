@@ -101,7 +101,8 @@ impl Stage for DiscrepancyStage {
     const INFO: &'static StageInfo = &StageInfo {
         name: "thermal.discrepancy",
         // 3: the noise scales are the mean-of-middle-two median (models::stats), not the upper one.
-        version: 3,
+        // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
+        version: 4,
         summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
         inputs: &[PRINTS],
