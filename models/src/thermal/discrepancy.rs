@@ -981,15 +981,26 @@ mod tests {
                 }
             }
         }
+        with_observations(&probe, &frames, &temps, &widths)
+    }
+
+    /// The record of `shape`'s print (its path, flow and temperatures) with these observations.
+    fn with_observations(
+        shape: &ThermalRecord,
+        frames: &[FrameObservation],
+        temps: &[TemperatureObservation],
+        widths: &[WidthObservation],
+    ) -> ThermalRecord {
+        let (flow, speed) = flow_and_speed(shape.samples);
         ThermalRecord::new(RecordParts {
-            frames: &frames,
-            temps: &temps,
-            widths: &widths,
+            frames,
+            temps,
+            widths,
             deposition: deposition(&flow, &speed),
-            samples,
-            layer_duration_s: duration,
-            nozzle_temp_c: nozzle,
-            bed_temp_c: bed,
+            samples: shape.samples,
+            layer_duration_s: shape.layer_duration_s,
+            nozzle_temp_c: shape.nozzle_temp_c,
+            bed_temp_c: shape.bed_temp_c,
         })
         .unwrap()
     }
@@ -1028,7 +1039,6 @@ mod tests {
     /// `record` with each layer's temperatures raised by `layer_c[layer]` and every
     /// reading by a deterministic scatter of about `scatter_c`.
     fn with_layer_spread(record: &ThermalRecord, layer_c: &[f64], scatter_c: f64) -> ThermalRecord {
-        let (flow, speed) = flow_and_speed(record.samples);
         let temps: Vec<TemperatureObservation> = record
             .temps
             .iter()
@@ -1038,17 +1048,7 @@ mod tests {
                 TemperatureObservation { temp_c: t.temp_c + layer_c[t.layer] + scatter_c * 3.4 * u, ..*t }
             })
             .collect();
-        ThermalRecord::new(RecordParts {
-            frames: &record.frames,
-            temps: &temps,
-            widths: &record.widths,
-            deposition: deposition(&flow, &speed),
-            samples: record.samples,
-            layer_duration_s: record.layer_duration_s,
-            nozzle_temp_c: record.nozzle_temp_c,
-            bed_temp_c: record.bed_temp_c,
-        })
-        .unwrap()
+        with_observations(record, &record.frames, &temps, &record.widths)
     }
 
     #[test]
