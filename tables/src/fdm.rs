@@ -339,7 +339,7 @@ pipeline::table! {
         target: Str "",
         /// Target training lines (every subset of that size).
         n_train: Int64 "1",
-        /// `single`, `transfer_zero_mean`, `transfer_source_mean`, `guarded` (the negative-transfer guard) or `co_learning` (several sources).
+        /// `single`, `transfer_zero_mean`, `transfer_source_mean`, `guarded` (the negative-transfer guard), `co_learning` (several sources), or `hindsight_bound` (not a method: per training subset the prior and λ best on its own held-out lines, how far any choice of λ could go).
         method: Str "",
         /// Median held-out RMSE over every (subset, held-out line).
         median_rmse_mm: Float64 "mm",
@@ -374,7 +374,7 @@ pipeline::table! {
         rmse_mm: Float64 "mm",
         /// Prior weight chosen.
         lambda: Float64 "1",
-        /// The prior used: `none`, the source printer's name, or `pooled`.
+        /// The prior used: `none`, the source printer's name (followed by ` (zero mean)` for the paper's zero-mean prior), or `pooled`.
         prior: Str "",
     }
 }

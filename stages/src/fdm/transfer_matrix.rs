@@ -4,7 +4,8 @@
 //! as the target of all the others. Per task every subset of the target's lines is
 //! fitted with the methods of `models::fdm::colearn` (single, the paper's zero-mean
 //! prior, the source-centred prior, the negative-transfer guard, co-learning) and tested
-//! on the target's other lines.
+//! on the target's other lines; beside them, not a method, the bound in hindsight (per
+//! subset the prior and λ best on its own held-out lines: how far any choice could go).
 //!
 //! Outputs:
 //! - `transfer_matrix.parquet`: sources, target, n_train, method, median_rmse_mm,
@@ -61,8 +62,8 @@ impl Stage for TransferMatrixStage {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.transfer_matrix",
-        version: 1,
-        summary: "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning} → transfer_matrix.parquet, transfer_matrix_rows.parquet",
+        version: 2,
+        summary: "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning, bound in hindsight} → transfer_matrix.parquet, transfer_matrix_rows.parquet",
         implements: "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard",
         inputs: &[PRINTERS],
         output: Output::Tables,

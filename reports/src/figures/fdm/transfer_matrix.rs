@@ -3,7 +3,9 @@
 //! held-out RMSE improvement over single-printer learning against the number of target
 //! training lines, for the source-centred prior and the negative-transfer guard from
 //! each source (one colour per source; dashed: source-centred, solid: guarded) and for
-//! co-learning from all the other printers (black, with its 95 % bootstrap interval).
+//! co-learning from all the other printers (black, with its 95 % bootstrap interval);
+//! grey dots: the bound in hindsight, how far the best prior and λ per training subset,
+//! chosen on its own held-out lines, would go (not a method; `models::fdm::colearn`).
 //! The y axis is clipped so that a catastrophic transfer cannot flatten the rest; a
 //! clipped value is drawn as a triangle on the bottom edge. Reads
 //! `transfer_matrix.parquet`.
@@ -86,8 +88,8 @@ impl Stage for TransferMatrixFigure {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_transfer_matrix",
-        version: 3,
-        summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval → transfer_matrix.png/.svg",
+        version: 4,
+        summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval, the bound in hindsight → transfer_matrix.png/.svg",
         implements: "paper 000 Fig. 9 over several printers",
         inputs: &[MATRIX],
         output: Output::Tables,
@@ -209,7 +211,31 @@ fn draw_panel<DB: DrawingBackend>(
             PathElement::new([(x, y(c.ci_pct.0)), (x, y(c.ci_pct.1))], BLACK.stroke_width(1))
         }))?;
     }
+    let bound = bound_series(cells);
+    if !bound.is_empty() {
+        let style = RGBColor(120, 120, 120).stroke_width(2);
+        chart
+            .draw_series(DashedLineSeries::new(bound.iter().map(|p| (p.0, y(p.1))), 3, 4, style))?
+            .label("bound in hindsight (prior and λ best on the held-out lines)")
+            .legend(move |(x, yy)| PathElement::new([(x, yy), (x + 20, yy)], style));
+    }
     draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// Not a method: per training subset the prior and `λ` best on its own held-out lines
+/// (`models::fdm::colearn`), drawn as how far any choice of them could go.
+const BOUND: &str = "hindsight_bound";
+
+/// `(n, improvement)` of the bound in hindsight, ascending in `n`: per `n` the largest
+/// over the panel's tasks (the task with every other printer as a source, where there is
+/// one, searches every prior the others do).
+fn bound_series(cells: &[Cell]) -> Vec<(f64, f64)> {
+    let mut best: BTreeMap<i64, f64> = BTreeMap::new();
+    for c in cells.iter().filter(|c| c.method == BOUND && c.improvement_pct.is_finite()) {
+        let v = best.entry(c.n_train).or_insert(f64::NEG_INFINITY);
+        *v = v.max(c.improvement_pct);
+    }
+    best.into_iter().map(|(n, v)| (n as f64, v)).collect()
 }
 
 /// The single-source methods a panel draws per source, each with whether its line is
@@ -220,12 +246,14 @@ const SINGLE_SOURCE_SERIES: [(&str, bool); 2] = [("transfer_source_mean", true),
 const CO_LEARNING: &str = "co_learning";
 
 /// The highest value a panel draws: the single-source lines (source-centred and
-/// guarded), the co-learning line and its intervals' tops; not the methods it leaves
+/// guarded), the co-learning line and its intervals' tops, the bound in hindsight (its
+/// largest over the tasks, as drawn); not the methods it leaves
 /// out (the zero-mean prior) nor the intervals it does not draw.
 fn drawn_top_pct(cells: &[Cell]) -> f64 {
     let single_source = |c: &Cell| !c.sources.contains('+') && SINGLE_SOURCE_SERIES.iter().any(|(m, _)| *m == c.method);
     let drawn = cells.iter().filter_map(|c| match c.method.as_str() {
         CO_LEARNING => Some(c.improvement_pct.max(c.ci_pct.1)),
+        BOUND => Some(c.improvement_pct),
         _ if single_source(c) => Some(c.improvement_pct),
         _ => None,
     });
@@ -312,5 +340,28 @@ mod tests {
         assert_eq!(drawn_top_pct(&cells), 15.0);
         cells.push(cell("a+b", "co_learning", 14.0, 33.0));
         assert_eq!(drawn_top_pct(&cells), 33.0);
+        // The bound in hindsight is drawn without its interval.
+        cells.push(cell("a+b", "hindsight_bound", 40.0, 90.0));
+        assert_eq!(drawn_top_pct(&cells), 40.0);
+    }
+
+    #[test]
+    fn the_bound_drawn_is_the_largest_over_the_tasks_at_each_n() {
+        let cell = |sources: &str, n_train: i64, method: &str, improvement_pct: f64| Cell {
+            sources: sources.into(),
+            n_train,
+            method: method.into(),
+            improvement_pct,
+            ci_pct: (f64::NAN, f64::NAN),
+        };
+        let cells = vec![
+            cell("a", 2, "hindsight_bound", 5.0),
+            cell("a+b", 2, "hindsight_bound", 9.0),
+            cell("b", 2, "hindsight_bound", 7.0),
+            cell("a", 1, "hindsight_bound", -3.0),
+            cell("a+b", 1, "guarded", 50.0),
+            cell("a", 3, "hindsight_bound", f64::NAN),
+        ];
+        assert_eq!(bound_series(&cells), vec![(1.0, -3.0), (2.0, 9.0)]);
     }
 }
