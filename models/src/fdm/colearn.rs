@@ -20,7 +20,11 @@
 //!      per-line parameters are not exactly Gaussian and one outlying source line widens
 //!      `Σ̂_S`, which makes the check more permissive, not less). A source whose
 //!      `F` statistic exceeds its 95 % quantile is in conflict and is not used. A source
-//!      with `K ≤ p` lines cannot be checked and is not used.
+//!      with `K ≤ p` lines cannot be checked and is not used. The check is weak with
+//!      few target lines: on virtual printers (the test with other families) it passes
+//!      a printer whose nozzle is 1.6 times wider from two target lines, because
+//!      single-line parameters scatter widely, and the guard then transfers from it
+//!      and loses to single-printer learning, within its interval only.
 //!   2. **Amount.** With two or more target lines, inner leave-one-out over the
 //!      candidates "no transfer" and the source-centred prior at every grid `λ`
 //!      (smallest mean held-out RMSE; ties go to "no transfer", which comes first).
@@ -665,8 +669,12 @@ pub fn default_tasks(n: usize, co_learning: bool) -> Vec<TransferTask> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::discrepancy::forward::Theta;
     use super::super::hyperparams::PiecewiseParams;
+    use super::super::kinematics::LineKinematics;
     use super::super::line::other_family_widths;
+    use super::super::printer::{print_line, Effects, PrinterProfile};
+    use super::super::synthetic::TABLE_I;
     use super::super::test_support::real_lines;
     use super::super::transfer::TransferParams;
     use super::*;
@@ -824,6 +832,83 @@ mod tests {
             checked += usize::from(method != MatrixMethod::Hindsight);
         }
         assert!(checked > 100, "{checked} comparisons");
+    }
+
+    /// Nine Table I lines of the virtual printer `profile`, sampled every 0.5 mm (the
+    /// truth grid's every tenth point), each line from its own seeded stream.
+    fn virtual_lines(profile: &PrinterProfile, seed: u64) -> Vec<MeasuredLine> {
+        let kins: Vec<LineKinematics> =
+            TABLE_I.iter().map(|&(a, f)| LineKinematics::paper_line(a, f).unwrap()).collect();
+        let v_ref = kins.iter().map(LineKinematics::peak_speed_mm_s).fold(0.0, f64::max);
+        kins.iter()
+            .enumerate()
+            .map(|(k, kin)| {
+                let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, k as u64, 0));
+                let line = print_line(profile, &Effects::default(), kin, v_ref, &mut rng).unwrap();
+                let widths = line.widths_mm();
+                let keep = |v: &[f64]| -> Vec<f64> { v.iter().step_by(10).copied().collect() };
+                MeasuredLine::new(*kin, keep(&line.positions_mm), keep(&widths)).unwrap()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn virtual_printers_of_other_families_the_guard_and_co_learning_never_hurt_beyond_their_interval() {
+        // Virtual printers (models::fdm::printer, DESIGN §5.1): a target of the Taz 6's
+        // calibrated physics, a twin of it (same physics, its own lines), and two
+        // printers of other families made by changing the physics: a 0.8 mm nozzle (w0
+        // × 1.6) and a Bowden extruder (half of the flow through a second lag of 1.5 s,
+        // the tube's compliance). As targets: four lines of the Taz 6 and of the
+        // Bowden printer (14 subsets each, as the real-lines test). The guard and
+        // co-learning must never be worse than single beyond their interval, and the
+        // twin's prior must help two target lines, alone and among the other families.
+        // Not asserted, because it does not hold: that the guard rejects the other
+        // families. From two target lines the conflict check passes the wide nozzle
+        // (its per-line parameters scatter too widely for the check to see the
+        // difference), inner leave-one-out over one-line folds then picks its prior,
+        // and at n = 2 the guard loses to single-printer learning, within its interval
+        // only; co-learning picks that prior for some subsets too.
+        let taz6 = PrinterProfile::taz6();
+        let wide = PrinterProfile { theta: Theta { w0_mm: 1.6 * taz6.theta.w0_mm, ..taz6.theta }, ..taz6 };
+        let bowden = PrinterProfile { theta: Theta { slow_fraction: 0.5, tau_slow_s: 1.5, ..taz6.theta }, ..taz6 };
+        let pick = |lines: Vec<MeasuredLine>| -> Vec<MeasuredLine> {
+            [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect()
+        };
+        let (target, twin) = (pick(virtual_lines(&taz6, 1)), virtual_lines(&taz6, 2));
+        let (wide, bowden_all) = (virtual_lines(&wide, 3), virtual_lines(&bowden, 4));
+        let bowden_target = pick(virtual_lines(&bowden, 5));
+        let p = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+        let printers = [
+            StudyPrinter { name: "taz6-four", lines: &target, params: &p },
+            StudyPrinter { name: "twin", lines: &twin, params: &p },
+            StudyPrinter { name: "wide", lines: &wide, params: &p },
+            StudyPrinter { name: "bowden", lines: &bowden_all, params: &p },
+            StudyPrinter { name: "bowden-four", lines: &bowden_target, params: &p },
+        ];
+        let tasks = [
+            TransferTask { sources: vec![1], target: 0 },
+            TransferTask { sources: vec![2], target: 0 },
+            TransferTask { sources: vec![3], target: 0 },
+            TransferTask { sources: vec![1, 2, 3], target: 0 },
+            TransferTask { sources: vec![1], target: 4 },
+        ];
+        let transfer = TransferParams {
+            lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
+            ..TransferParams::paper_defaults()
+        }
+        .check()
+        .unwrap();
+        let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
+        let summary = summarise(&rows, 500, 7);
+        for s in summary.iter().filter(|s| matches!(s.method, MatrixMethod::Guarded | MatrixMethod::CoLearning)) {
+            assert!(s.ci_hi_pct >= 0.0, "task {} n = {}: {s:?}", s.task, s.n_train);
+        }
+        let of = |task: usize, n: usize, m: MatrixMethod| {
+            summary.iter().find(|s| s.task == task && s.n_train == n && s.method == m).unwrap().improvement_pct
+        };
+        assert!(of(0, 2, MatrixMethod::Guarded) > 10.0, "the twin's prior helps two lines");
+        assert!(of(3, 2, MatrixMethod::CoLearning) > 10.0, "so it does among other families");
+        assert_hindsight_bounds_every_method(&rows);
     }
 
     #[test]
