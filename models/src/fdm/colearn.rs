@@ -764,9 +764,7 @@ mod tests {
         // 0 or above, and with the other family as the only source it must fit exactly
         // what single-printer learning fits.
         let Some((t5, t6, wide)) = real_study() else { return };
-        let pick =
-            |lines: &[MeasuredLine]| -> Vec<MeasuredLine> { [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect() };
-        let (t5_four, t6_four) = (pick(&t5), pick(&t6));
+        let (t5_four, t6_four) = (four_lines(&t5), four_lines(&t6));
         let p5 = PiecewiseParams::paper_defaults().check().unwrap();
         let p6 = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
         let printers = [
@@ -782,12 +780,7 @@ mod tests {
             TransferTask { sources: vec![1], target: 3 },
             TransferTask { sources: vec![0, 2], target: 4 },
         ];
-        let transfer = TransferParams {
-            lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
-            ..TransferParams::paper_defaults()
-        }
-        .check()
-        .unwrap();
+        let transfer = decade_grid();
         let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
         let mut by_target: Vec<MatrixRow> =
             [3, 4].iter().flat_map(|&t| transfer_matrix_for_target(&printers, &tasks, &transfer, t).unwrap()).collect();
@@ -834,6 +827,17 @@ mod tests {
         assert!(checked > 100, "{checked} comparisons");
     }
 
+    /// Four of nine Table I lines (14 training subsets: the tests stay short).
+    fn four_lines(lines: &[MeasuredLine]) -> Vec<MeasuredLine> {
+        [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect()
+    }
+
+    /// The shipped spec's λ grid: 1e-6 to 1e4 in whole decades.
+    fn decade_grid() -> TransferValidParams {
+        let grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
+        TransferParams { lambda_grid: grid, ..TransferParams::paper_defaults() }.check().unwrap()
+    }
+
     /// Nine Table I lines of the virtual printer `profile`, sampled every 0.5 mm (the
     /// truth grid's every tenth point), each line from its own seeded stream.
     fn virtual_lines(profile: &PrinterProfile, seed: u64) -> Vec<MeasuredLine> {
@@ -871,12 +875,9 @@ mod tests {
         let taz6 = PrinterProfile::taz6();
         let wide = PrinterProfile { theta: Theta { w0_mm: 1.6 * taz6.theta.w0_mm, ..taz6.theta }, ..taz6 };
         let bowden = PrinterProfile { theta: Theta { slow_fraction: 0.5, tau_slow_s: 1.5, ..taz6.theta }, ..taz6 };
-        let pick = |lines: Vec<MeasuredLine>| -> Vec<MeasuredLine> {
-            [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect()
-        };
-        let (target, twin) = (pick(virtual_lines(&taz6, 1)), virtual_lines(&taz6, 2));
+        let (target, twin) = (four_lines(&virtual_lines(&taz6, 1)), virtual_lines(&taz6, 2));
         let (wide, bowden_all) = (virtual_lines(&wide, 3), virtual_lines(&bowden, 4));
-        let bowden_target = pick(virtual_lines(&bowden, 5));
+        let bowden_target = four_lines(&virtual_lines(&bowden, 5));
         let p = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
         let printers = [
             StudyPrinter { name: "taz6-four", lines: &target, params: &p },
@@ -892,12 +893,7 @@ mod tests {
             TransferTask { sources: vec![1, 2, 3], target: 0 },
             TransferTask { sources: vec![1], target: 4 },
         ];
-        let transfer = TransferParams {
-            lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
-            ..TransferParams::paper_defaults()
-        }
-        .check()
-        .unwrap();
+        let transfer = decade_grid();
         let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
         let summary = summarise(&rows, 500, 7);
         for s in summary.iter().filter(|s| matches!(s.method, MatrixMethod::Guarded | MatrixMethod::CoLearning)) {
