@@ -426,7 +426,10 @@ impl<'a> TargetStudy<'a> {
                 Origin::Source(src) => task.sources.contains(src),
                 Origin::Pool(members) => *members == pool,
             };
-            for j in (0..self.configs.lambdas().len()).filter(|_| of_task) {
+            if !of_task {
+                continue;
+            }
+            for j in 0..self.configs.lambdas().len() {
                 let config = self.configs.index(Some(slot), j);
                 let score = mean_rmse(config);
                 if score < best.0 {
