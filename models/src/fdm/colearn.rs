@@ -33,11 +33,11 @@
 //!      From five target lines on, every source is a candidate: the check asks whether
 //!      the target is *like* the source, but a prior centred on a printer that differs
 //!      can still be a better centre than none, which the check cannot see and five or
-//!      more folds can: in the shipped transfer spec the check keeps the Taz 6 from the
-//!      slower-melting Taz 6, whose own lines choose it from five lines on. With fewer
-//!      folds the inner choice alone is too noisy: dropping the check from three or
-//!      from four lines on made the guard fall below single-printer learning beyond
-//!      its interval there.
+//!      more folds can: in the shipped transfer spec the check keeps the Taz 6 out as a
+//!      source for the slower-melting Taz 6, whose own lines choose it from five lines
+//!      on. With fewer folds the inner choice alone is too noisy: dropping the check
+//!      from three or from four lines on made the guard fall below single-printer
+//!      learning beyond its interval there.
 //!   3. **One line: no transfer.** With one target line there is nothing on the target
 //!      to validate a transfer on, and the source-simulation `λ` that
 //!      `transfer_source_mean` uses validates only on the source: on the real Taz 6 →
@@ -48,11 +48,11 @@
 //!   are the sources that pass the conflict check and the *pooled* prior, Algorithm 1
 //!   over the per-line parameters of all the task's sources together (its covariance
 //!   holds the spread between printers as well as within them), if it passes the check
-//!   too (from five target lines on, all of them, as for the guard). With two or more target lines inner leave-one-out chooses among "no
-//!   transfer" and every candidate at every grid `λ`; with one line, no transfer (as
-//!   the guard). An unrelated printer among the sources
-//!   either fails the check or loses the inner cross-validation, so adding it costs
-//!   at most the selection noise.
+//!   too (from five target lines on, all of them, as for the guard). With two or more
+//!   target lines inner leave-one-out chooses among "no transfer" and every candidate
+//!   at every grid `λ`; with one line, no transfer (as the guard). An unrelated printer
+//!   among the sources either fails the check or loses the inner cross-validation, so
+//!   adding it costs at most the selection noise.
 //!
 //! - `hindsight_bound` (every task): **not a method** but how far any choice of prior and
 //!   `λ` could go. Per training subset, among "no transfer" and every prior of the task
