@@ -25,19 +25,13 @@
 //!      a printer whose nozzle is 1.6 times wider from two target lines, because
 //!      single-line parameters scatter widely, and the guard then transfers from it
 //!      and loses to single-printer learning, within its interval only. The check
-//!      applies with fewer than [`INNER_CV_ALONE_FROM`] (five) target lines only; see
-//!      point 2.
+//!      stands at every `n`: dropping it once the target has five lines (five folds
+//!      for point 2) let the shipped spec's slower-melting Taz 6 learn from the Taz 6,
+//!      but made virtual targets of other families worse than single-printer learning
+//!      beyond their interval (the test with nine-line virtual targets).
 //!   2. **Amount.** With two or more target lines, inner leave-one-out over the
 //!      candidates "no transfer" and the source-centred prior at every grid `λ`
 //!      (smallest mean held-out RMSE; ties go to "no transfer", which comes first).
-//!      From five target lines on, every source is a candidate: the check asks whether
-//!      the target is *like* the source, but a prior centred on a printer that differs
-//!      can still be a better centre than none, which the check cannot see and five or
-//!      more folds can: in the shipped transfer spec the check keeps the Taz 6 out as a
-//!      source for the slower-melting Taz 6, whose own lines choose it from five lines
-//!      on. With fewer folds the inner choice alone is too noisy: dropping the check
-//!      from three or from four lines on made the guard fall below single-printer
-//!      learning beyond its interval there.
 //!   3. **One line: no transfer.** With one target line there is nothing on the target
 //!      to validate a transfer on, and the source-simulation `λ` that
 //!      `transfer_source_mean` uses validates only on the source: on the real Taz 6 →
@@ -48,11 +42,11 @@
 //!   are the sources that pass the conflict check and the *pooled* prior, Algorithm 1
 //!   over the per-line parameters of all the task's sources together (its covariance
 //!   holds the spread between printers as well as within them), if it passes the check
-//!   too (from five target lines on, all of them, as for the guard). With two or more
-//!   target lines inner leave-one-out chooses among "no transfer" and every candidate
-//!   at every grid `λ`; with one line, no transfer (as the guard). An unrelated printer
-//!   among the sources either fails the check or loses the inner cross-validation, so
-//!   adding it costs at most the selection noise.
+//!   too. With two or more target lines inner leave-one-out chooses among "no
+//!   transfer" and every candidate at every grid `λ`; with one line, no transfer (as
+//!   the guard). An unrelated printer among the sources
+//!   either fails the check or loses the inner cross-validation, so adding it costs
+//!   at most the selection noise.
 //!
 //! - `hindsight_bound` (every task): **not a method** but how far any choice of prior and
 //!   `λ` could go. Per training subset, among "no transfer" and every prior of the task
@@ -94,11 +88,6 @@ use super::transfer_cv::{
 
 /// Level of the conflict check (its `F` quantile is `1 − CONFLICT_ALPHA`).
 pub const CONFLICT_ALPHA: f64 = 0.05;
-
-/// Target lines from which the guard's inner leave-one-out decides alone, without the
-/// conflict check: five folds, the fewest of the usual five- or ten-fold
-/// cross-validation (module docs, point 2).
-pub const INNER_CV_ALONE_FROM: usize = 5;
 
 /// One printer of a transfer study: its lines and its piecewise-model settings.
 #[derive(Debug, Clone, Copy)]
@@ -468,9 +457,7 @@ impl<'a> TargetStudy<'a> {
             let slot = self.slot(&Origin::Pool(pool.clone()), PriorMean::SourceMean);
             candidates.push((Origin::Pool(pool), self.conflict(sub, &self.slots[slot].covariance)));
         }
-        if sub.indices.len() < INNER_CV_ALONE_FROM {
-            candidates.retain(|(_, ratio)| *ratio <= 1.0);
-        }
+        candidates.retain(|(_, ratio)| *ratio <= 1.0);
         if sub.indices.len() == 1 {
             return Ok(Choice::NONE);
         }
@@ -828,46 +815,6 @@ mod tests {
         assert_hindsight_bounds_every_method(&rows);
     }
 
-    #[test]
-    fn from_five_target_lines_inner_cross_validation_alone_chooses_a_source_the_check_rejects() {
-        // The real Taz 6 as the source; as the target, its nine lines with a slower melt
-        // (the shipped spec's fdm.other_family: widths lagged over 8 mm of path). The
-        // conflict check keeps the source out while the target has fewer than five
-        // lines; from five on, inner leave-one-out decides alone, takes the source for
-        // most subsets and gains over single-printer learning, and at no n does the
-        // guard fall below single-printer learning beyond its interval.
-        let Some((_, t6, _)) = real_study() else { return };
-        let slow: Vec<MeasuredLine> = t6
-            .iter()
-            .map(|l| {
-                let w = other_family_widths(&l.positions_mm, &l.widths_mm, 1.0, 8.0);
-                MeasuredLine::new(l.nominal, l.positions_mm.clone(), w).unwrap()
-            })
-            .collect();
-        let p6 = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
-        let printers = [
-            StudyPrinter { name: "taz6", lines: &t6, params: &p6 },
-            StudyPrinter { name: "slow", lines: &slow, params: &p6 },
-        ];
-        let tasks = [TransferTask { sources: vec![0], target: 1 }];
-        let rows = transfer_matrix(&printers, &tasks, &decade_grid()).unwrap();
-        let guarded = |n: usize| rows.iter().filter(move |r| r.method == MatrixMethod::Guarded && r.n_train == n);
-        for n in 1..INNER_CV_ALONE_FROM {
-            assert!(guarded(n).all(|r| r.prior == "none"), "n = {n}: the check keeps the source out");
-        }
-        for n in INNER_CV_ALONE_FROM..slow.len() {
-            let used = guarded(n).filter(|r| r.prior == "taz6").count();
-            assert!(2 * used > guarded(n).count(), "n = {n}: the source in {used} rows");
-        }
-        let summary = summarise(&rows, 500, 7);
-        let of = |n: usize| summary.iter().find(|s| s.n_train == n && s.method == MatrixMethod::Guarded).unwrap();
-        for n in 1..slow.len() {
-            assert!(of(n).ci_hi_pct >= 0.0, "n = {n}: {:?}", of(n));
-        }
-        assert!(of(slow.len() - 1).improvement_pct > 0.0, "{:?}", of(slow.len() - 1));
-        assert_hindsight_bounds_every_method(&rows);
-    }
-
     /// On every (task, training subset) the bound in hindsight's mean RMSE over the
     /// subset's held-out lines is at most every method's, as its definition requires
     /// (every method of a task chooses among the configurations it searches).
@@ -965,6 +912,35 @@ mod tests {
         assert!(of(0, 2, MatrixMethod::Guarded) > 10.0, "the twin's prior helps two lines");
         assert!(of(3, 2, MatrixMethod::CoLearning) > 10.0, "so it does among other families");
         assert_hindsight_bounds_every_method(&rows);
+    }
+
+    #[test]
+    fn nine_line_virtual_targets_of_other_families_the_guard_never_hurts_beyond_its_interval() {
+        // All nine lines of a virtual Taz 6 learnt from the Bowden printer, and of the
+        // Bowden printer learnt from the Taz 6's twin (one source each, every subset up
+        // to eight lines): from five target lines on the inner leave-one-out has five
+        // folds or more, and the conflict check must still stand beside it. Without the
+        // check from five lines on (tried: it helped the shipped spec's slower-melting
+        // Taz 6), both tasks fall below single-printer learning beyond their interval
+        // at n = 5. The likely reason: leave-one-out picks the best of a dozen noisy
+        // configurations, so its pick looks better than it is, by more than a prior
+        // from another family gives.
+        let taz6 = PrinterProfile::taz6();
+        let bowden = PrinterProfile { theta: Theta { slow_fraction: 0.5, tau_slow_s: 1.5, ..taz6.theta }, ..taz6 };
+        let (target, twin) = (virtual_lines(&taz6, 1), virtual_lines(&taz6, 2));
+        let (bowden_source, bowden_target) = (virtual_lines(&bowden, 4), virtual_lines(&bowden, 5));
+        let p = PiecewiseParams::paper_defaults_without_blob().check().unwrap();
+        let printers = [
+            StudyPrinter { name: "taz6", lines: &target, params: &p },
+            StudyPrinter { name: "twin", lines: &twin, params: &p },
+            StudyPrinter { name: "bowden", lines: &bowden_source, params: &p },
+            StudyPrinter { name: "bowden-target", lines: &bowden_target, params: &p },
+        ];
+        let tasks = [TransferTask { sources: vec![2], target: 0 }, TransferTask { sources: vec![1], target: 3 }];
+        let rows = transfer_matrix(&printers, &tasks, &decade_grid()).unwrap();
+        for s in summarise(&rows, 500, 7).iter().filter(|s| s.method == MatrixMethod::Guarded) {
+            assert!(s.ci_hi_pct >= 0.0, "task {} n = {}: {s:?}", s.task, s.n_train);
+        }
     }
 
     #[test]

@@ -44,7 +44,7 @@ mod test_support;
 
 pub use colearn::{
     default_tasks, summarise, transfer_matrix, transfer_matrix_for_target, MatrixMethod, MatrixRow, MatrixSummary,
-    StudyPrinter, TransferTask, CONFLICT_ALPHA, INNER_CV_ALONE_FROM,
+    StudyPrinter, TransferTask,
 };
 pub use errors::{FitError, KinematicsError, ParamError};
 pub use fit::{fit, fit_at};

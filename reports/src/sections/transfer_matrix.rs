@@ -11,7 +11,6 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use models::fdm::{CONFLICT_ALPHA, INNER_CV_ALONE_FROM};
 use pipeline::params::NoParams;
 use pipeline::schema::Table;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
@@ -48,7 +47,7 @@ impl Stage for TransferMatrixSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.transfer_matrix",
-        version: 3,
+        version: 2,
         summary: "Transfer among printers: per method the cells worse / better than single-printer learning beyond their interval, per task the guarded improvement → section.html, comparison.parquet",
         implements: "paper 000 Sec. III-B and Fig. 9, over several printers",
         inputs: &[MATRIX],
@@ -149,16 +148,8 @@ fn per_task(matrix: &Matrix) -> String {
             plain(bound, 2)
         );
     }
-    let (check_pct, alone_from) = (100.0 * CONFLICT_ALPHA, INNER_CV_ALONE_FROM);
-    let _ = write!(
-        html,
-        "</table>\n<p class=\"run\">With one target line the guard does not transfer (nothing on the target validates a transfer), so at n = 1 it is single-printer learning by construction (not shown). \
-With 2 to {} target lines it considers only the sources whose per-line parameters agree with the target's (a Hotelling test at the {check_pct} % level) and lets leave-one-out over the target's lines choose among them, no transfer and λ; \
-from {alone_from} lines on, leave-one-out alone chooses, so a source that differs from the target can still centre the prior where the target's own lines show that it helps. \
+    html + "</table>\n<p class=\"run\">With one target line the guard does not transfer (nothing on the target validates a transfer), so at n = 1 it is single-printer learning by construction (not shown). \
 The bound in hindsight is not a method: for each training subset it takes, among no transfer and every prior of the task at every λ of the grid, the one with the smallest mean RMSE on that subset's own held-out lines. \
 No rule that chooses the prior and λ from the training lines has a smaller mean held-out RMSE on any subset, so where the bound is small, no such rule helps with these priors. \
-The printers other than the Taz 5 and Taz 6 are made from their measured lines by the stated physical change of stage fdm.other_family (a wider nozzle, a slower melt).</p>\n",
-        alone_from - 1
-    );
-    html
+The printers other than the Taz 5 and Taz 6 are made from their measured lines by the stated physical change of stage fdm.other_family (a wider nozzle, a slower melt).</p>\n"
 }

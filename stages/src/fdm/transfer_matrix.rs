@@ -62,7 +62,7 @@ impl Stage for TransferMatrixStage {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.transfer_matrix",
-        version: 3,
+        version: 2,
         summary: "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning, bound in hindsight} → transfer_matrix.parquet, transfer_matrix_rows.parquet",
         implements: "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard",
         inputs: &[PRINTERS],
