@@ -16,9 +16,10 @@ use crate::cli::{
 };
 
 /// Every stage kind this binary knows: domain stages and figures (and, for the fault
-/// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`).
+/// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`), under this build's code
+/// fingerprint (`src/code_fingerprint.rs`), which every stage's cache key holds.
 pub fn registry() -> Registry {
-    let mut registry = Registry::new();
+    let mut registry = Registry::with_code_fingerprint(env!("AMREPRO_CODE_FINGERPRINT"));
     stages::register(&mut registry);
     reports::register(&mut registry);
     if std::env::var_os(pipeline::testing::ENV_VAR).is_some_and(|v| v == "1") {

@@ -4,6 +4,8 @@
 //! message too (`pipeline::panic`), never a Rust panic report.
 
 mod cli;
+#[cfg(test)]
+mod code_fingerprint;
 mod commands;
 mod nightly_run;
 mod outputs;

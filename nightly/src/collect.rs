@@ -217,6 +217,7 @@ mod tests {
                 kind: "k".into(),
                 kind_version: 1,
                 tool_version: "0".into(),
+                code_fingerprint: String::new(),
                 key_hash: String::new(),
                 params: Default::default(),
                 seed: 0,

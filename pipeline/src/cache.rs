@@ -1,5 +1,6 @@
 //! The stage cache: a stage is skipped when its key hash — of (kind, kind version,
-//! tool version, parameters, seed, input content hashes) — equals the one recorded
+//! tool version, the program's code fingerprint, parameters, seed, input content
+//! hashes) — equals the one recorded
 //! beside its outputs and those outputs are intact. Otherwise the decision says why
 //! it runs, in the terms `--dry-run` prints.
 
@@ -35,6 +36,8 @@ pub struct CacheKey<'a> {
     pub kind_version: u32,
     /// Tool version.
     pub tool_version: &'a str,
+    /// The program's code fingerprint ([`crate::Registry::code_fingerprint`]).
+    pub code: &'a str,
     /// Parameters.
     pub params: &'a Params,
     /// Stage seed.
@@ -77,6 +80,10 @@ fn differences(key: &CacheKey, prev: &StageRecord) -> Vec<String> {
     }
     if prev.tool_version != key.tool_version {
         why.push(format!("tool version changed: {} → {}", prev.tool_version, TOOL_VERSION));
+    }
+    if prev.code_fingerprint != key.code {
+        let old = if prev.code_fingerprint.is_empty() { "none recorded" } else { &prev.code_fingerprint };
+        why.push(format!("the program's code changed (fingerprint {old} → {})", key.code));
     }
     why.extend(param_changes(&prev.params, key.params));
     if prev.seed != key.seed {

@@ -272,6 +272,7 @@ impl Executor<'_> {
             kind: stage.kind,
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION,
+            code: self.registry.code_fingerprint(),
             params: &stage.params,
             seed,
             inputs: &inputs,
@@ -535,6 +536,7 @@ impl StageJob<'_> {
             kind: stage.kind.to_string(),
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION.to_string(),
+            code_fingerprint: self.registry.code_fingerprint().to_string(),
             key_hash: self.key_hash,
             params: stage.params.clone(),
             seed: self.seed,
@@ -650,5 +652,56 @@ fn format_line(line: &StageLine) -> String {
         Status::Cached => format!("  cached   {:<24} {}", line.stage, line.kind),
         Status::Resumed => format!("  resumed  {:<24} {:<32} ({})", line.stage, line.kind, line.reason),
         Status::WouldRun => format!("  would run {:<23} {:<32} because {}", line.stage, line.kind, line.reason),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::FaultKind;
+
+    /// A registry of `test.fault` under the code fingerprint `code`.
+    fn registry(code: &str) -> Registry {
+        let mut registry = Registry::with_code_fingerprint(code);
+        registry.register(Box::new(FaultKind));
+        registry
+    }
+
+    /// Runs `spec` into `out` with `registry`: each stage's status and reason.
+    fn run(spec: &Path, out: &Path, registry: &Registry) -> Vec<(Status, String)> {
+        let plan = Plan::from_file(spec, registry).unwrap();
+        let opts = RunOptions { out_dir: out.to_path_buf(), ..RunOptions::default() };
+        let summary = run_plan(&plan, registry, &opts, &|_| {}).unwrap();
+        summary.stages.into_iter().map(|s| (s.status, s.reason)).collect()
+    }
+
+    #[test]
+    fn another_build_of_the_program_reruns_every_stage_and_says_why() {
+        let dir = tempfile::tempdir().unwrap();
+        let (spec, out) = (dir.path().join("s.toml"), dir.path().join("out"));
+        let text = "[run]\nname = \"c\"\n\
+                    [stage.a]\nkind = \"test.fault\"\nparams = { text = \"x\" }\n\
+                    [stage.b]\nkind = \"test.fault\"\ninputs = [\"a\"]\n";
+        std::fs::write(&spec, text).unwrap();
+        let (first, second) = (registry("0123456789abcdef"), registry("fedcba9876543210"));
+        assert!(run(&spec, &out, &first).iter().all(|(s, _)| *s == Status::Ran));
+        assert!(run(&spec, &out, &first).iter().all(|(s, _)| *s == Status::Cached), "same build: cached");
+        let rerun = run(&spec, &out, &second);
+        assert!(rerun.iter().all(|(s, _)| *s == Status::Ran), "{rerun:?}");
+        let why = "the program's code changed (fingerprint 0123456789abcdef → fedcba9876543210)";
+        assert!(rerun[0].1.contains(why), "{}", rerun[0].1);
+        let record = read_record(&out.join("runs/c/a")).unwrap();
+        assert_eq!(record.code_fingerprint, "fedcba9876543210");
+        assert!(run(&spec, &out, &second).iter().all(|(s, _)| *s == Status::Cached));
+        // A record from before the key held the code (no fingerprint, another key).
+        let path = out.join("runs/c/a").join(RECORD_FILE);
+        let mut old: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        let fields = old.as_object_mut().unwrap();
+        fields.remove("code_fingerprint");
+        fields.insert("key_hash".into(), "0".repeat(64).into());
+        std::fs::write(&path, serde_json::to_vec(&old).unwrap()).unwrap();
+        let rerun = run(&spec, &out, &second);
+        assert_eq!(rerun[0].0, Status::Ran);
+        assert!(rerun[0].1.contains("fingerprint none recorded → fedcba9876543210"), "{}", rerun[0].1);
     }
 }

@@ -28,7 +28,12 @@ pub struct StageRecord {
     pub kind_version: u32,
     /// Tool version that produced the outputs.
     pub tool_version: String,
-    /// Cache key: hash of (kind, version, tool version, params, seed, inputs).
+    /// Code fingerprint of the program that produced them (empty in records written
+    /// before the cache held it, and by programs without one).
+    #[serde(default)]
+    pub code_fingerprint: String,
+    /// Cache key: hash of (kind, version, tool version, code fingerprint, params, seed,
+    /// inputs).
     pub key_hash: String,
     /// The parameters it ran with.
     pub params: Params,

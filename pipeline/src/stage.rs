@@ -381,16 +381,32 @@ pub fn check_declaration(kind: &dyn StageKind) -> Result<(), String> {
     Ok(())
 }
 
-/// All registered stage kinds, by name.
+/// All registered stage kinds, by name, and the code fingerprint of the program that
+/// holds them.
 #[derive(Default)]
 pub struct Registry {
     kinds: BTreeMap<&'static str, Box<dyn StageKind>>,
+    code_fingerprint: String,
 }
 
 impl Registry {
-    /// An empty registry.
+    /// An empty registry with no code fingerprint (the cache then tells builds apart by
+    /// the kinds' versions only).
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// An empty registry of a program whose code hashes to `fingerprint` (the `amrepro`
+    /// binary's, from its sources at build time). Every stage's cache key holds it, so
+    /// a stage cached by another build runs again: a change nobody marked with a version
+    /// bump is never served stale.
+    pub fn with_code_fingerprint(fingerprint: &str) -> Self {
+        Self { code_fingerprint: fingerprint.to_string(), ..Self::default() }
+    }
+
+    /// The code fingerprint ([`Self::with_code_fingerprint`]; empty if none).
+    pub fn code_fingerprint(&self) -> &str {
+        &self.code_fingerprint
     }
 
     /// Adds a kind. Panics on a duplicate name or a malformed declaration

@@ -355,6 +355,7 @@ impl<'a> Shared<'a> {
             kind: stage.kind,
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION,
+            code: self.registry.code_fingerprint(),
             params: &stage.params,
             seed,
             inputs,
