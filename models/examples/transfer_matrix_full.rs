@@ -6,6 +6,7 @@
 //!
 //! ```text
 //! cargo run --release -p models --example transfer_matrix_full -- [DATA_DIR] [--dump FILE] [--target K]
+//! cargo run --release -p models --example transfer_matrix_full -- DATA_DIR --self-source
 //! ```
 //!
 //! With `DATA_DIR` (the folder holding `taz5/` and `taz6/` of `fsu-linewidth`) the
@@ -15,6 +16,11 @@
 //! row with its RMSE and λ as exact bit patterns, so two builds can be compared bit for
 //! bit (`cmp`); `--target K` runs printer `K`'s unit only. This example reads files;
 //! the `models` library itself does no I/O.
+//!
+//! `--self-source` asks how much any source could give under paper 000's prior family:
+//! the real Taz 5 and Taz 6 each learn from *themselves* (the source prior is
+//! Algorithm 1 over all nine of the target's own lines, the held-out ones included, so
+//! it is a bound, not a method), and the summary's improvements at n ≤ 3 are printed.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -22,8 +28,8 @@ use std::time::Instant;
 
 use models::fdm::synthetic::{perturbed_lines, TABLE_I};
 use models::fdm::{
-    default_tasks, other_family_widths, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
-    PiecewiseParams, StudyPrinter, TransferParams,
+    default_tasks, other_family_widths, summarise, transfer_matrix_for_target, LineKinematics, MatrixRow,
+    MeasuredLine, PiecewiseParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 
 fn main() {
@@ -31,6 +37,9 @@ fn main() {
     let dump = args.iter().position(|a| a == "--dump").map(|i| PathBuf::from(&args[i + 1]));
     let only = args.iter().position(|a| a == "--target").map(|i| args[i + 1].parse::<usize>().unwrap());
     let data = args.first().filter(|a| !a.starts_with("--")).map(PathBuf::from);
+    if args.iter().any(|a| a == "--self-source") {
+        return self_source(&spec_printers(data.as_deref().expect("--self-source needs DATA_DIR")));
+    }
     let (lines, blob) = match &data {
         Some(dir) => (spec_printers(dir), [true, false, true, false]),
         None => (synthetic_printers(), [true, false, true, false]),
@@ -43,12 +52,7 @@ fn main() {
     let printers: Vec<StudyPrinter> = (0..4)
         .map(|k| StudyPrinter { name: names[k], lines: &lines[k], params: if blob[k] { &with_blob } else { &without } })
         .collect();
-    let transfer = TransferParams {
-        lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(),
-        ..TransferParams::paper_defaults()
-    }
-    .check()
-    .unwrap();
+    let transfer = decade_grid();
     let tasks = default_tasks(4, true);
     let mut rows = Vec::new();
     let start = Instant::now();
@@ -61,6 +65,35 @@ fn main() {
     if let Some(path) = dump {
         std::fs::write(&path, dump_rows(&rows)).unwrap();
     }
+}
+
+/// The real Taz 5 and Taz 6 (`lines[0]`, `lines[1]`) each as its own source: the
+/// summary at n ≤ 3 on standard output.
+fn self_source(lines: &[Vec<MeasuredLine>]) {
+    let (with_blob, without) = (
+        PiecewiseParams::paper_defaults().check().unwrap(),
+        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
+    );
+    let params = [&with_blob, &without, &with_blob, &without];
+    let names = ["taz5", "taz6", "taz5 (itself)", "taz6 (itself)"];
+    let printers: Vec<StudyPrinter> =
+        (0..4).map(|k| StudyPrinter { name: names[k], lines: &lines[k % 2], params: params[k] }).collect();
+    let tasks = [TransferTask { sources: vec![2], target: 0 }, TransferTask { sources: vec![3], target: 1 }];
+    let rows: Vec<MatrixRow> =
+        (0..2).flat_map(|t| transfer_matrix_for_target(&printers, &tasks, &decade_grid(), t).unwrap()).collect();
+    println!("target  n  method                 improvement over single (%) [95 %]");
+    for s in summarise(&rows, 2000, 1).iter().filter(|s| s.n_train <= 3) {
+        let (target, method) = (names[tasks[s.task].target], s.method.name());
+        let (imp, lo, hi) = (s.improvement_pct, s.ci_lo_pct, s.ci_hi_pct);
+        println!("{target:<7} {:<2} {method:<22} {imp:+6.1} [{lo:+6.1}, {hi:+6.1}]", s.n_train);
+    }
+}
+
+/// The λ grid of `fdm.transfer_matrix`: 1e-6 to 1e4 in whole decades.
+fn decade_grid() -> TransferValidParams {
+    TransferParams { lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(), ..TransferParams::paper_defaults() }
+        .check()
+        .unwrap()
 }
 
 /// One line per row: task, n, subset, held-out line, method, prior, and the RMSE and λ
