@@ -28,8 +28,8 @@ use std::time::Instant;
 
 use models::fdm::synthetic::{perturbed_lines, TABLE_I};
 use models::fdm::{
-    default_tasks, other_family_widths, summarise, transfer_matrix_for_target, LineKinematics, MatrixRow,
-    MeasuredLine, PiecewiseParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
+    default_tasks, other_family_widths, summarise, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
+    PiecewiseParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 
 fn main() {
