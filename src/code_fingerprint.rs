@@ -11,6 +11,9 @@
 //! count, not modification times: the same checkout gives the same fingerprint on any
 //! machine, which a run spread over machines needs (docs/SCALE.md).
 //!
+//! Not covered: the Rust toolchain (a new compiler does not rerun cached stages) and
+//! environment variables read at build time (none today).
+//!
 //! Hand-written: Cargo gives a build script no hash of a package's sources.
 
 use std::fs;

@@ -70,6 +70,17 @@ fn contents(manifests: &[Manifest]) -> String {
     format!("<ul>{items}</ul>\n")
 }
 
+/// The code fingerprint of the build that produced the run's outputs, as ` (code …)`,
+/// if its stages record one and agree on it (the cache reruns every stage of another
+/// build, so they do).
+fn code_text(m: &Manifest) -> String {
+    let mut codes = m.stages.iter().map(|s| s.record.code_fingerprint.as_str());
+    match codes.next() {
+        Some(first) if !first.is_empty() && codes.all(|c| c == first) => format!(" (code {})", escape(first)),
+        _ => String::new(),
+    }
+}
+
 fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
     let mut s = format!(
         "<h2 id=\"{0}\">{1} <small>({0})</small></h2>\n",
@@ -78,10 +89,11 @@ fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
     );
     let _ = writeln!(
         s,
-        "<p class=\"run\">spec <code>{}</code> (sha256 {}…), amrepro {}, wall time of the last invocation {:.2} s</p>",
+        "<p class=\"run\">spec <code>{}</code> (sha256 {}…), amrepro {}{}, wall time of the last invocation {:.2} s</p>",
         escape(&m.spec_file.display().to_string()),
         &m.spec_sha256[..12.min(m.spec_sha256.len())],
         escape(&m.tool_version),
+        code_text(m),
         m.wall_time_s
     );
     s += &stage_table(m);
@@ -240,4 +252,39 @@ mod tests {
     fn escapes_markup() {
         assert_eq!(escape("<a href=\"x\">&</a>"), "&lt;a href=&quot;x&quot;&gt;&amp;&lt;/a&gt;");
     }
+
+    #[test]
+    fn the_run_line_names_the_build_when_every_stage_records_the_same_one() {
+        let stage = |code: &str| -> ManifestStage {
+            let mut record: pipeline::StageRecord =
+                serde_json::from_str(RECORD).expect("a record without a code fingerprint parses");
+            record.code_fingerprint = code.into();
+            ManifestStage {
+                record,
+                status: "run".into(),
+                reason: String::new(),
+                this_run_wall_time_s: 0.0,
+                published: Default::default(),
+            }
+        };
+        let manifest = |codes: &[&str]| Manifest {
+            tool_version: "0.1.0".into(),
+            run: "r".into(),
+            title: String::new(),
+            spec_file: "s.toml".into(),
+            spec_sha256: String::new(),
+            finished_unix_s: 0,
+            wall_time_s: 0.0,
+            stages: codes.iter().map(|c| stage(c)).collect(),
+        };
+        assert_eq!(code_text(&manifest(&["d26b3398084096a6", "d26b3398084096a6"])), " (code d26b3398084096a6)");
+        assert_eq!(code_text(&manifest(&["d26b3398084096a6", "0123456789abcdef"])), "");
+        assert_eq!(code_text(&manifest(&["", ""])), "");
+        assert_eq!(code_text(&manifest(&[])), "");
+    }
+
+    /// A stage record as written before records held the code fingerprint.
+    const RECORD: &str = r#"{"stage": "a", "kind": "k", "kind_version": 1, "tool_version": "0.1.0",
+        "key_hash": "h", "params": {}, "seed": 0, "input_hashes": {}, "output_hash": "o", "outputs": [],
+        "rows": 0, "wall_time_s": 0.0}"#;
 }
