@@ -38,13 +38,16 @@ pub struct Sources {
     pub folders: Vec<PathBuf>,
 }
 
-/// The workspace members named in `root/Cargo.toml` (`members = [".", "pipeline", …]`).
+/// The workspace members named in `root/Cargo.toml`: the `members = [".", "pipeline",
+/// …]` list of its `[workspace]` table (comments ignored).
 pub fn members(root: &Path) -> io::Result<Vec<String>> {
     let manifest = root.join("Cargo.toml");
     let text = fs::read_to_string(&manifest)?;
     let invalid = |why: &str| io::Error::new(io::ErrorKind::InvalidData, format!("{}: {why}", manifest.display()));
-    let start = text.find("members").ok_or_else(|| invalid("no workspace `members`"))?;
-    let list = &text[start..];
+    let code: String = text.lines().map(|l| l.split('#').next().unwrap_or("")).collect::<Vec<_>>().join("\n");
+    let workspace = &code[code.find("[workspace]").ok_or_else(|| invalid("no `[workspace]` table"))?..];
+    let start = workspace.find("members").ok_or_else(|| invalid("no workspace `members`"))?;
+    let list = &workspace[start..];
     let (open, close) = (list.find('[').ok_or_else(|| invalid("`members` is not a list"))?, list.find(']'));
     let close = close.filter(|&c| c > open).ok_or_else(|| invalid("`members` list is not closed"))?;
     let names: Vec<String> = list[open + 1..close]
@@ -125,7 +128,8 @@ mod tests {
             fs::create_dir_all(path.parent().unwrap()).unwrap();
             fs::write(path, text).unwrap();
         };
-        put("Cargo.toml", "[workspace]\nmembers = [\".\", \"core\",\n  \"io\"]\nexclude = [\"fuzz\"]\n");
+        let manifest = "# members = [\"old\"]\n[workspace]\nmembers = [\".\", \"core\", # the library\n  \"io\"]\nexclude = [\"fuzz\"]\n";
+        put("Cargo.toml", manifest);
         put("Cargo.lock", "lock");
         put("src/main.rs", "fn main() {}");
         put("tests/cli.rs", "#[test] fn t() {}");
@@ -199,9 +203,12 @@ mod tests {
     }
 
     #[test]
-    fn a_manifest_without_members_is_an_error_naming_it() {
+    fn a_manifest_without_workspace_members_is_an_error_naming_it() {
         let dir = tempfile::tempdir().unwrap();
         fs::write(dir.path().join("Cargo.toml"), "[package]\nname = \"x\"\n").unwrap();
+        let err = sources(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("Cargo.toml") && err.contains("[workspace]"), "{err}");
+        fs::write(dir.path().join("Cargo.toml"), "[workspace]\nresolver = \"2\"\n").unwrap();
         let err = sources(dir.path()).unwrap_err().to_string();
         assert!(err.contains("Cargo.toml") && err.contains("members"), "{err}");
     }
