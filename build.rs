@@ -3,7 +3,6 @@
 //! again when any file it covers, or any folder it walked, changes.
 
 #[path = "src/code_fingerprint.rs"]
-#[allow(dead_code)]
 mod code_fingerprint;
 
 use std::path::PathBuf;

@@ -29,7 +29,7 @@ use std::time::Instant;
 use models::fdm::synthetic::{perturbed_lines, TABLE_I};
 use models::fdm::{
     default_tasks, other_family_widths, summarise, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
-    PiecewiseParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
+    PiecewiseParams, PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 
 fn main() {
@@ -44,10 +44,7 @@ fn main() {
         Some(dir) => (spec_printers(dir), [true, false, true, false]),
         None => (synthetic_printers(), [true, false, true, false]),
     };
-    let (with_blob, without) = (
-        PiecewiseParams::paper_defaults().check().unwrap(),
-        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
-    );
+    let (with_blob, without) = paper_params();
     let names = ["taz5", "taz6", "taz5-0.8mm", "taz6-slow-melt"];
     let printers: Vec<StudyPrinter> = (0..4)
         .map(|k| StudyPrinter { name: names[k], lines: &lines[k], params: if blob[k] { &with_blob } else { &without } })
@@ -70,10 +67,7 @@ fn main() {
 /// The real Taz 5 and Taz 6 (`lines[0]`, `lines[1]`) each as its own source: the
 /// summary at n ≤ 3 on standard output.
 fn self_source(lines: &[Vec<MeasuredLine>]) {
-    let (with_blob, without) = (
-        PiecewiseParams::paper_defaults().check().unwrap(),
-        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
-    );
+    let (with_blob, without) = paper_params();
     let params = [&with_blob, &without, &with_blob, &without];
     let names = ["taz5", "taz6", "taz5 (itself)", "taz6 (itself)"];
     let printers: Vec<StudyPrinter> =
@@ -87,6 +81,15 @@ fn self_source(lines: &[Vec<MeasuredLine>]) {
         let (imp, lo, hi) = (s.improvement_pct, s.ci_lo_pct, s.ci_hi_pct);
         println!("{target:<7} {:<2} {method:<22} {imp:+6.1} [{lo:+6.1}, {hi:+6.1}]", s.n_train);
     }
+}
+
+/// The paper's piecewise-model settings with the start blob (Taz 5 family) and without
+/// (Taz 6 family).
+fn paper_params() -> (PiecewiseValidParams, PiecewiseValidParams) {
+    (
+        PiecewiseParams::paper_defaults().check().unwrap(),
+        PiecewiseParams::paper_defaults_without_blob().check().unwrap(),
+    )
 }
 
 /// The λ grid of `fdm.transfer_matrix`: 1e-6 to 1e4 in whole decades.
