@@ -37,12 +37,14 @@ fn the_guard_never_hurts_beyond_its_interval_on_the_real_lines() {
         assert!(hi[i] >= 0.0, "row {i}: the guard is worse than single beyond its interval");
         assert!(lo[i] <= imp[i] && imp[i] <= hi[i] + 1e-9, "row {i}: the estimate lies in its interval");
     }
+    assert!(strings(&table, t::kinematics).iter().all(|k| k == "target_pair"), "the spec's kinematics rule");
     let singles = (0..table.height()).filter(|&i| method[i] == "single");
     assert!(singles.clone().count() == 16 && singles.clone().all(|i| imp[i] == 0.0));
     let run = tmp.path().join("out/runs/ren2021_transfer");
     assert!(run.join("matrix_fig/transfer_matrix.png").is_file());
     let section = std::fs::read_to_string(run.join("comparison/section.html")).unwrap();
     assert!(section.contains("negative-transfer guard"), "{section}");
+    assert!(section.contains("that the same training lines give without prior"), "{section}");
     let rows = read_table(&tmp.path().join("out/fdm/transfer_matrix_rows.parquet"));
     let prior = strings(&rows, transfer_matrix_rows::prior);
     let rows_method = strings(&rows, transfer_matrix_rows::method);
@@ -52,14 +54,18 @@ fn the_guard_never_hurts_beyond_its_interval_on_the_real_lines() {
 }
 
 #[test]
-fn unknown_blob_printer_and_a_reused_printer_name_are_named() {
+fn unknown_blob_printer_an_unknown_kinematics_rule_and_a_reused_printer_name_are_named() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = shipped_spec(tmp.path(), "ren2021_transfer", &data_root().join("fsu-linewidth"));
     let text = std::fs::read_to_string(&spec).unwrap();
-    let typo = text.replace("params = { bootstrap_draws = 400 }", "params = { blob_printers = \"taz7\" }");
+    let typo = text.replace("bootstrap_draws = 400,", "blob_printers = \"taz7\",");
     std::fs::write(&spec, typo).unwrap();
     let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
     assert!(err.contains("taz7") && err.contains("matrix"), "{err}");
+    let rule = text.replace("kinematics = \"target_pair\"", "kinematics = \"target\"");
+    std::fs::write(&spec, rule).unwrap();
+    let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    assert!(err.contains("kinematics") && err.contains("`target`") && err.contains("target_pair"), "{err}");
     let same = text.replace("printer = \"taz6-slow-melt\"", "printer = \"taz6\"");
     std::fs::write(&spec, same).unwrap();
     let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);

@@ -6,6 +6,7 @@
 //!
 //! ```text
 //! cargo run --release -p models --example transfer_matrix_full -- [DATA_DIR] [--dump FILE] [--target K]
+//!     [--kinematics grid|target_pair] [--summary]
 //! cargo run --release -p models --example transfer_matrix_full -- DATA_DIR --self-source
 //! ```
 //!
@@ -14,7 +15,10 @@
 //! nozzle (widths × 1.6) and the Taz 6 with a slow melt (widths lagged over 8 mm).
 //! Without it they are the synthetic printers of the `fdm` bench. `--dump` writes every
 //! row with its RMSE and λ as exact bit patterns, so two builds can be compared bit for
-//! bit (`cmp`); `--target K` runs printer `K`'s unit only. This example reads files;
+//! bit (`cmp`); `--target K` runs printer `K`'s unit only; `--kinematics` chooses where
+//! the fits under a prior take `(r_a, r_F)` (`PriorKinematics`; `grid` by default, the
+//! spec's choice is `target_pair`); `--summary` prints every (task, n, method) of the
+//! summary. This example reads files;
 //! the `models` library itself does no I/O.
 //!
 //! `--self-source` asks how much any source could give under paper 000's prior family:
@@ -29,7 +33,8 @@ use std::time::Instant;
 use models::fdm::synthetic::{perturbed_lines, TABLE_I};
 use models::fdm::{
     default_tasks, other_family_widths, summarise, transfer_matrix_for_target, LineKinematics, MatrixRow, MeasuredLine,
-    PiecewiseParams, PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
+    PiecewiseParams, PiecewiseValidParams, PriorKinematics, StudyPrinter, TransferParams, TransferTask,
+    TransferValidParams,
 };
 
 fn main() {
@@ -49,7 +54,10 @@ fn main() {
     let printers: Vec<StudyPrinter> = (0..4)
         .map(|k| StudyPrinter { name: names[k], lines: &lines[k], params: if blob[k] { &with_blob } else { &without } })
         .collect();
-    let transfer = decade_grid();
+    let kinematics = args.iter().position(|a| a == "--kinematics").map(|i| args[i + 1].as_str());
+    let kinematics =
+        kinematics.map_or(PriorKinematics::Grid, |k| PriorKinematics::parse(k).expect("grid or target_pair"));
+    let transfer = decade_grid(kinematics);
     let tasks = default_tasks(4, true);
     let mut rows = Vec::new();
     let start = Instant::now();
@@ -62,6 +70,27 @@ fn main() {
     if let Some(path) = dump {
         std::fs::write(&path, dump_rows(&rows)).unwrap();
     }
+    if args.iter().any(|a| a == "--summary") {
+        print_summary(&rows, &tasks, &names);
+    }
+}
+
+/// Every (task, n, method) of the summary on standard output.
+fn print_summary(rows: &[MatrixRow], tasks: &[TransferTask], names: &[&str]) {
+    println!("sources -> target  n  method                 median mm  improvement (%) [95 %]");
+    for s in summarise(rows, 2000, 1) {
+        let task = &tasks[s.task];
+        let sources: Vec<&str> = task.sources.iter().map(|&k| names[k]).collect();
+        let (imp, lo, hi) = (s.improvement_pct, s.ci_lo_pct, s.ci_hi_pct);
+        println!(
+            "{} -> {} {:<2} {:<22} {:.4} {imp:+6.1} [{lo:+6.1}, {hi:+6.1}]",
+            sources.join("+"),
+            names[task.target],
+            s.n_train,
+            s.method.name(),
+            s.median_rmse_mm
+        );
+    }
 }
 
 /// The real Taz 5 and Taz 6 (`lines[0]`, `lines[1]`) each as its own source: the
@@ -73,8 +102,9 @@ fn self_source(lines: &[Vec<MeasuredLine>]) {
     let printers: Vec<StudyPrinter> =
         (0..4).map(|k| StudyPrinter { name: names[k], lines: &lines[k % 2], params: params[k] }).collect();
     let tasks = [TransferTask { sources: vec![2], target: 0 }, TransferTask { sources: vec![3], target: 1 }];
-    let rows: Vec<MatrixRow> =
-        (0..2).flat_map(|t| transfer_matrix_for_target(&printers, &tasks, &decade_grid(), t).unwrap()).collect();
+    let rows: Vec<MatrixRow> = (0..2)
+        .flat_map(|t| transfer_matrix_for_target(&printers, &tasks, &decade_grid(PriorKinematics::Grid), t).unwrap())
+        .collect();
     println!("target  n  method                 improvement over single (%) [95 %]");
     for s in summarise(&rows, 2000, 1).iter().filter(|s| s.n_train <= 3) {
         let (target, method) = (names[tasks[s.task].target], s.method.name());
@@ -92,11 +122,11 @@ fn paper_params() -> (PiecewiseValidParams, PiecewiseValidParams) {
     )
 }
 
-/// The λ grid of `fdm.transfer_matrix`: 1e-6 to 1e4 in whole decades.
-fn decade_grid() -> TransferValidParams {
-    TransferParams { lambda_grid: (0..11).map(|k| 10f64.powi(k - 6)).collect(), ..TransferParams::paper_defaults() }
-        .check()
-        .unwrap()
+/// The λ grid of `fdm.transfer_matrix`, 1e-6 to 1e4 in whole decades, with the
+/// kinematics rule `kinematics`.
+fn decade_grid(kinematics: PriorKinematics) -> TransferValidParams {
+    let lambda_grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
+    TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
 }
 
 /// One line per row: task, n, subset, held-out line, method, prior, and the RMSE and λ

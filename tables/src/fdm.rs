@@ -351,6 +351,8 @@ pipeline::table! {
         ci_hi_pct: Float64 "%",
         /// Predictions behind the median.
         rows: Int64 "1",
+        /// Where the fits under a prior took the kinematic scales (r_a, r_F) of eq. 1: `grid` (the grid search repeated under each prior and λ) or `target_pair` (the training lines' own pair, found without prior).
+        kinematics: Str "",
     }
 }
 

@@ -97,9 +97,10 @@ pub const TEST_WHITE_STUDY: &str = "draws = 1, null_draws = 2";
 /// The transfer matrix of the shipped `specs/ren2021_transfer.toml` (four printers,
 /// about two minutes), and the two-printer matrix the tests run instead.
 pub const SHIPPED_MATRIX: &str =
-    "inputs = [\"taz5\", \"taz6\", \"taz5_wide_nozzle\", \"taz6_slow_melt\"]\nparams = { blob_printers = \"taz5, taz5-0.8mm\" }";
+    "inputs = [\"taz5\", \"taz6\", \"taz5_wide_nozzle\", \"taz6_slow_melt\"]\nparams = { blob_printers = \"taz5, taz5-0.8mm\", kinematics = \"target_pair\" }";
 /// See [`SHIPPED_MATRIX`].
-pub const TEST_MATRIX: &str = "inputs = [\"taz6\", \"taz6_slow_melt\"]\nparams = { bootstrap_draws = 400 }";
+pub const TEST_MATRIX: &str =
+    "inputs = [\"taz6\", \"taz6_slow_melt\"]\nparams = { bootstrap_draws = 400, kinematics = \"target_pair\" }";
 
 /// A shipped spec's text with its studies cut to the tests' size: the power studies
 /// ([`TEST_POWER_STUDY`], [`TEST_WHITE_STUDY`]) and the transfer matrix

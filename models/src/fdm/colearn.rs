@@ -3,7 +3,9 @@
 //! MAP transfer (Ren et al. 2021, Sec. II-B, Algorithm 1, eqs 4-6) and on the held-out
 //! table of [`super::transfer_cv`]: every training subset of the target's lines is fitted
 //! once under every prior configuration, so every method here is a rule that *reads*
-//! that table, and the methods are compared on the same fits.
+//! that table, and the methods are compared on the same fits. Where those fits take
+//! `(r_a, r_F)` is the transfer settings' [`PriorKinematics`](super::transfer::PriorKinematics):
+//! the guarantees below are tested under both rules.
 //!
 //! # Methods
 //! - `single`, `transfer_zero_mean`, `transfer_source_mean`: as in
@@ -284,7 +286,7 @@ fn target_rows(
     let configs = Configs::new(&priors, lambdas);
     let tp = printers[target];
     let subsets = all_condition_subsets(tp.lines.len());
-    let table = held_out_table(tp.lines, tp.params, &subsets, &configs)?;
+    let table = held_out_table(tp.lines, tp.params, &subsets, &configs, transfer.get().kinematics)?;
     let study = TargetStudy::new(&subsets, &configs, &table, &slots, sources, transfer)?;
     let mut rows = Vec::new();
     for &(task, t) in &mine {
@@ -683,7 +685,7 @@ mod tests {
     use super::super::printer::{print_line, Effects, PrinterProfile};
     use super::super::synthetic::TABLE_I;
     use super::super::test_support::real_lines;
-    use super::super::transfer::TransferParams;
+    use super::super::transfer::{PriorKinematics, TransferParams};
     use super::*;
 
     #[test]
@@ -787,10 +789,16 @@ mod tests {
             TransferTask { sources: vec![1], target: 3 },
             TransferTask { sources: vec![0, 2], target: 4 },
         ];
-        let transfer = decade_grid();
-        let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
+        for kinematics in RULES {
+            real_lines_under(&printers, &tasks, &decade_grid(kinematics));
+        }
+    }
+
+    /// The assertions of the real-lines test under one transfer setting.
+    fn real_lines_under(printers: &[StudyPrinter], tasks: &[TransferTask], transfer: &TransferValidParams) {
+        let rows = transfer_matrix(printers, tasks, transfer).unwrap();
         let mut by_target: Vec<MatrixRow> =
-            [3, 4].iter().flat_map(|&t| transfer_matrix_for_target(&printers, &tasks, &transfer, t).unwrap()).collect();
+            [3, 4].iter().flat_map(|&t| transfer_matrix_for_target(printers, tasks, transfer, t).unwrap()).collect();
         by_target.sort_by_key(|r| r.task);
         assert_eq!(by_target, rows, "the study split by target printer gives the same rows");
         let summary = summarise(&rows, 500, 7);
@@ -851,11 +859,15 @@ mod tests {
         [0, 3, 5, 8].iter().map(|&k| lines[k].clone()).collect()
     }
 
-    /// The shipped spec's λ grid: 1e-6 to 1e4 in whole decades.
-    fn decade_grid() -> TransferValidParams {
+    /// The shipped spec's λ grid, 1e-6 to 1e4 in whole decades, with the kinematics rule
+    /// `kinematics`.
+    fn decade_grid(kinematics: PriorKinematics) -> TransferValidParams {
         let grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
-        TransferParams { lambda_grid: grid, ..TransferParams::paper_defaults() }.check().unwrap()
+        TransferParams { lambda_grid: grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
     }
+
+    /// Both kinematics rules: the guarantees must hold under each.
+    const RULES: [PriorKinematics; 2] = [PriorKinematics::Grid, PriorKinematics::TargetPair];
 
     /// Nine Table I lines of the virtual printer `profile`, sampled every 0.5 mm (the
     /// truth grid's every tenth point), each line from its own seeded stream.
@@ -912,16 +924,17 @@ mod tests {
             TransferTask { sources: vec![1, 2, 3], target: 0 },
             TransferTask { sources: vec![1], target: 4 },
         ];
-        let transfer = decade_grid();
-        let rows = transfer_matrix(&printers, &tasks, &transfer).unwrap();
-        let summary = summarise(&rows, 500, 7);
-        assert_guarded_never_below_single(&summary);
-        let of = |task: usize, n: usize, m: MatrixMethod| {
-            summary.iter().find(|s| s.task == task && s.n_train == n && s.method == m).unwrap().improvement_pct
-        };
-        assert!(of(0, 2, MatrixMethod::Guarded) > 10.0, "the twin's prior helps two lines");
-        assert!(of(3, 2, MatrixMethod::CoLearning) > 10.0, "so it does among other families");
-        assert_hindsight_bounds_every_method(&rows);
+        for kinematics in RULES {
+            let rows = transfer_matrix(&printers, &tasks, &decade_grid(kinematics)).unwrap();
+            let summary = summarise(&rows, 500, 7);
+            assert_guarded_never_below_single(&summary);
+            let of = |task: usize, n: usize, m: MatrixMethod| {
+                summary.iter().find(|s| s.task == task && s.n_train == n && s.method == m).unwrap().improvement_pct
+            };
+            assert!(of(0, 2, MatrixMethod::Guarded) > 10.0, "{kinematics:?}: the twin's prior helps two lines");
+            assert!(of(3, 2, MatrixMethod::CoLearning) > 10.0, "{kinematics:?}: so it does among other families");
+            assert_hindsight_bounds_every_method(&rows);
+        }
     }
 
     #[test]
@@ -947,8 +960,10 @@ mod tests {
             StudyPrinter { name: "bowden-target", lines: &bowden_target, params: &p },
         ];
         let tasks = [TransferTask { sources: vec![2], target: 0 }, TransferTask { sources: vec![1], target: 3 }];
-        let rows = transfer_matrix(&printers, &tasks, &decade_grid()).unwrap();
-        assert_guarded_never_below_single(&summarise(&rows, 500, 7));
+        for kinematics in RULES {
+            let rows = transfer_matrix(&printers, &tasks, &decade_grid(kinematics)).unwrap();
+            assert_guarded_never_below_single(&summarise(&rows, 500, 7));
+        }
     }
 
     #[test]

@@ -57,8 +57,8 @@ pub use piecewise::{Bp1PowerLaw, LineChain, PiecewiseCoefficients, WidthPhase};
 pub use predict::FittedPiecewise;
 pub use transfer::{
     all_condition_subsets, condition_subsets, estimate_covariance, single, solve_map, transfer_source_mean,
-    transfer_zero_mean, ConditionSubset, LambdaRule, ParameterCovariance, PriorMean, SourcePrior, TransferFit,
-    TransferParams, TransferValidParams,
+    transfer_zero_mean, ConditionSubset, LambdaRule, ParameterCovariance, PriorKinematics, PriorMean, SourcePrior,
+    TransferFit, TransferParams, TransferValidParams,
 };
 pub use transfer_cv::{
     transfer_cv, transfer_cv_blocks, transfer_cv_from_parts, transfer_cv_part, GridPart, GridWinner, TransferCvRow,

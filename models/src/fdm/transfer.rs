@@ -23,6 +23,11 @@
 //!   each source line in turn plays the single target line, with the prior built from
 //!   the other source lines, and predicts the remaining source lines; the `λ` with the
 //!   smallest mean RMSE over all those predictions is used.
+//! - `(r_a, r_F)` under the prior ([`PriorKinematics`]): by default every fit under a
+//!   prior repeats the grid search of Sec. II-A (steps 2-8) for its own `λ`; with
+//!   [`PriorKinematics::TargetPair`] it takes the pair the same lines select without
+//!   prior and fits the prior there. The paper's prior is on `θ`, not on `(r_a, r_F)`,
+//!   and it does not say which it did.
 //! - Fig. 9 enumerates all training subsets of the nine target conditions:
 //!   [`condition_subsets`], C(9, n) for n = 1..8, 510 in all;
 //!   [`transfer_cv`](super::transfer_cv::transfer_cv) runs the whole cross-validation.
@@ -139,6 +144,44 @@ pub struct TransferParams {
     /// Which of `(β, γ, c, ρ)` get the prior. All four by default (Sec. III-B step 1);
     /// `[false, true, false, true]` is the γ-ρ-only variant of eq. 6.
     pub prior_on: [bool; TRANSFER_DIM],
+    /// Where a fit under the prior takes its kinematic scales `(r_a, r_F)` of eq. 1.
+    pub kinematics: PriorKinematics,
+}
+
+/// Where a fit under the prior (eq. 5) takes the kinematic scales `(r_a, r_F)` of eq. 1.
+///
+/// The prior of eqs 4-5 is on the shape parameters `(β, γ, c, ρ)`; `(r_a, r_F)`, the
+/// ratios of the target's actual acceleration and feed to the G-code's, are not in it.
+/// The paper does not say whether its grid search over them (Sec. II-A, steps 2-8) is
+/// repeated under the prior.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PriorKinematics {
+    /// The whole grid search is repeated under the prior: each `λ` picks its own pair by
+    /// the penalised fit's training RMSE. Under a strong prior that pulls the shape away
+    /// from the target's lines, the pair then absorbs part of the misfit and can end far
+    /// from the pair the lines themselves give. The default, and what Fig. 9 uses.
+    #[default]
+    Grid,
+    /// The pair is the target's own: the single-printer grid search on the same training
+    /// lines without prior (Sec. II-A, steps 2-8), and every prior fit is made at that
+    /// pair (a two-stage estimate: kinematics from the target, then the MAP of eq. 5).
+    /// It needs one grid search per training set instead of one per prior and `λ`.
+    TargetPair,
+}
+
+impl PriorKinematics {
+    /// Stable name: `grid` or `target_pair`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Grid => "grid",
+            Self::TargetPair => "target_pair",
+        }
+    }
+
+    /// The rule of a [`name`](Self::name).
+    pub fn parse(name: &str) -> Option<Self> {
+        [Self::Grid, Self::TargetPair].into_iter().find(|k| k.name() == name)
+    }
 }
 
 /// Checked transfer settings.
@@ -153,6 +196,7 @@ impl TransferParams {
         Self {
             lambda_grid: (0..21).map(|k| 10f64.powf(-6.0 + 0.5 * k as f64)).collect(),
             prior_on: [true; TRANSFER_DIM],
+            kinematics: PriorKinematics::Grid,
         }
     }
 
@@ -305,12 +349,12 @@ pub fn transfer_fit(
     let prior = segment_prior(&source.covariance, mean, transfer)?;
     let (lambda, rule) = if target_lines.len() >= 2 {
         let lambdas = &transfer.get().lambda_grid;
-        let scores = inner_cv_rmse(target_lines, target_params, &prior, lambdas)?;
+        let scores = inner_cv_rmse(target_lines, target_params, &prior, transfer)?;
         (lambdas[argmin(&scores)], LambdaRule::InnerCrossValidation)
     } else {
         (source.single_line_lambda(mean), LambdaRule::SourceSimulation)
     };
-    let mut fits = fit_with_prior(target_lines, target_params, &prior, &[lambda])?;
+    let mut fits = fit_with_prior(target_lines, target_params, &prior, &[lambda], transfer.get().kinematics)?;
     Ok(TransferFit { model: fits.remove(0), lambda, rule })
 }
 
@@ -351,15 +395,23 @@ pub(crate) fn segment_prior(
     Ok(prior)
 }
 
-/// MAP fits of the target lines for each `λ` (each with its own grid search over
-/// `r_a`, `r_F`).
+/// MAP fits of the target lines for each `λ`, at the `(r_a, r_F)` that `kinematics`
+/// gives: each `λ` with its own grid search, or all at the lines' single-printer pair.
 pub(crate) fn fit_with_prior(
     lines: &[MeasuredLine],
     params: &PiecewiseValidParams,
     prior: &SegmentPrior,
     lambdas: &[f64],
+    kinematics: PriorKinematics,
 ) -> Result<Vec<FittedPiecewise>, FitError> {
-    fit_on_grid(lines, params, &full_grid(params), Some(prior), lambdas)
+    let grid = match kinematics {
+        PriorKinematics::Grid => full_grid(params),
+        PriorKinematics::TargetPair => {
+            let own = super::fit::fit(lines, params)?;
+            vec![(own.r_a, own.r_f)]
+        }
+    };
+    fit_on_grid(lines, params, &grid, Some(prior), lambdas)
 }
 
 /// Mean leave-one-out RMSE over the training lines for each `λ`.
@@ -367,10 +419,11 @@ fn inner_cv_rmse(
     lines: &[MeasuredLine],
     params: &PiecewiseValidParams,
     prior: &SegmentPrior,
-    lambdas: &[f64],
+    transfer: &TransferValidParams,
 ) -> Result<Vec<f64>, FitError> {
+    let TransferParams { lambda_grid: lambdas, kinematics, .. } = transfer.get();
     let per_fold = super::loo::run_folds(lines, |train, test, _| {
-        let fits = fit_with_prior(train, params, prior, lambdas)?;
+        let fits = fit_with_prior(train, params, prior, lambdas, *kinematics)?;
         fits.iter()
             .map(|f| Ok(rmse(&f.predict(&test.nominal, &test.positions_mm)?, &test.widths_mm)))
             .collect::<Result<Vec<f64>, FitError>>()
@@ -393,7 +446,8 @@ fn simulate_single_line_lambda(
             let others: Vec<[f64; TRANSFER_DIM]> =
                 per_line.iter().enumerate().filter(|&(i, _)| i != j).map(|(_, t)| *t).collect();
             let prior = segment_prior(&estimate_covariance(&others)?, mean, transfer)?;
-            let fits = fit_with_prior(std::slice::from_ref(&lines[j]), params, &prior, lambdas)?;
+            let one = std::slice::from_ref(&lines[j]);
+            let fits = fit_with_prior(one, params, &prior, lambdas, transfer.get().kinematics)?;
             fits.iter().map(|f| mean_rmse_on_others(f, lines, j)).collect::<Result<Vec<f64>, FitError>>()
         })
         .collect::<Result<Vec<Vec<f64>>, FitError>>()?;
@@ -585,7 +639,7 @@ mod tests {
         ])
         .unwrap();
         let prior = segment_prior(&cov, PriorMean::SourceMean, &transfer).unwrap();
-        let with = fit_with_prior(&lines[..4], &params, &prior, &[1e-12]).unwrap();
+        let with = fit_with_prior(&lines[..4], &params, &prior, &[1e-12], PriorKinematics::Grid).unwrap();
         let without = fit(&lines[..4], &params).unwrap();
         let (a, b) = (with[0].coefficients, without.coefficients);
         assert_eq!((with[0].r_a, with[0].r_f), (without.r_a, without.r_f));
@@ -593,7 +647,7 @@ mod tests {
             assert!((x - y).abs() < 1e-6 * (1.0 + y.abs()), "{x} vs {y}");
         }
         // A very strong prior pulls the transferable parameters onto the source mean.
-        let strong = fit_with_prior(&lines[..4], &params, &prior, &[1e9]).unwrap();
+        let strong = fit_with_prior(&lines[..4], &params, &prior, &[1e9], PriorKinematics::Grid).unwrap();
         let s = strong[0].coefficients.transfer_vector();
         for i in 0..4 {
             assert!((s[i] - cov.mean[i]).abs() < 1e-3 * (1.0 + cov.mean[i].abs()));

@@ -59,6 +59,19 @@
 //! configurations, a handful of iterations each, every one a partition update per line,
 //! the equations of the changed rows and a 5 × 5 LU solve (the `fdm` bench measures
 //! it, `examples/transfer_matrix_full.rs` the four-printer matrix).
+//!
+//! # The pair from the fit without prior
+//!
+//! With [`PriorKinematics::TargetPair`] a fit under a prior does not search the grid: it
+//! takes the pair its training lines select without prior (`transfer::fit_with_prior`).
+//! Here that is two passes: the grid search above for configuration 0 alone, which
+//! gives every subset its pair, then every configuration of each subset at that pair
+//! only, subsets grouped by pair so that each pair's lines are computed once
+//! (`fit_at_own_pairs`). A configuration's solve at a pair is the same as in the full
+//! search, so the rows again equal the direct loop bit for bit (tested), and the chain
+//! solves fall from one per (set, pair, configuration) to one per (set, pair) plus
+//! one per (set, configuration). The blocks of [`transfer_cv_part`] cut the grid, which
+//! this rule needs whole, so they refuse it.
 
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
@@ -76,8 +89,8 @@ use super::line::{rmse, MeasuredLine};
 use super::piecewise::Bp1PowerLaw;
 use super::predict::FittedPiecewise;
 use super::transfer::{
-    all_condition_subsets, argmin, segment_prior, source_covariance, ConditionSubset, ParameterCovariance, PriorMean,
-    SourcePrior, TransferValidParams,
+    all_condition_subsets, argmin, segment_prior, source_covariance, ConditionSubset, ParameterCovariance,
+    PriorKinematics, PriorMean, SourcePrior, TransferParams, TransferValidParams,
 };
 
 /// Most target lines [`transfer_cv`] accepts. There are `2^N − 2` subsets, each fitted
@@ -152,7 +165,7 @@ pub fn transfer_cv(
     check_target_count(target_lines.len())?;
     let source = SourcePrior::build(source_lines, source_params, transfer)?;
     let cv = CvSetup::new(target_lines, target_params, &source.covariance, transfer)?;
-    let whole = cv.grid_part(0..full_grid(target_params).len());
+    let whole = cv.whole_grid();
     cv.rows(&source, vec![whole])
 }
 
@@ -180,6 +193,13 @@ pub fn transfer_cv_part(
     let pairs_in_grid = full_grid(target_params).len();
     if pairs.start > pairs.end || pairs.end > pairs_in_grid {
         return Err(FitError::Dimension(format!("grid pairs {pairs:?} of a grid of {pairs_in_grid}")));
+    }
+    if transfer.get().kinematics != PriorKinematics::Grid {
+        return Err(FitError::Dimension(format!(
+            "grid blocks need kinematics = {}: with {} a training set's pair comes from the whole grid",
+            PriorKinematics::Grid.name(),
+            transfer.get().kinematics.name()
+        )));
     }
     let (_, covariance) = source_covariance(source_lines, source_params)?;
     Ok(CvSetup::new(target_lines, target_params, &covariance, transfer)?.grid_part(pairs))
@@ -219,6 +239,7 @@ struct CvSetup<'a> {
     subsets: Vec<ConditionSubset>,
     priors: [SegmentPrior; 2],
     lambdas: &'a [f64],
+    kinematics: PriorKinematics,
 }
 
 impl<'a> CvSetup<'a> {
@@ -234,7 +255,8 @@ impl<'a> CvSetup<'a> {
         ];
         let subsets = all_condition_subsets(lines.len());
         let prepared = prepare_lines(lines, params, &subsets)?;
-        Ok(Self { lines, params, prepared, subsets, priors, lambdas: &transfer.get().lambda_grid })
+        let TransferParams { lambda_grid, kinematics, .. } = transfer.get();
+        Ok(Self { lines, params, prepared, subsets, priors, lambdas: lambda_grid, kinematics: *kinematics })
     }
 
     fn configs(&self) -> Configs<'_> {
@@ -243,6 +265,11 @@ impl<'a> CvSetup<'a> {
 
     fn grid_part(&self, pairs: Range<usize>) -> GridPart {
         fit_grid_block(&self.prepared, self.params, &self.subsets, &self.configs(), pairs)
+    }
+
+    /// The whole grid search, by the rule of `kinematics`.
+    fn whole_grid(&self) -> GridPart {
+        search_grid(&self.prepared, self.params, &self.subsets, &self.configs(), self.kinematics)
     }
 
     /// The parts merged in grid order, the held-out table and the rows.
@@ -286,9 +313,10 @@ pub(crate) fn held_out_table(
     target_params: &PiecewiseValidParams,
     subsets: &[ConditionSubset],
     configs: &Configs,
+    kinematics: PriorKinematics,
 ) -> Result<HeldOut, FitError> {
     let prepared = prepare_lines(target_lines, target_params, subsets)?;
-    let whole = fit_grid_block(&prepared, target_params, subsets, configs, 0..full_grid(target_params).len());
+    let whole = search_grid(&prepared, target_params, subsets, configs, kinematics);
     held_out_from(target_lines, &prepared, target_params, subsets, configs, whole)
 }
 
@@ -322,6 +350,11 @@ impl<'a> Configs<'a> {
 
     pub(crate) fn len(&self) -> usize {
         self.priors.len()
+    }
+
+    /// Configuration 0 alone (no prior).
+    fn without_prior(&self) -> Self {
+        Self { priors: vec![None], lambdas: self.lambdas }
     }
 
     /// The grid of `λ`.
@@ -373,6 +406,7 @@ fn fit_grid_block(
     // joins neighbouring runs in order, and `merge` is associative with `empty()` as
     // identity, so the winners are those of one pass in grid order.
     let start = pairs.start;
+    let every: Vec<usize> = (0..subsets.len()).collect();
     grid[pairs]
         .par_iter()
         .enumerate()
@@ -380,12 +414,71 @@ fn fit_grid_block(
         .fold(
             || (PairWork::new(prepared, subsets.len()), empty()),
             |(mut work, mut best), (k, &r)| {
-                work.evaluate(start + k, r, subsets, params, &configs.priors, &mut best);
+                work.evaluate(start + k, r, (subsets, &every), params, &configs.priors, &mut best);
                 (work, best)
             },
         )
         .map(|(_, best)| best)
         .reduce(empty, GridPart::merge)
+}
+
+/// The whole grid search of every subset under every configuration, by the rule
+/// `kinematics`: every configuration over every pair ([`fit_grid_block`]), or
+/// ([`PriorKinematics::TargetPair`]) the search without prior first, then every
+/// configuration at each subset's winning pair ([`fit_at_own_pairs`]).
+fn search_grid(
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    subsets: &[ConditionSubset],
+    configs: &Configs,
+    kinematics: PriorKinematics,
+) -> GridPart {
+    let pairs = 0..full_grid(params).len();
+    match kinematics {
+        PriorKinematics::Grid => fit_grid_block(prepared, params, subsets, configs, pairs),
+        PriorKinematics::TargetPair => {
+            let own = fit_grid_block(prepared, params, subsets, &configs.without_prior(), pairs);
+            fit_at_own_pairs(prepared, params, subsets, configs, own)
+        }
+    }
+}
+
+/// Every subset under every configuration at the one pair `own` selected for it
+/// without prior, as `fit_on_grid` does on a one-pair grid: subsets grouped by their
+/// pair, so that each pair's lines are computed once; a subset without a pair keeps
+/// `own`'s first error.
+fn fit_at_own_pairs(
+    prepared: &[PreparedLine],
+    params: &PiecewiseValidParams,
+    subsets: &[ConditionSubset],
+    configs: &Configs,
+    own: GridPart,
+) -> GridPart {
+    let grid = full_grid(params);
+    let mut by_pair: Vec<(usize, Vec<usize>)> = Vec::new();
+    let mut order: Vec<(usize, usize)> =
+        own.winners.iter().enumerate().filter_map(|(s, w)| w.pair.map(|p| (p, s))).collect();
+    order.sort_unstable();
+    for (pair, s) in order {
+        match by_pair.last_mut() {
+            Some((p, list)) if *p == pair => list.push(s),
+            _ => by_pair.push((pair, vec![s])),
+        }
+    }
+    let empty = || GridPart::new(subsets.len(), configs.len());
+    let mut part = by_pair
+        .par_iter()
+        .fold(
+            || (PairWork::new(prepared, subsets.len()), empty()),
+            |(mut work, mut best), (pair, which)| {
+                work.evaluate(*pair, grid[*pair], (subsets, which), params, &configs.priors, &mut best);
+                (work, best)
+            },
+        )
+        .map(|(_, best)| best)
+        .reduce(empty, GridPart::merge);
+    part.first_error = own.first_error;
+    part
 }
 
 /// Per-thread state of the grid loop: every target line at the current pair.
@@ -409,12 +502,12 @@ impl<'p> PairWork<'p> {
         }
     }
 
-    /// One grid pair: the lines once, then every subset under every configuration.
+    /// One grid pair: the lines once, then the subsets `which` under every configuration.
     fn evaluate(
         &mut self,
         pair: usize,
         (r_a, r_f): (f64, f64),
-        subsets: &[ConditionSubset],
+        (subsets, which): (&[ConditionSubset], &[usize]),
         params: &PiecewiseValidParams,
         configs: &[ChainPrior],
         best: &mut GridPart,
@@ -423,7 +516,8 @@ impl<'p> PairWork<'p> {
             *status = line.update(r_a, r_f);
         }
         let mut refs: Vec<&LineAtPair> = Vec::with_capacity(self.lines.len());
-        for (s, subset) in subsets.iter().enumerate() {
+        for &s in which {
+            let subset = &subsets[s];
             // As in `fit`, the first failing line makes the pair fail for this set.
             if let Some(e) = subset.indices.iter().find_map(|&i| self.status[i].as_ref().err()) {
                 best.fail(s, pair, e);
@@ -848,6 +942,47 @@ mod tests {
         lambdas.sort_by(f64::total_cmp);
         lambdas.dedup();
         assert!(lambdas.len() > 1, "{lambdas:?}");
+    }
+
+    #[test]
+    fn target_pair_equals_the_direct_loop_and_fits_every_prior_at_the_single_pair() {
+        // With the pair taken from the fit without prior, the two-stage search (one grid
+        // search per subset, then every configuration at its pair) equals the direct
+        // loop, whose prior fits run on a one-pair grid at `single`'s pair.
+        let grid = Case::new(&[0, 2, 4, 8], 0.2);
+        let transfer = TransferParams { kinematics: PriorKinematics::TargetPair, ..grid.transfer.get().clone() };
+        let case = Case { transfer: transfer.check().unwrap(), ..grid };
+        let rows = case.run();
+        assert_eq!(rows, case.reference());
+        let prior = SourcePrior::build(&case.source, &case.sp, &case.transfer).unwrap();
+        for subset in all_condition_subsets(case.target.len()) {
+            let train: Vec<MeasuredLine> = subset.indices.iter().map(|&i| case.target[i].clone()).collect();
+            let own = single(&train, &case.tp).unwrap().model;
+            for fit in [
+                transfer_zero_mean(&train, &case.tp, &prior, &case.transfer).unwrap(),
+                transfer_source_mean(&train, &case.tp, &prior, &case.transfer).unwrap(),
+            ] {
+                assert_eq!((fit.model.r_a, fit.model.r_f), (own.r_a, own.r_f), "{}", subset.id);
+            }
+        }
+        // Single-printer rows do not depend on the rule; the rule changes some prior row.
+        let by_grid = Case { transfer: TransferParams::paper_defaults().check().unwrap(), ..case }.run();
+        let single_rows = |rows: &[TransferCvRow]| -> Vec<TransferCvRow> {
+            rows.iter().filter(|r| r.method == TransferMethod::Single).cloned().collect()
+        };
+        assert_eq!(single_rows(&rows), single_rows(&by_grid));
+        assert!(rows.iter().zip(&by_grid).any(|(a, b)| a != b), "the rule changed no prior fit");
+    }
+
+    #[test]
+    fn grid_blocks_refuse_the_target_pair_rule() {
+        // A block of pairs cannot know a subset's pair without prior, which needs the
+        // whole grid.
+        let case = Case::coarse(&[0, 4], 0.5);
+        let transfer = TransferParams { kinematics: PriorKinematics::TargetPair, ..case.transfer.get().clone() };
+        let err = transfer_cv_part(&case.source, &case.target, &case.sp, &case.tp, &transfer.check().unwrap(), 0..3)
+            .unwrap_err();
+        assert!(err.to_string().contains("target_pair"), "{err}");
     }
 
     #[test]

@@ -4,22 +4,27 @@
 //! better, than learning from the target's lines alone beyond its 95 % interval; per
 //! task, the guarded method's (or co-learning's) improvement with its interval at a few
 //! training-set sizes, beside the source-centred prior and the bound in hindsight
-//! (`models::fdm::colearn`) at n = 1 and 2. Every number is read from `transfer_matrix.parquet`.
+//! (`models::fdm::colearn`) at n = 1 and 2; where the fits under a prior took the
+//! kinematic scales `(r_a, r_F)` (the table's `kinematics`). Every number is read from
+//! `transfer_matrix.parquet`.
 //!
 //! Input: the `fdm.transfer_matrix` stage.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
+use std::path::Path;
 
 use pipeline::params::NoParams;
-use pipeline::schema::Table;
+use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use tables::fdm::transfer_matrix;
 use tables::report::comparison;
 
 use super::{comparison_frame, Row};
 use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix, READS};
 use crate::html::escape;
+use crate::read::{no_rows, read_parquet, strs};
 
 /// The `report.transfer_matrix` stage kind.
 pub struct TransferMatrixSection;
@@ -30,7 +35,11 @@ const MATRIX: Input = Input::one(
     &[Source::Stage("fdm.transfer_matrix")],
     "the median improvements with their intervals per task, n and method (`transfer_matrix.parquet`)",
 )
-.reading(READS);
+.reading(SECTION_READS);
+
+/// What the section reads: the figure's columns and the kinematics rule.
+const SECTION_READS: &[Reads] =
+    &[READS[0], Reads { table: &transfer_matrix::TABLE, columns: &[transfer_matrix::kinematics] }];
 
 /// Methods in table order, with what a reader of the paper calls them.
 const METHODS: [(&str, &str); 4] = [
@@ -47,7 +56,7 @@ impl Stage for TransferMatrixSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.transfer_matrix",
-        version: 2,
+        version: 3,
         summary: "Transfer among printers: per method the cells worse / better than single-printer learning beyond their interval, per task the guarded improvement → section.html, comparison.parquet",
         implements: "paper 000 Sec. III-B and Fig. 9, over several printers",
         inputs: &[MATRIX],
@@ -56,11 +65,13 @@ impl Stage for TransferMatrixSection {
     const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
-        let matrix = load(&ctx.input(&MATRIX).dir)?;
+        let dir = &ctx.input(&MATRIX).dir;
+        let matrix = load(dir)?;
         let (rows, tally_html) = tally(&matrix);
         let mut html = String::from("<h3>Transfer among printers: when it helps, and the guard</h3>\n");
         html += &tally_html;
         html += &per_task(&matrix);
+        html += &kinematics_note(&kinematics_rule(dir)?);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
@@ -152,4 +163,28 @@ fn per_task(matrix: &Matrix) -> String {
 The bound in hindsight is not a method: for each training subset it takes, among no transfer and every prior of the task at every λ of the grid, the one with the smallest mean RMSE on that subset's own held-out lines. \
 No rule that chooses the prior and λ from the training lines has a smaller mean held-out RMSE on any subset, so where the bound is small, no such rule helps with these priors. \
 The printers other than the Taz 5 and Taz 6 are made from their measured lines by the stated physical change of stage fdm.other_family (a wider nozzle, a slower melt).</p>\n"
+}
+
+/// The one kinematics rule of every row of `transfer_matrix.parquet`.
+fn kinematics_rule(dir: &Path) -> Result<String, StageError> {
+    use transfer_matrix as t;
+    let path = dir.join(t::TABLE.file());
+    let rules = strs(&read_parquet(&path)?, t::kinematics, &path)?;
+    match rules.first() {
+        Some(first) if rules.iter().all(|r| r == first) => Ok(first.clone()),
+        _ => Err(no_rows(&path, t::kinematics, "one kinematics rule for every row")),
+    }
+}
+
+/// Where the fits under a prior took `(r_a, r_F)`, for a reader of the paper.
+fn kinematics_note(rule: &str) -> String {
+    let how = match rule {
+        "target_pair" => "Every fit under a prior takes the kinematic scales (r_a, r_F) of eq. 1 that the same training lines give without prior \
+(the single-printer grid search of Sec. II-A) and fits the prior of eq. 5 at that pair. \
+The prior is on the shape parameters, not on (r_a, r_F). The reproduction of Fig. 9 repeats the grid search under each prior and λ instead, \
+where a strong prior can move the pair to absorb its misfit.",
+        "grid" => "Every fit under a prior repeats the grid search over the kinematic scales (r_a, r_F) of eq. 1 for its own prior and λ, as the reproduction of Fig. 9 does.",
+        other => return format!("<p class=\"run\">Kinematics rule of the fits under a prior: {}.</p>\n", escape(other)),
+    };
+    format!("<p class=\"run\">{how}</p>\n")
 }

@@ -24,7 +24,7 @@ use std::path::PathBuf;
 
 use models::fdm::{
     default_tasks, summarise, transfer_matrix_for_target, MatrixMethod, MatrixRow, PiecewiseParams,
-    PiecewiseValidParams, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
+    PiecewiseValidParams, PriorKinematics, StudyPrinter, TransferParams, TransferTask, TransferValidParams,
 };
 use pipeline::params::{ParamError, StageParams};
 use pipeline::schema::Table;
@@ -49,6 +49,8 @@ pipeline::params! {
         pub co_learning: bool = true,
         /// Spacing of the λ grid from 1e-6 to 1e4 (decades; fdm.transfer_cv uses 0.5). Every method's λ is chosen on this grid.
         pub lambda_step_decades: f64 [0.1, 2.0] = 1.0,
+        /// Where a fit under a prior takes the kinematic scales (r_a, r_F) of eq. 1: `grid` repeats the grid search under every prior and λ (as fdm.transfer_cv, Fig. 9); `target_pair` takes the training lines' own pair without prior and fits every prior there.
+        pub kinematics: String = "grid",
         /// Bootstrap resamples of the target's held-out lines for each improvement's 95 % interval.
         pub bootstrap_draws: i64 [100, 100_000] = 2000,
     }
@@ -62,7 +64,7 @@ impl Stage for TransferMatrixStage {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.transfer_matrix",
-        version: 2,
+        version: 3,
         summary: "Transfer among several printers: every ordered pair and every printer from all the others × {single, zero-mean, source-mean, guarded, co-learning, bound in hindsight} → transfer_matrix.parquet, transfer_matrix_rows.parquet",
         implements: "paper 000 Sec. II-B / III-B (Algorithm 1, eqs 4-6) over many printers, with a negative-transfer guard",
         inputs: &[PRINTERS],
@@ -72,10 +74,7 @@ impl Stage for TransferMatrixStage {
         &[&transfer_matrix::TABLE, &transfer_matrix_rows::TABLE, &transfer_matrix_part::TABLE];
 
     fn check(p: &TransferMatrixParams) -> Result<(), ParamError> {
-        lambda_grid(p.lambda_step_decades)
-            .check()
-            .map(|_| ())
-            .map_err(|e| ParamError::new("lambda_step_decades", e.to_string()))
+        transfer_params(p).map(|_| ())
     }
 
     fn run(&self, ctx: &mut StageContext, _: &TransferMatrixParams) -> Result<(), StageError> {
@@ -127,6 +126,7 @@ fn write_tables(ctx: &mut StageContext, study: &Study, rows: &[MatrixRow]) -> Re
         f64_col(transfer_matrix::ci_lo_pct, summary.iter().map(|s| s.ci_lo_pct).collect()),
         f64_col(transfer_matrix::ci_hi_pct, summary.iter().map(|s| s.ci_hi_pct).collect()),
         i64_col(transfer_matrix::rows, summary.iter().map(|s| s.rows as i64).collect()),
+        str_col(transfer_matrix::kinematics, vec![study.transfer.get().kinematics.name().to_string(); summary.len()]),
     ])?;
     ctx.write_table(transfer_matrix::TABLE.name, &mut table)?;
     let mut rows = rows_table(rows, &study.tasks, &study.lines, &names)?;
@@ -150,7 +150,7 @@ impl Study {
             .collect::<Result<Vec<PrinterLines>, _>>()?;
         let params = model_params(&lines, &p.blob_printers)
             .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
-        let transfer = lambda_grid(p.lambda_step_decades).check().map_err(|e| fit_failed("transfer parameters", e))?;
+        let transfer = transfer_params(&p).map_err(|e| StageError::params(ctx, e))?;
         let tasks = default_tasks(lines.len(), p.co_learning);
         Ok(Self { lines, params, transfer, tasks })
     }
@@ -231,13 +231,18 @@ fn model_params(printers: &[PrinterLines], blob_printers: &str) -> Result<Vec<Pi
         .collect()
 }
 
-/// The paper's transfer settings on a λ grid from 1e-6 to 1e4 in steps of `step` decades.
-fn lambda_grid(step: f64) -> TransferParams {
-    let count = (10.0 / step + 1e-9).floor() as usize + 1;
-    TransferParams {
-        lambda_grid: (0..count).map(|k| 10f64.powf(-6.0 + step * k as f64)).collect(),
-        ..TransferParams::paper_defaults()
-    }
+/// The paper's transfer settings on a λ grid from 1e-6 to 1e4 in steps of
+/// `lambda_step_decades`, with the stage's kinematics rule.
+fn transfer_params(p: &TransferMatrixParams) -> Result<TransferValidParams, ParamError> {
+    let kinematics = PriorKinematics::parse(&p.kinematics).ok_or_else(|| {
+        let names = [PriorKinematics::Grid, PriorKinematics::TargetPair].map(|k| k.name());
+        ParamError::new("kinematics", format!("`{}` is not one of {}", p.kinematics, names.join(", ")))
+    })?;
+    let count = (10.0 / p.lambda_step_decades + 1e-9).floor() as usize + 1;
+    let lambda_grid = (0..count).map(|k| 10f64.powf(-6.0 + p.lambda_step_decades * k as f64)).collect();
+    TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }
+        .check()
+        .map_err(|e| ParamError::new("lambda_step_decades", e.to_string()))
 }
 
 /// Each task's `+`-joined source names and its target's name.
