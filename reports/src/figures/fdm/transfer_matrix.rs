@@ -61,8 +61,15 @@ pub const READS: &[Reads] = &[Reads {
 const PANEL_PX: (u32, u32) = (760, 520);
 /// The y axis never goes below this (%): worse transfers are marked on the edge.
 const FLOOR_PCT: f64 = -40.0;
-/// Extra y range above the data, as a fraction of the data's range, for the legend.
-const LEGEND_ROOM: f64 = 0.45;
+/// The legend's size (upper left, over small n): pixels per entry (14 px text and its
+/// spacing) and of its padding, and the pixels of a panel that are not plot (caption,
+/// margins, n labels), measured on the drawn figure.
+const LEGEND_ENTRY_PX: f64 = 17.0;
+const LEGEND_PAD_PX: f64 = 12.0;
+const PANEL_NON_PLOT_PX: f64 = 85.0;
+/// Gap between the legend's lower edge and the highest drawn value (fraction of the
+/// plot's height).
+const LEGEND_GAP: f64 = 0.04;
 /// How far apart along n the clipped-value triangles of neighbouring series sit.
 const CLIPPED_DODGE: f64 = 0.06;
 
@@ -88,7 +95,7 @@ impl Stage for TransferMatrixFigure {
     type Params = TransferMatrixParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_transfer_matrix",
-        version: 4,
+        version: 5,
         summary: "Median improvement over single-printer learning vs target training lines, one panel per target: source-centred and guarded transfer from each source, co-learning with its interval, the bound in hindsight → transfer_matrix.png/.svg",
         implements: "paper 000 Fig. 9 over several printers",
         inputs: &[MATRIX],
@@ -151,9 +158,15 @@ fn draw_panel<DB: DrawingBackend>(
     cells: &[Cell],
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let n_max = cells.iter().map(|c| c.n_train).max().unwrap_or(1) as f64;
-    // Head room above the data for the legend (upper left, where n is small).
-    let data_top = drawn_top_pct(cells).clamp(10.0, 100.0);
-    let top = data_top + LEGEND_ROOM * (data_top - FLOOR_PCT);
+    let mut sources: Vec<&str> =
+        cells.iter().filter(|c| !c.sources.contains('+')).map(|c| c.sources.as_str()).collect();
+    sources.sort_unstable();
+    sources.dedup();
+    let co: Vec<&Cell> = cells.iter().filter(|c| c.method == CO_LEARNING).collect();
+    let bound = bound_series(cells);
+    let entries =
+        sources.len() * SINGLE_SOURCE_SERIES.len() + usize::from(!co.is_empty()) + usize::from(!bound.is_empty());
+    let top = axis_top(drawn_top_pct(cells).clamp(10.0, 100.0), entries);
     let y = |v: f64| v.max(FLOOR_PCT);
     let mut chart = ChartBuilder::on(area)
         .caption(format!("target {target}"), text(18.0))
@@ -169,10 +182,6 @@ fn draw_panel<DB: DrawingBackend>(
         .y_label_formatter(&|v| format!("{v:.0}"))
         .draw()?;
     chart.draw_series(DashedLineSeries::new([(0.5, 0.0), (n_max + 0.5, 0.0)], 6, 4, BLACK.stroke_width(1)))?;
-    let mut sources: Vec<&str> =
-        cells.iter().filter(|c| !c.sources.contains('+')).map(|c| c.sources.as_str()).collect();
-    sources.sort_unstable();
-    sources.dedup();
     let slots = (sources.len() * SINGLE_SOURCE_SERIES.len()) as f64;
     for (k, source) in sources.iter().enumerate() {
         let colour = PALETTE[k % PALETTE.len()];
@@ -198,7 +207,6 @@ fn draw_panel<DB: DrawingBackend>(
                 .draw_series(clipped.map(|p| TriangleMarker::new((p.0 + dodge, FLOOR_PCT + 1.5), 6, shade.filled())))?;
         }
     }
-    let co: Vec<&Cell> = cells.iter().filter(|c| c.method == CO_LEARNING).collect();
     if !co.is_empty() {
         let style = BLACK.stroke_width(3);
         let pts: Vec<(f64, f64)> = co.iter().map(|c| (c.n_train as f64, y(c.improvement_pct))).collect();
@@ -211,7 +219,6 @@ fn draw_panel<DB: DrawingBackend>(
             PathElement::new([(x, y(c.ci_pct.0)), (x, y(c.ci_pct.1))], BLACK.stroke_width(1))
         }))?;
     }
-    let bound = bound_series(cells);
     if !bound.is_empty() {
         let style = RGBColor(120, 120, 120).stroke_width(2);
         chart
@@ -220,6 +227,16 @@ fn draw_panel<DB: DrawingBackend>(
             .legend(move |(x, yy)| PathElement::new([(x, yy), (x + 20, yy)], style));
     }
     draw_house_legend(&mut chart, SeriesLabelPosition::UpperLeft)
+}
+
+/// The top of the y axis (%) that leaves the legend of `entries` entries its height above
+/// `data_top`, the highest drawn value, with [`LEGEND_GAP`] between them: with the
+/// legend taking the fraction `f` of the plot's height from the top,
+/// `(top − data_top) / (top − FLOOR_PCT) = f`.
+fn axis_top(data_top: f64, entries: usize) -> f64 {
+    let plot_px = f64::from(PANEL_PX.1) - PANEL_NON_PLOT_PX;
+    let f = ((LEGEND_PAD_PX + LEGEND_ENTRY_PX * entries as f64) / plot_px + LEGEND_GAP).min(0.8);
+    (data_top - f * FLOOR_PCT) / (1.0 - f)
 }
 
 /// Not a method: per training subset the prior and `λ` best on its own held-out lines
@@ -277,6 +294,23 @@ mod tests {
     use crate::figures::test_util::{assert_drawn, declared, write_declared};
     use polars::df;
     use tables::fdm::transfer_matrix as t;
+
+    #[test]
+    fn the_axis_top_leaves_the_legend_its_height_above_the_data() {
+        // The legend's fraction of the plot's height, from the top, ends above the
+        // highest drawn value by the gap: more entries raise the top, and the data keep
+        // their place below the legend whatever their height.
+        let plot_px = f64::from(PANEL_PX.1) - PANEL_NON_PLOT_PX;
+        for entries in [3, 8, 12] {
+            let legend = (LEGEND_PAD_PX + LEGEND_ENTRY_PX * entries as f64) / plot_px;
+            for data_top in [10.0, 37.6, 100.0] {
+                let top = axis_top(data_top, entries);
+                let room = (top - data_top) / (top - FLOOR_PCT);
+                assert!((room - legend - LEGEND_GAP).abs() < 1e-12, "{entries} {data_top}: {room}");
+            }
+            assert!(axis_top(20.0, entries + 1) > axis_top(20.0, entries));
+        }
+    }
 
     #[test]
     fn draws_one_panel_per_target_and_rejects_an_empty_table() {
