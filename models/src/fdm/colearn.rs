@@ -789,7 +789,8 @@ mod tests {
             TransferTask { sources: vec![1], target: 3 },
             TransferTask { sources: vec![0, 2], target: 4 },
         ];
-        for kinematics in RULES {
+        // The guarantees must hold under both kinematics rules, here and in the tests below.
+        for kinematics in PriorKinematics::ALL {
             real_lines_under(&printers, &tasks, &decade_grid(kinematics));
         }
     }
@@ -866,9 +867,6 @@ mod tests {
         TransferParams { lambda_grid: grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
     }
 
-    /// Both kinematics rules: the guarantees must hold under each.
-    const RULES: [PriorKinematics; 2] = [PriorKinematics::Grid, PriorKinematics::TargetPair];
-
     /// Nine Table I lines of the virtual printer `profile`, sampled every 0.5 mm (the
     /// truth grid's every tenth point), each line from its own seeded stream.
     fn virtual_lines(profile: &PrinterProfile, seed: u64) -> Vec<MeasuredLine> {
@@ -924,7 +922,7 @@ mod tests {
             TransferTask { sources: vec![1, 2, 3], target: 0 },
             TransferTask { sources: vec![1], target: 4 },
         ];
-        for kinematics in RULES {
+        for kinematics in PriorKinematics::ALL {
             let rows = transfer_matrix(&printers, &tasks, &decade_grid(kinematics)).unwrap();
             let summary = summarise(&rows, 500, 7);
             assert_guarded_never_below_single(&summary);
@@ -960,7 +958,7 @@ mod tests {
             StudyPrinter { name: "bowden-target", lines: &bowden_target, params: &p },
         ];
         let tasks = [TransferTask { sources: vec![2], target: 0 }, TransferTask { sources: vec![1], target: 3 }];
-        for kinematics in RULES {
+        for kinematics in PriorKinematics::ALL {
             let rows = transfer_matrix(&printers, &tasks, &decade_grid(kinematics)).unwrap();
             assert_guarded_never_below_single(&summarise(&rows, 500, 7));
         }

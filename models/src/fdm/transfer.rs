@@ -170,6 +170,9 @@ pub enum PriorKinematics {
 }
 
 impl PriorKinematics {
+    /// Every rule.
+    pub const ALL: [Self; 2] = [Self::Grid, Self::TargetPair];
+
     /// Stable name: `grid` or `target_pair`.
     pub fn name(&self) -> &'static str {
         match self {
@@ -180,7 +183,7 @@ impl PriorKinematics {
 
     /// The rule of a [`name`](Self::name).
     pub fn parse(name: &str) -> Option<Self> {
-        [Self::Grid, Self::TargetPair].into_iter().find(|k| k.name() == name)
+        Self::ALL.into_iter().find(|k| k.name() == name)
     }
 }
 

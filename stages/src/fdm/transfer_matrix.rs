@@ -235,7 +235,7 @@ fn model_params(printers: &[PrinterLines], blob_printers: &str) -> Result<Vec<Pi
 /// `lambda_step_decades`, with the stage's kinematics rule.
 fn transfer_params(p: &TransferMatrixParams) -> Result<TransferValidParams, ParamError> {
     let kinematics = PriorKinematics::parse(&p.kinematics).ok_or_else(|| {
-        let names = [PriorKinematics::Grid, PriorKinematics::TargetPair].map(|k| k.name());
+        let names = PriorKinematics::ALL.map(|k| k.name());
         ParamError::new("kinematics", format!("`{}` is not one of {}", p.kinematics, names.join(", ")))
     })?;
     let count = (10.0 / p.lambda_step_decades + 1e-9).floor() as usize + 1;
