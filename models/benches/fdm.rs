@@ -95,7 +95,7 @@ fn bench_transfer_matrix(c: &mut Criterion) {
     // `grid` repeats the grid search under every prior and λ.
     g.sample_size(10).sampling_mode(SamplingMode::Flat).measurement_time(Duration::from_secs(120));
     for kinematics in PriorKinematics::ALL {
-        let lambda_grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
+        let lambda_grid = TransferParams::log_lambda_grid(1.0);
         let transfer = TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap();
         g.bench_function(format!("four_printers_9_lines_16_tasks_5_methods_{}", kinematics.name()), |b| {
             b.iter(|| {

@@ -125,7 +125,7 @@ fn paper_params() -> (PiecewiseValidParams, PiecewiseValidParams) {
 /// The λ grid of `fdm.transfer_matrix`, 1e-6 to 1e4 in whole decades, with the
 /// kinematics rule `kinematics`.
 fn decade_grid(kinematics: PriorKinematics) -> TransferValidParams {
-    let lambda_grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
+    let lambda_grid = TransferParams::log_lambda_grid(1.0);
     TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
 }
 

@@ -863,8 +863,8 @@ mod tests {
     /// The shipped spec's λ grid, 1e-6 to 1e4 in whole decades, with the kinematics rule
     /// `kinematics`.
     fn decade_grid(kinematics: PriorKinematics) -> TransferValidParams {
-        let grid = (0..11).map(|k| 10f64.powi(k - 6)).collect();
-        TransferParams { lambda_grid: grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
+        let lambda_grid = TransferParams::log_lambda_grid(1.0);
+        TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }.check().unwrap()
     }
 
     /// Nine Table I lines of the virtual printer `profile`, sampled every 0.5 mm (the

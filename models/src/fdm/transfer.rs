@@ -197,10 +197,23 @@ impl TransferParams {
     /// prior on all four transferable parameters.
     pub fn paper_defaults() -> Self {
         Self {
-            lambda_grid: (0..21).map(|k| 10f64.powf(-6.0 + 0.5 * k as f64)).collect(),
+            lambda_grid: Self::log_lambda_grid(0.5),
             prior_on: [true; TRANSFER_DIM],
             kinematics: PriorKinematics::Grid,
         }
+    }
+
+    /// `λ` from 10⁻⁶ to 10⁴, one value every `step_decades` decades (0.5: the 21 of
+    /// [`paper_defaults`](Self::paper_defaults); 1: the 11 of the transfer matrix). Empty
+    /// unless `step_decades` is positive and finite, which [`check`](Self::check) refuses.
+    pub fn log_lambda_grid(step_decades: f64) -> Vec<f64> {
+        const LOWEST_DECADE: f64 = -6.0;
+        const DECADES: f64 = 10.0;
+        if !(step_decades.is_finite() && step_decades > 0.0) {
+            return Vec::new();
+        }
+        let count = (DECADES / step_decades + 1e-9).floor() as usize + 1;
+        (0..count).map(|k| 10f64.powf(LOWEST_DECADE + step_decades * k as f64)).collect()
     }
 
     /// The γ-ρ-only reading of eq. 6 ("the estimation of γ and ρ can be made jointly",
@@ -602,6 +615,22 @@ mod tests {
         assert_eq!(c.mean[0], 2.0);
         assert_eq!(c.cov[0][0], 2.0);
         assert!(matches!(estimate_covariance(&[[0.0; 4]]), Err(FitError::NotEnoughData(_))));
+    }
+
+    #[test]
+    fn log_lambda_grids_run_from_one_millionth_to_ten_thousand() {
+        let half = TransferParams::log_lambda_grid(0.5);
+        assert_eq!(half.len(), 21);
+        assert_eq!((half[0], half[2], half[20]), (1e-6, 1e-5, 1e4));
+        let whole = TransferParams::log_lambda_grid(1.0);
+        let powers: Vec<f64> = (0..11).map(|k| 10f64.powi(k - 6)).collect();
+        assert_eq!(whole, powers, "whole decades are the powers of ten, bit for bit");
+        assert_eq!(TransferParams::log_lambda_grid(3.0), [1e-6, 1e-3, 1.0, 1e3]);
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let grid = TransferParams::log_lambda_grid(bad);
+            assert!(grid.is_empty(), "{bad}");
+            assert!(TransferParams { lambda_grid: grid, ..TransferParams::paper_defaults() }.check().is_err());
+        }
     }
 
     #[test]

@@ -238,8 +238,7 @@ fn transfer_params(p: &TransferMatrixParams) -> Result<TransferValidParams, Para
         let names = PriorKinematics::ALL.map(|k| k.name());
         ParamError::new("kinematics", format!("`{}` is not one of {}", p.kinematics, names.join(", ")))
     })?;
-    let count = (10.0 / p.lambda_step_decades + 1e-9).floor() as usize + 1;
-    let lambda_grid = (0..count).map(|k| 10f64.powf(-6.0 + p.lambda_step_decades * k as f64)).collect();
+    let lambda_grid = TransferParams::log_lambda_grid(p.lambda_step_decades);
     TransferParams { lambda_grid, kinematics, ..TransferParams::paper_defaults() }
         .check()
         .map_err(|e| ParamError::new("lambda_step_decades", e.to_string()))
