@@ -1,19 +1,40 @@
 //! Build script of the `amrepro` binary: computes the program's code fingerprint
-//! (`src/code_fingerprint.rs`) into `AMREPRO_CODE_FINGERPRINT`, and asks Cargo to run
-//! again when any file it covers, or any folder it walked, changes.
+//! (`src/code_fingerprint.rs`: the sources and the toolchain building them) into
+//! `AMREPRO_CODE_FINGERPRINT` and the toolchain's line into `AMREPRO_TOOLCHAIN`, and
+//! asks Cargo to run again when any file it covers, or any folder it walked, changes
+//! (Cargo reruns every build script under a new compiler or other `RUSTFLAGS` anyway).
 
 #[path = "src/code_fingerprint.rs"]
 mod code_fingerprint;
 
 use std::path::PathBuf;
+use std::process::Command;
+
+/// The toolchain line of [`code_fingerprint::toolchain`] for this build, from what Cargo
+/// tells a build script: the compiler (`RUSTC`), `TARGET` and `CARGO_ENCODED_RUSTFLAGS`.
+fn this_toolchain() -> String {
+    let var = |name: &str| std::env::var(name).unwrap_or_default();
+    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    let output = Command::new(&rustc)
+        .arg("-vV")
+        .output()
+        .unwrap_or_else(|e| panic!("the code fingerprint cannot run `{} -vV`: {e}", rustc.to_string_lossy()));
+    if !output.status.success() {
+        panic!("the code fingerprint: `{} -vV` failed: {}", rustc.to_string_lossy(), output.status);
+    }
+    let version = String::from_utf8_lossy(&output.stdout);
+    code_fingerprint::toolchain(&version, &var("TARGET"), &var("CARGO_ENCODED_RUSTFLAGS"))
+}
 
 fn main() {
     let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("Cargo sets CARGO_MANIFEST_DIR"));
     let sources = code_fingerprint::sources(&root)
         .unwrap_or_else(|e| panic!("the code fingerprint cannot list the workspace's sources: {e}"));
-    let fingerprint = code_fingerprint::fingerprint(&root, &sources.files)
+    let toolchain = this_toolchain();
+    let fingerprint = code_fingerprint::fingerprint(&root, &sources.files, &toolchain)
         .unwrap_or_else(|e| panic!("the code fingerprint cannot read the workspace's sources: {e}"));
     println!("cargo:rustc-env=AMREPRO_CODE_FINGERPRINT={fingerprint}");
+    println!("cargo:rustc-env=AMREPRO_TOOLCHAIN={toolchain}");
     for path in sources.files.iter().chain(&sources.folders) {
         println!("cargo:rerun-if-changed={}", path.display());
     }

@@ -4,10 +4,21 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+/// `amrepro --version`: the release, then the code fingerprint that every stage's cache
+/// key holds and the toolchain that built it (`build.rs`), which workers of one run
+/// spread over machines must share (docs/SCALE.md).
+const LONG_VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    "\ncode fingerprint: ",
+    env!("AMREPRO_CODE_FINGERPRINT"),
+    "\nbuilt by: ",
+    env!("AMREPRO_TOOLCHAIN")
+);
+
 /// Reproduce additive-manufacturing papers end to end: declarative specs of stages
 /// that write Parquet tables, figures and an HTML report.
 #[derive(Debug, Parser)]
-#[command(name = "amrepro", version, about)]
+#[command(name = "amrepro", version, long_version = LONG_VERSION, about)]
 pub struct Cli {
     /// What to do.
     #[command(subcommand)]

@@ -8,11 +8,13 @@
 //! `members`): the root's `Cargo.toml`, `Cargo.lock` and `src/`, and every other
 //! member's folder except what is not built into the program (its `tests/`,
 //! `benches/`, `examples/`, `target/` and hidden entries). Contents and relative paths
-//! count, not modification times: the same checkout gives the same fingerprint on any
-//! machine, which a run spread over machines needs (docs/SCALE.md).
-//!
-//! Not covered: the Rust toolchain (a new compiler does not rerun cached stages) and
-//! environment variables read at build time (none today).
+//! count, not modification times. The build counts too ([`toolchain`]): the
+//! compiler's `rustc -vV` (its release, commit and LLVM), the target triple and the
+//! `RUSTFLAGS` given, so a new compiler or other code-generation flags rerun every
+//! stage instead of serving tables another build computed. The same checkout built by
+//! the same toolchain gives the same fingerprint on any machine, which a run spread
+//! over machines needs (docs/SCALE.md). Not covered: environment variables read at
+//! build time (none today).
 //!
 //! Hand-written: Cargo gives a build script no hash of a package's sources.
 
@@ -98,11 +100,23 @@ fn walk(root: &Path, rel: &Path, out: &mut Sources) -> io::Result<()> {
     Ok(())
 }
 
-/// The fingerprint of `files` under `root`: SHA-256 over each file's relative path
-/// (with `/` separators), its length and its bytes, in the given order; the first
-/// [`DIGITS`] hex digits.
-pub fn fingerprint(root: &Path, files: &[PathBuf]) -> io::Result<String> {
+/// One line naming the build: `rustc_verbose_version` (the output of `rustc -vV`, its
+/// lines joined by `; `), the target triple and the encoded `RUSTFLAGS` (Cargo's
+/// `CARGO_ENCODED_RUSTFLAGS`, flags separated by `0x1f`, shown separated by spaces).
+pub fn toolchain(rustc_verbose_version: &str, target: &str, encoded_rustflags: &str) -> String {
+    let rustc: Vec<&str> = rustc_verbose_version.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+    let flags: Vec<&str> = encoded_rustflags.split('\x1f').filter(|f| !f.is_empty()).collect();
+    format!("{}; target: {target}; rustflags: [{}]", rustc.join("; "), flags.join(" "))
+}
+
+/// The fingerprint of `files` under `root` built by `toolchain` ([`toolchain`]):
+/// SHA-256 over the toolchain line, then each file's relative path (with `/`
+/// separators), its length and its bytes, in the given order; the first [`DIGITS`] hex
+/// digits.
+pub fn fingerprint(root: &Path, files: &[PathBuf], toolchain: &str) -> io::Result<String> {
     let mut hasher = Sha256::new();
+    hasher.update((toolchain.len() as u64).to_le_bytes());
+    hasher.update(toolchain.as_bytes());
     for rel in files {
         let bytes = fs::read(root.join(rel))?;
         let name: Vec<String> = rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
@@ -147,8 +161,10 @@ mod tests {
         dir
     }
 
+    const TOOLCHAIN: &str = "rustc 1.90.0 (1159e78c4 2025-09-14); host: x86_64-unknown-linux-gnu; target: x86_64-unknown-linux-gnu; rustflags: []";
+
     fn of(root: &Path) -> String {
-        fingerprint(root, &sources(root).unwrap().files).unwrap()
+        fingerprint(root, &sources(root).unwrap().files, TOOLCHAIN).unwrap()
     }
 
     #[test]
@@ -221,7 +237,31 @@ mod tests {
             assert!(files.iter().any(|f| f.starts_with(rel)), "{rel} not covered");
         }
         assert!(!files.iter().any(|f| f.starts_with("tests") || f.starts_with("fuzz") || f.starts_with("docs")));
-        // The program's own fingerprint is this checkout's.
-        assert_eq!(env!("AMREPRO_CODE_FINGERPRINT"), fingerprint(root, &files).unwrap());
+        // The program's own fingerprint is this checkout's, built by this toolchain.
+        let built_by = env!("AMREPRO_TOOLCHAIN");
+        assert!(built_by.starts_with("rustc ") && built_by.contains("; target: "), "{built_by}");
+        assert_eq!(env!("AMREPRO_CODE_FINGERPRINT"), fingerprint(root, &files, built_by).unwrap());
+    }
+
+    #[test]
+    fn another_compiler_or_other_flags_change_it() {
+        let ws = workspace();
+        let files = sources(ws.path()).unwrap().files;
+        let rustc = "rustc 1.90.0 (1159e78c4 2025-09-14)\nbinary: rustc\nhost: x86_64-unknown-linux-gnu\nLLVM version: 20.1.8\n";
+        let line = toolchain(rustc, "x86_64-unknown-linux-gnu", "");
+        assert_eq!(
+            line,
+            "rustc 1.90.0 (1159e78c4 2025-09-14); binary: rustc; host: x86_64-unknown-linux-gnu; \
+             LLVM version: 20.1.8; target: x86_64-unknown-linux-gnu; rustflags: []"
+        );
+        let base = fingerprint(ws.path(), &files, &line).unwrap();
+        let newer = toolchain(&rustc.replace("1.90.0", "1.91.0"), "x86_64-unknown-linux-gnu", "");
+        let flags = toolchain(rustc, "x86_64-unknown-linux-gnu", "-C\x1ftarget-cpu=native");
+        assert_eq!(flags, line.replace("rustflags: []", "rustflags: [-C target-cpu=native]"));
+        let other_target = toolchain(rustc, "aarch64-unknown-linux-gnu", "");
+        for other in [newer, flags, other_target] {
+            assert_ne!(fingerprint(ws.path(), &files, &other).unwrap(), base, "{other}");
+        }
+        assert_eq!(fingerprint(ws.path(), &files, &line).unwrap(), base);
     }
 }

@@ -63,6 +63,28 @@ fn only_and_force_rerun_one_stage() {
 }
 
 #[test]
+fn version_names_the_code_fingerprint_every_stage_record_holds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let version = ok(tmp.path(), &["--version"]);
+    let field = |name: &str| {
+        version.lines().find_map(|l| l.strip_prefix(name)).unwrap_or_else(|| panic!("no `{name}` in:\n{version}"))
+    };
+    let code = field("code fingerprint: ");
+    assert!(code.len() == 16 && code.chars().all(|c| c.is_ascii_hexdigit()), "{version}");
+    let built_by = field("built by: ");
+    assert!(built_by.starts_with("rustc ") && built_by.contains("; target: "), "{version}");
+    let spec = fsu_spec(tmp.path(), &data_root().join("fsu-linewidth"));
+    ok(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    let manifest = std::fs::read_to_string(tmp.path().join("out/runs/fsu_linewidth/manifest.json")).unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&manifest).unwrap();
+    let stages = manifest["stages"].as_array().expect("a stages list");
+    assert_eq!(stages.len(), 5);
+    for stage in stages {
+        assert_eq!(stage["code_fingerprint"], code, "{stage}");
+    }
+}
+
+#[test]
 fn same_spec_gives_byte_identical_parquet() {
     let tmp = tempfile::tempdir().unwrap();
     let spec = fsu_spec(tmp.path(), &data_root().join("fsu-linewidth"));

@@ -18,11 +18,12 @@ use pipeline::params::NoParams;
 use pipeline::schema::{Reads, Table};
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
+use polars::prelude::DataFrame;
 use tables::fdm::transfer_matrix;
 use tables::report::comparison;
 
 use super::{comparison_frame, Row};
-use crate::figures::fdm::transfer_matrix::{load, Cell, Matrix, READS};
+use crate::figures::fdm::transfer_matrix::{matrix_of, Cell, Matrix, READS};
 use crate::html::escape;
 use crate::read::{no_rows, read_parquet, strs};
 
@@ -65,13 +66,14 @@ impl Stage for TransferMatrixSection {
     const WRITES: &'static [&'static Table] = &[&comparison::TABLE];
 
     fn run(&self, ctx: &mut StageContext, _: &NoParams) -> Result<(), StageError> {
-        let dir = &ctx.input(&MATRIX).dir;
-        let matrix = load(dir)?;
+        let path = ctx.input(&MATRIX).dir.join(transfer_matrix::TABLE.file());
+        let table = read_parquet(&path)?;
+        let matrix = matrix_of(&table, &path)?;
         let (rows, tally_html) = tally(&matrix);
         let mut html = String::from("<h3>Transfer among printers: when it helps, and the guard</h3>\n");
         html += &tally_html;
         html += &per_task(&matrix);
-        html += &kinematics_note(&kinematics_rule(dir)?);
+        html += &kinematics_note(&kinematics_rule(&table, &path)?);
         pipeline::artifact::write_atomic(&ctx.output_path("section.html")?, html.as_bytes())?;
         ctx.write_table(comparison::TABLE.name, &mut comparison_frame(&rows)?)?;
         Ok(())
@@ -165,14 +167,13 @@ No rule that chooses the prior and λ from the training lines has a smaller mean
 The printers other than the Taz 5 and Taz 6 are made from their measured lines by the stated physical change of stage fdm.other_family (a wider nozzle, a slower melt).</p>\n"
 }
 
-/// The one kinematics rule of every row of `transfer_matrix.parquet`.
-fn kinematics_rule(dir: &Path) -> Result<String, StageError> {
+/// The one kinematics rule of every row of `transfer_matrix.parquet` (read from `path`).
+fn kinematics_rule(table: &DataFrame, path: &Path) -> Result<String, StageError> {
     use transfer_matrix as t;
-    let path = dir.join(t::TABLE.file());
-    let rules = strs(&read_parquet(&path)?, t::kinematics, &path)?;
+    let rules = strs(table, t::kinematics, path)?;
     match rules.first() {
         Some(first) if rules.iter().all(|r| r == first) => Ok(first.clone()),
-        _ => Err(no_rows(&path, t::kinematics, "one kinematics rule for every row")),
+        _ => Err(no_rows(path, t::kinematics, "one kinematics rule for every row")),
     }
 }
 

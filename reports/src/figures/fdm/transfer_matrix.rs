@@ -15,6 +15,7 @@ use std::path::Path;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use polars::prelude::DataFrame;
 
 use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
@@ -117,14 +118,18 @@ impl Stage for TransferMatrixFigure {
 
 /// Reads `<dir>/transfer_matrix.parquet`.
 pub fn load(dir: &Path) -> Result<Matrix, StageError> {
+    let path = dir.join(transfer_matrix::TABLE.file());
+    matrix_of(&read_parquet(&path)?, &path)
+}
+
+/// [`load`] of the table already read from `path`.
+pub fn matrix_of(df: &DataFrame, path: &Path) -> Result<Matrix, StageError> {
     use transfer_matrix as t;
-    let path = dir.join(t::TABLE.file());
-    let df = read_parquet(&path)?;
     let (sources, target, method) =
-        (strs(&df, t::sources, &path)?, strs(&df, t::target, &path)?, strs(&df, t::method, &path)?);
-    let n_train = ints(&df, t::n_train, &path)?;
+        (strs(df, t::sources, path)?, strs(df, t::target, path)?, strs(df, t::method, path)?);
+    let n_train = ints(df, t::n_train, path)?;
     let (imp, lo, hi) =
-        (f64s(&df, t::improvement_pct, &path)?, f64s(&df, t::ci_lo_pct, &path)?, f64s(&df, t::ci_hi_pct, &path)?);
+        (f64s(df, t::improvement_pct, path)?, f64s(df, t::ci_lo_pct, path)?, f64s(df, t::ci_hi_pct, path)?);
     let mut matrix = Matrix::new();
     for i in (0..df.height()).filter(|&i| imp[i].is_finite() && method[i] != "single") {
         matrix.entry(target[i].clone()).or_default().push(Cell {
@@ -136,7 +141,7 @@ pub fn load(dir: &Path) -> Result<Matrix, StageError> {
         });
     }
     if matrix.is_empty() {
-        return Err(no_rows(&path, t::improvement_pct, "a finite improvement of a transfer method"));
+        return Err(no_rows(path, t::improvement_pct, "a finite improvement of a transfer method"));
     }
     Ok(matrix)
 }
