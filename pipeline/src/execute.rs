@@ -1,7 +1,8 @@
 //! Executes a checked [`Plan`] in an out folder it holds the lock of ([`crate::lock`]):
-//! wave by wave, stages of a wave in parallel ([`on_stage_threads`]); each stage skipped when its
-//! cache key is unchanged, otherwise run into a staging folder that becomes its
-//! pending outputs when it succeeds (a panic is its error). Only when every stage has
+//! wave by wave, stages of a wave in parallel, each in a rayon pool of its own
+//! ([`on_stage_threads`]); each stage skipped when its cache key is unchanged,
+//! otherwise run into a staging folder that becomes its pending outputs when it
+//! succeeds (a panic is its error). Only when every stage has
 //! succeeded does the run commit ([`crate::commit`]): stage folders, published copies
 //! and the manifest change together, the manifest last.
 
@@ -147,29 +148,43 @@ pub fn run_plan_locked(
     execute_plan(plan, registry, opts, log)
 }
 
-/// `f` over `jobs` on at most as many threads as rayon's pool has, the results in the
-/// order of `jobs`. The threads are not the pool's: a stage runs its own parallel work
-/// on the pool, and a pool thread waiting for that work steals whatever else is queued
-/// there, another stage's whole run included, so under `par_iter` a stage's measured
-/// wall time held other stages' (a 0.03 s stage measured 27 s beside the re-prints). A
-/// panic outside a stage's own (caught) run is passed on.
+/// `f` over `jobs` on at most as many threads as rayon's global pool has, the results
+/// in the order of `jobs`, each thread running its jobs one after another in a rayon
+/// pool of its own (of the global pool's size). A stage's parallel work so stays in
+/// its own pool: under `par_iter` over the stages, a pool thread waiting for its
+/// stage's work stole other queued stages whole, so a stage's measured wall time held
+/// theirs (a 0.03 s stage measured 27 s beside the re-prints); and in one shared pool
+/// a stage that starts beside a long one waits for all of that one's queued work (a
+/// 3 s stage measured 187 s beside the power study). Now a stage's time is its own
+/// work, slowed only by sharing the cores with the stages beside it. A panic outside a
+/// stage's own (caught) run is passed on.
 fn on_stage_threads<T: Send>(jobs: &[usize], f: impl Fn(&usize) -> T + Sync) -> Vec<T> {
-    let workers = rayon::current_num_threads().min(jobs.len());
+    let threads = rayon::current_num_threads();
+    let workers = threads.min(jobs.len());
     if workers <= 1 {
         return jobs.iter().map(f).collect();
     }
     let next = AtomicUsize::new(0);
-    let work = || {
+    let work = |worker: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(move |i| format!("amrepro-stages{worker}-{i}"))
+            .build()
+            .ok();
         let mut done = Vec::new();
         loop {
             let k = next.fetch_add(1, Ordering::Relaxed);
             let Some(job) = jobs.get(k) else { return done };
-            done.push((k, f(job)));
+            let result = match &pool {
+                Some(pool) => pool.install(|| f(job)),
+                None => f(job),
+            };
+            done.push((k, result));
         }
     };
     let mut results: Vec<Option<T>> = (0..jobs.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..workers).map(|_| scope.spawn(work)).collect();
+        let handles: Vec<_> = (0..workers).map(|w| scope.spawn(move || work(w))).collect();
         for handle in handles {
             let done = handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             for (k, result) in done {
@@ -738,22 +753,29 @@ mod tests {
     }
 
     #[test]
-    fn stages_of_a_wave_run_in_order_off_the_pool_so_none_steals_another() {
+    fn stages_of_a_wave_run_in_order_each_in_a_pool_of_its_own() {
         use rayon::prelude::*;
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+        let name = || std::thread::current().name().unwrap_or("").to_string();
+        let pool_of = |thread: &str| thread.rsplit_once('-').map(|(pool, _)| pool.to_string()).unwrap_or_default();
+        let outer = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
         let jobs: Vec<usize> = (0..7).collect();
-        let results = pool.install(|| {
+        let results = outer.install(|| {
             on_stage_threads(&jobs, |&j| {
-                // A stage's own parallel work still runs on the pool.
-                let sum: usize = (0..1000usize).into_par_iter().map(|i| i * j).sum();
-                (j, rayon::current_thread_index(), std::thread::current().id(), sum)
+                // A stage's own parallel work, and the threads it ran on.
+                let threads: Vec<String> = (0..64usize).into_par_iter().map(|_| name()).collect();
+                (j, name(), threads, rayon::current_num_threads())
             })
         });
         assert_eq!(results.iter().map(|r| r.0).collect::<Vec<_>>(), jobs, "results in the order of the jobs");
-        assert!(results.iter().all(|r| r.1.is_none()), "a stage ran on a pool thread: {results:?}");
-        assert!(results.iter().all(|r| r.3 == 499_500 * r.0));
-        let threads: std::collections::BTreeSet<_> = results.iter().map(|r| format!("{:?}", r.2)).collect();
-        assert!(threads.len() <= 3, "at most as many stage threads as the pool has: {threads:?}");
+        let pools: std::collections::BTreeSet<String> = results.iter().map(|r| pool_of(&r.1)).collect();
+        assert!(pools.len() <= 3 && pools.iter().all(|p| p.starts_with("amrepro-stages")), "{pools:?}");
+        for (j, body, threads, size) in &results {
+            assert_eq!(*size, 3, "job {j}: a pool of the outer pool's size");
+            assert!(
+                threads.iter().all(|t| pool_of(t) == pool_of(body)),
+                "job {j} ran work outside its pool: {threads:?}"
+            );
+        }
         let caught = std::panic::catch_unwind(|| on_stage_threads(&jobs, |&j| assert_ne!(j, 5, "job five")));
         assert!(caught.is_err(), "a panic outside a stage's caught run is passed on");
     }
