@@ -14,6 +14,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use pipeline::params::NoParams;
@@ -492,7 +493,7 @@ impl Stage for DiscoveryPowerFigure {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_discovery_power",
-        version: 1,
+        version: 2,
         summary: "Power curves of the discrepancy engine: share of draws naming a hidden effect against its strength, per base, with the null false-alarm rate → discovery_power.png/.svg",
         implements: "DESIGN §7 (tests that hide an effect and require finding it)",
         inputs: &[POWER],
@@ -616,11 +617,12 @@ fn draw_power_key<DB: DrawingBackend>(
         area.draw(&Text::new(e.to_string(), (x + 38, 10), style.clone()))?;
         x += 60 + 9 * e.len() as i32;
     }
-    area.draw(&TriangleMarker::new((x + 10, 18), 6, BLACK.filled()))?;
-    area.draw(&Text::new("measurement noise only (dashed)", (x + 24, 10), style.clone()))?;
+    area.draw(&DashedPathElement::new([(x, 18), (x + 30, 18)], 6, 4, BLACK.stroke_width(2)))?;
+    area.draw(&TriangleMarker::new((x + 15, 18), 6, BLACK.filled()))?;
+    area.draw(&Text::new("measurement noise only (triangles, dashed between strengths)", (x + 38, 10), style.clone()))?;
     let y = 44;
-    area.draw(&PathElement::new([(60, y), (90, y)], BLACK.stroke_width(1)))?;
-    area.draw(&PathElement::new([(96, y), (126, y)], BLACK.mix(0.45).stroke_width(1)))?;
+    area.draw(&DashedPathElement::new([(60, y), (90, y)], 6, 4, BLACK.stroke_width(1)))?;
+    area.draw(&DashedPathElement::new([(96, y), (126, y)], 6, 4, BLACK.mix(0.45).stroke_width(1)))?;
     let bound = "upper 95 % bound of the null draws' false-alarm rate (grey: measurement noise only)";
     area.draw(&Text::new(bound, (134, y - 8), style.clone()))?;
     for (k, b) in bases.iter().enumerate() {
