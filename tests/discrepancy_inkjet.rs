@@ -68,6 +68,10 @@ fn the_shipped_spec_names_each_hidden_cause_and_nothing_on_the_papers_physics() 
         section.contains("Does the extended model print better?")
             && section.contains("the extended controller's RMSD is")
     );
+    for print in ["print_paper_physics", "print_curing_shrinkage", "print_nozzle_bias"] {
+        let png = tmp.path().join(format!("out/runs/discrepancy_inkjet/residuals_{print}/discrepancy_residuals.png"));
+        assert!(std::fs::metadata(&png).unwrap().len() > 20_000, "{}", png.display());
+    }
 }
 
 #[test]

@@ -53,6 +53,10 @@ fn the_shipped_spec_names_the_camera_latency_and_the_tau_error_and_nothing_wrong
     let section = std::fs::read_to_string(tmp.path().join("out/runs/discrepancy_thermal/report/section.html")).unwrap();
     assert!(section.contains("camera latency") && section.contains("8 layers"), "{section}");
     assert!(section.contains("Does the extended model compensate better?"), "{section}");
+    for print in ["print_paper_physics", "print_camera_latency", "print_layer_heat", "print_tau_mismatch"] {
+        let png = tmp.path().join(format!("out/runs/discrepancy_thermal/residuals_{print}/discrepancy_residuals.png"));
+        assert!(std::fs::metadata(&png).unwrap().len() > 20_000, "{}", png.display());
+    }
 }
 
 /// `thermal_control_gain.parquet`: the three commands of every strength, each metric's

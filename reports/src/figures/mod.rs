@@ -1,9 +1,11 @@
 //! Figure stage kinds: each reads published tables of its input stages and draws one
 //! figure as PNG and SVG, in the style of the paper it reproduces. Grouped by domain:
 //! `fdm` (paper 000 and the FDM discrepancy), `inkjet` (paper 002), `thermal`
-//! (paper 003), and the power-by-effect figure every domain's discovery study draws.
+//! (paper 003), and the two every domain of the discrepancy engine draws: its held-out
+//! residuals (`discrepancy_residuals`) and a discovery study's power by effect.
 
 mod common;
+pub(crate) mod discrepancy_residuals;
 pub(crate) mod fdm;
 pub(crate) mod inkjet;
 mod power_by_effect;
@@ -11,10 +13,10 @@ mod power_by_effect;
 pub(crate) mod test_util;
 pub(crate) mod thermal;
 
+pub use discrepancy_residuals::DiscrepancyResidualsFigure;
 pub use fdm::{
-    DiscoveryPowerFigure, DiscrepancyLinesFigure, DiscrepancyResidualsFigure, InfillFigure, LooPredictionsFigure,
-    RSurfaceFigure, SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure, VirtualAgreementFigure,
-    WidthProfilesFigure,
+    DiscoveryPowerFigure, DiscrepancyLinesFigure, InfillFigure, LooPredictionsFigure, RSurfaceFigure,
+    SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure, VirtualAgreementFigure, WidthProfilesFigure,
 };
 pub use inkjet::{InkjetHeightMapsFigure, InkjetModelVsScanFigure, InkjetPipeJunctionFigure};
 pub use power_by_effect::DiscoveryPowerByEffectFigure;

@@ -1,9 +1,7 @@
-//! The discrepancy engine's figures (DESIGN §7) on paper 000's lines:
+//! The discrepancy engine's figures (DESIGN §7) on paper 000's lines (the held-out
+//! residuals against each candidate variable are `figure.discrepancy_residuals`, which
+//! every domain draws):
 //!
-//! - `figure.fdm_discrepancy_residuals`: the held-out residuals of the lag model and of
-//!   the extended model against each candidate variable, bin means with their 95 %
-//!   intervals over lines, and each variable's structure share (`residuals.parquet`);
-//!   the named cause's signature is the structure the extension removes.
 //! - `figure.fdm_discrepancy_lines`: measured, lag-model and extended-model widths
 //!   along the lines the lag model predicts worst (`predictions.parquet`).
 //! - `figure.fdm_discovery_power`: the power curves — the share of draws in which the
@@ -21,31 +19,20 @@ use pipeline::params::NoParams;
 use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::discrepancy::fdm::{gain, predictions, residuals};
+use tables::discrepancy::fdm::{gain, predictions};
 use tables::discrepancy::power;
 
+use crate::figures::discrepancy_residuals::{BASELINE, EXTENDED};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
 use super::draw_width_profile_mesh;
 use super::loo_predictions::step_points;
 
-/// Colour of the lag model (the baseline) in every figure here.
-const BASELINE: RGBColor = PALETTE[1];
-/// Colour of the extended model.
-const EXTENDED: RGBColor = PALETTE[0];
 /// Colour of measured widths.
 const MEASURED: RGBColor = RGBColor(70, 70, 70);
 /// The baseline's name in the tables (`extended_model` equals it when nothing was named).
 const LAG_MODEL: &str = "lag_model";
-
-pipeline::params! {
-    /// The parameters of `figure.fdm_discrepancy_residuals`.
-    pub struct ResidualsParams {
-        /// Printer whose results are drawn.
-        pub printer: String,
-    }
-}
 
 pipeline::params! {
     /// The parameters of `figure.fdm_discrepancy_lines`.
@@ -57,34 +44,9 @@ pipeline::params! {
     }
 }
 
-/// What both figures read of the engine run: the extended model's name.
+/// What the lines figure reads of the engine run besides its predictions: the extended
+/// model's name.
 const EXTENDED_NAME: Reads = Reads { table: &gain::TABLE, columns: &[gain::printer, gain::extended_model] };
-
-/// The engine run whose held-out residuals the residuals figure draws.
-const DISCREPANCY_RESIDUALS: Input = Input::one(
-    "discrepancy",
-    &[Source::Stage("fdm.discrepancy")],
-    "the engine's held-out residuals and gain (`residuals.parquet`, `gain.parquet`)",
-)
-.reading(&[
-    Reads {
-        table: &residuals::TABLE,
-        columns: &[
-            residuals::printer,
-            residuals::model,
-            residuals::variable,
-            residuals::unit,
-            residuals::label,
-            residuals::bin_lo,
-            residuals::bin_hi,
-            residuals::mean_residual_mm,
-            residuals::ci_lo_mm,
-            residuals::ci_hi_mm,
-            residuals::structure,
-        ],
-    },
-    EXTENDED_NAME,
-]);
 
 /// The engine run whose held-out predictions the lines figure draws.
 const DISCREPANCY_LINES: Input = Input::one(
@@ -133,95 +95,11 @@ const POWER: Input = Input::many(
     ],
 }]);
 
-/// The `figure.fdm_discrepancy_residuals` stage kind.
-pub struct DiscrepancyResidualsFigure;
-
 /// The `figure.fdm_discrepancy_lines` stage kind.
 pub struct DiscrepancyLinesFigure;
 
 /// The `figure.fdm_discovery_power` stage kind.
 pub struct DiscoveryPowerFigure;
-
-impl Stage for DiscrepancyResidualsFigure {
-    type Params = ResidualsParams;
-    const INFO: &'static StageInfo = &StageInfo {
-        name: "figure.fdm_discrepancy_residuals",
-        version: 1,
-        summary: "Held-out residuals of the lag model and the extended model against every candidate variable, bin means with 95 % intervals → discrepancy_residuals.png/.svg",
-        implements: "DESIGN §7 step 1 (show)",
-        inputs: &[DISCREPANCY_RESIDUALS],
-        output: Output::Tables,
-    };
-
-    fn run(&self, ctx: &mut StageContext, p: &ResidualsParams) -> Result<(), StageError> {
-        let printer = &p.printer;
-        let dir = &ctx.input(&DISCREPANCY_RESIDUALS).dir;
-        let panels = read_residuals(&dir.join(residuals::TABLE.file()), printer)?;
-        let extended = read_extended_name(&dir.join(gain::TABLE.file()), printer)?;
-        let title = if extended == LAG_MODEL {
-            format!("{printer}: held-out residual (measured − predicted) of the lag model (no cause named)")
-        } else {
-            format!("{printer}: held-out residual (measured − predicted) of the lag model and of {extended}")
-        };
-        let stem = ctx.output_path("discrepancy_residuals")?;
-        draw_png_and_svg(
-            &stem,
-            (1500, 1150),
-            |a| draw_residuals(a, &title, &extended, &panels),
-            |a| draw_residuals(a, &title, &extended, &panels),
-        )
-    }
-}
-
-/// One variable's bins for both models.
-struct ResidualPanel {
-    variable: String,
-    unit: String,
-    /// Per model (`baseline`, `extended`): structure share and `(x, mean, lo, hi)` bins.
-    models: BTreeMap<String, (f64, Vec<[f64; 4]>)>,
-    /// Category labels at their codes, for a categorical variable.
-    labels: Vec<(f64, String)>,
-}
-
-fn read_residuals(path: &Path, printer: &str) -> Result<Vec<ResidualPanel>, StageError> {
-    use residuals as r;
-    let df = read_parquet(path)?;
-    let (printers, models, variables) =
-        (strs(&df, r::printer, path)?, strs(&df, r::model, path)?, strs(&df, r::variable, path)?);
-    let (units, labels) = (strs(&df, r::unit, path)?, strs(&df, r::label, path)?);
-    let (lo, hi, mean) =
-        (f64s(&df, r::bin_lo, path)?, f64s(&df, r::bin_hi, path)?, f64s(&df, r::mean_residual_mm, path)?);
-    let (ci_lo, ci_hi, structure) =
-        (f64s(&df, r::ci_lo_mm, path)?, f64s(&df, r::ci_hi_mm, path)?, f64s(&df, r::structure, path)?);
-    let mut panels: Vec<ResidualPanel> = Vec::new();
-    for i in (0..df.height()).filter(|&i| printers[i] == printer) {
-        let index = match panels.iter().position(|p| p.variable == variables[i]) {
-            Some(k) => k,
-            None => {
-                panels.push(ResidualPanel {
-                    variable: variables[i].clone(),
-                    unit: units[i].clone(),
-                    models: BTreeMap::new(),
-                    labels: Vec::new(),
-                });
-                panels.len() - 1
-            }
-        };
-        let panel = &mut panels[index];
-        let x = 0.5 * (lo[i] + hi[i]);
-        if units[i].is_empty() && !panel.labels.iter().any(|l| l.0 == x) {
-            panel.labels.push((x, labels[i].clone()));
-        }
-        let entry = panel.models.entry(models[i].clone()).or_insert((structure[i], Vec::new()));
-        if mean[i].is_finite() {
-            entry.1.push([x, mean[i], ci_lo[i], ci_hi[i]]);
-        }
-    }
-    if panels.is_empty() {
-        return Err(no_rows(path, r::printer, &format!("printer `{printer}`")));
-    }
-    Ok(panels)
-}
 
 /// `lag_model + width_cap` (or `lag_model`) from `gain.parquet`.
 fn read_extended_name(path: &Path, printer: &str) -> Result<String, StageError> {
@@ -231,115 +109,6 @@ fn read_extended_name(path: &Path, printer: &str) -> Result<String, StageError> 
         .find(|&i| printers[i] == printer)
         .map(|i| names[i].clone())
         .ok_or_else(|| no_rows(path, gain::printer, &format!("printer `{printer}`")))
-}
-
-fn draw_residuals<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    title: &str,
-    extended: &str,
-    panels: &[ResidualPanel],
-) -> Result<(), String> {
-    let area = area.margin(12, 6, 6, 14).titled(title, text(24.0)).map_err(|e| e.to_string())?;
-    let cols = 3;
-    let rows = panels.len().div_ceil(cols);
-    let cells = area.split_evenly((rows, cols));
-    // No panel's scale is finer than a third of the largest mean of any, so that a
-    // variable without structure does not look as if it had some.
-    let floor = panels.iter().map(largest_mean).fold(0.0f64, f64::max) / 3.0;
-    for (k, (panel, cell)) in panels.iter().zip(&cells).enumerate() {
-        draw_residual_panel(cell, panel, extended, floor, k == 0).map_err(|e| e.to_string())?;
-    }
-    Ok(())
-}
-
-fn largest_mean(panel: &ResidualPanel) -> f64 {
-    panel.models.values().flat_map(|m| m.1.iter().map(|b| b[1].abs())).filter(|v| v.is_finite()).fold(0.0f64, f64::max)
-}
-
-/// The panel's half-height: the largest bin mean (at least `floor`), or interval end
-/// within three times it (a bin with few lines has a wide interval that would flatten
-/// every mean).
-fn residual_span(panel: &ResidualPanel, floor: f64) -> f64 {
-    let bins = || panel.models.values().flat_map(|m| m.1.iter());
-    let means = largest_mean(panel).max(floor).max(0.005);
-    let ends = bins().flat_map(|b| [b[2].abs(), b[3].abs()]).filter(|v| v.is_finite() && *v <= 3.0 * means);
-    ends.fold(means, f64::max) * 1.15
-}
-
-fn draw_residual_panel<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    panel: &ResidualPanel,
-    extended: &str,
-    floor: f64,
-    legend: bool,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let span = residual_span(panel, floor);
-    let share = |m: &str| panel.models.get(m).map_or(f64::NAN, |v| v.0);
-    let caption = if extended == LAG_MODEL {
-        format!("{}: structure {:.0} %", panel.variable, 100.0 * share("baseline"))
-    } else {
-        format!("{}: structure {:.0} % → {:.0} %", panel.variable, 100.0 * share("baseline"), 100.0 * share("extended"))
-    };
-    let xs: Vec<f64> = panel.models.values().flat_map(|m| m.1.iter().map(|b| b[0])).collect();
-    let (x_min, x_max) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-    let pad = ((x_max - x_min) * 0.06).max(0.5 * if panel.unit.is_empty() { 1.0 } else { 1e-6 });
-    let mut chart = ChartBuilder::on(area)
-        .caption(caption, text(17.0))
-        .margin(8)
-        .x_label_area_size(36)
-        .y_label_area_size(58)
-        .build_cartesian_2d((x_min - pad)..(x_max + pad), -span..span)?;
-    let labels = panel.labels.clone();
-    let x_desc =
-        if panel.unit.is_empty() { panel.variable.clone() } else { format!("{} ({})", panel.variable, panel.unit) };
-    house_mesh(&mut chart)
-        .x_desc(x_desc)
-        .y_desc("residual (mm)")
-        .x_labels(if labels.is_empty() { 6 } else { labels.len() })
-        .x_label_formatter(&|x| match labels.iter().find(|l| (l.0 - x).abs() < 1e-9) {
-            Some(l) => l.1.clone(),
-            None if labels.is_empty() => format_tick(*x),
-            None => String::new(),
-        })
-        .y_label_formatter(&|y| format!("{y:.3}"))
-        .draw()?;
-    chart.draw_series(LineSeries::new([(x_min - pad, 0.0), (x_max + pad, 0.0)], BLACK.mix(0.5).stroke_width(1)))?;
-    let offset = 0.012 * (x_max - x_min + 2.0 * pad);
-    let series =
-        [("baseline", BASELINE, -offset, LAG_MODEL.to_string()), ("extended", EXTENDED, offset, extended.to_string())];
-    let unchanged = extended == LAG_MODEL;
-    for (model, colour, shift, label) in series {
-        let Some((_, bins)) = panel.models.get(model) else { continue };
-        if unchanged && model == "extended" {
-            continue;
-        }
-        let shift = if unchanged { 0.0 } else { shift };
-        let style = colour.stroke_width(2);
-        let clip = |y: f64| y.clamp(-span, span);
-        chart.draw_series(
-            bins.iter()
-                .filter(|b| b[2].is_finite() && b[3].is_finite())
-                .map(move |b| PathElement::new([(b[0] + shift, clip(b[2])), (b[0] + shift, clip(b[3]))], style)),
-        )?;
-        chart
-            .draw_series(bins.iter().map(move |b| Circle::new((b[0] + shift, b[1]), 4, colour.filled())))?
-            .label(label)
-            .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
-    }
-    if legend {
-        draw_house_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-    }
-    Ok(())
-}
-
-fn format_tick(x: f64) -> String {
-    if x.abs() >= 100.0 {
-        format!("{x:.0}")
-    } else if x.abs() >= 1.0 {
-        format!("{x:.1}")
-    } else {
-        format!("{x:.2}")
-    }
 }
 
 impl Stage for DiscrepancyLinesFigure {
@@ -713,40 +482,8 @@ mod tests {
         assert!((worst[0].rmse(2) - 0.3).abs() < 1e-12 && worst[0].rmse(3) == 0.0);
     }
 
-    /// `residuals.parquet` for taz5: three variables (one categorical) × two models, a
-    /// linear trend of the bin means that the extension shrinks tenfold.
-    fn residuals_table(bins: usize) -> polars::prelude::DataFrame {
-        let (mut model, mut variable, mut unit, mut label) = (vec![], vec![], vec![], vec![]);
-        let (mut lo, mut hi, mut mean) = (vec![], vec![], vec![]);
-        for m in ["baseline", "extended"] {
-            for v in ["position_mm", "speed_mm_s", "phase"] {
-                for b in 0..bins {
-                    let edges =
-                        if v == "phase" { (b as f64, b as f64) } else { (10.0 * b as f64, 10.0 * (b + 1) as f64) };
-                    let scale = if m == "baseline" { 0.1 } else { 0.01 };
-                    model.push(m);
-                    variable.push(v);
-                    unit.push(if v == "phase" { "" } else { "mm" });
-                    label.push(format!("p{b}"));
-                    lo.push(edges.0);
-                    hi.push(edges.1);
-                    mean.push(scale * (b as f64 - 6.0) / 6.0);
-                }
-            }
-        }
-        let n = mean.len();
-        let ci_lo: Vec<f64> = mean.iter().map(|v| v - 0.01).collect();
-        let ci_hi: Vec<f64> = mean.iter().map(|v| v + 0.01).collect();
-        use residuals as r;
-        let table = df!(r::printer => vec!["taz5"; n], r::model => model, r::variable => variable, r::unit => unit,
-            r::label => label, r::bin_lo => lo, r::bin_hi => hi, r::mean_residual_mm => mean, r::ci_lo_mm => ci_lo,
-            r::ci_hi_mm => ci_hi, r::structure => vec![0.3; n])
-        .unwrap();
-        declared(&r::TABLE, table)
-    }
-
     #[test]
-    fn draws_all_three_figures_from_their_tables() {
+    fn draws_the_lines_and_power_figures_from_their_tables() {
         let dir = tempfile::tempdir().unwrap();
         let (mut pos, mut meas, mut base, mut ext, mut cond) = (vec![], vec![], vec![], vec![], vec![]);
         for (k, c) in ["S400F3000", "S800F9000"].iter().enumerate() {
@@ -770,8 +507,6 @@ mod tests {
         write_declared(dir.path(), &pred::TABLE, lines);
         let gains = df!(gain::printer => ["taz5"], gain::extended_model => ["lag_model + width_cap"]).unwrap();
         write_declared(dir.path(), &gain::TABLE, declared(&gain::TABLE, gains));
-        let bins = 12;
-        write_declared(dir.path(), &residuals::TABLE, residuals_table(bins));
         let study = df!(
             power::base => ["taz5"; 4], power::noise => ["measured", "measured", "measured", "white"],
             power::own_causes => ["width_cap"; 4], power::effect => ["none", "bed_tilt", "bed_tilt", "gear_eccentricity"],
@@ -782,18 +517,6 @@ mod tests {
         .unwrap();
         write_declared(dir.path(), &power::TABLE, declared(&power::TABLE, study));
         let out = tempfile::tempdir().unwrap();
-        let p = read_residuals(&dir.path().join(residuals::TABLE.file()), "taz5").unwrap();
-        assert_eq!(p.len(), 3);
-        assert_eq!(p[2].labels.len(), bins);
-        let stem = out.path().join("r");
-        draw_png_and_svg(
-            &stem,
-            (1500, 1150),
-            |a| draw_residuals(a, "t", "lag_model + width_cap", &p),
-            |a| draw_residuals(a, "t", "x", &p),
-        )
-        .unwrap();
-        assert_drawn(&stem);
         let lines = worst_lines(read_lines(&dir.path().join(predictions::TABLE.file()), "taz5").unwrap(), 2);
         let stem = out.path().join("l");
         draw_png_and_svg(
@@ -809,6 +532,6 @@ mod tests {
         let stem = out.path().join("p");
         draw_png_and_svg(&stem, (1500, 620), |a| draw_power(a, "t", &bases), |a| draw_power(a, "t", &bases)).unwrap();
         assert_drawn(&stem);
-        assert!(read_residuals(&dir.path().join(residuals::TABLE.file()), "taz6").is_err());
+        assert!(read_lines(&dir.path().join(predictions::TABLE.file()), "taz6").is_err());
     }
 }

@@ -11,7 +11,7 @@ pub(crate) mod transfer_matrix;
 mod virtual_agreement;
 mod width_profiles;
 
-pub use discrepancy::{DiscoveryPowerFigure, DiscrepancyLinesFigure, DiscrepancyResidualsFigure};
+pub use discrepancy::{DiscoveryPowerFigure, DiscrepancyLinesFigure};
 pub use infill::InfillFigure;
 pub use loo_predictions::LooPredictionsFigure;
 pub use r_surface::RSurfaceFigure;
