@@ -132,17 +132,18 @@ fn engine_of(table: &DataFrame, path: &Path) -> Result<&'static Engine, StageErr
 }
 
 /// The models a figure compares, as `gain.parquet` names them, and the residuals' axis.
-struct Models {
+pub(crate) struct Models {
     /// The baseline (`lag_model`).
-    baseline: String,
+    pub(crate) baseline: String,
     /// The baseline extended by the causes named (`lag_model + width_cap`), or the baseline.
-    extended: String,
+    pub(crate) extended: String,
     /// The residual axis's description with the domain's unit.
     y_desc: String,
 }
 
 impl Models {
-    fn read(path: &Path, engine: &Engine, set: &str) -> Result<Self, StageError> {
+    /// The models of data set `set` in the `gain.parquet` at `path` of `engine`'s domain.
+    pub(crate) fn read(path: &Path, engine: &Engine, set: &str) -> Result<Self, StageError> {
         let df = read_parquet(path)?;
         let sets = strs(&df, engine.set, path)?;
         let (baselines, extended) =
@@ -159,12 +160,17 @@ impl Models {
     }
 
     /// Nothing was named: the extended model is the baseline.
-    fn unchanged(&self) -> bool {
+    pub(crate) fn unchanged(&self) -> bool {
         self.extended == self.baseline
     }
 
+    /// The baseline in words (`lag model`).
+    pub(crate) fn baseline_words(&self) -> String {
+        self.baseline.replace('_', " ")
+    }
+
     fn title(&self, set: &str) -> String {
-        let baseline = self.baseline.replace('_', " ");
+        let baseline = self.baseline_words();
         if self.unchanged() {
             format!("{set}: held-out residual (measured − predicted) of the {baseline} (no cause named)")
         } else {

@@ -2,8 +2,8 @@
 //! residuals against each candidate variable are `figure.discrepancy_residuals`, which
 //! every domain draws):
 //!
-//! - `figure.fdm_discrepancy_lines`: measured, lag-model and extended-model widths
-//!   along the lines the lag model predicts worst (`predictions.parquet`).
+//! - `figure.fdm_discrepancy_lines`: measured, baseline and extended-model widths
+//!   along the lines the baseline predicts worst (`predictions.parquet`).
 //! - `figure.fdm_discovery_power`: the power curves — the share of draws in which the
 //!   engine names a hidden effect, against its strength, per base printer, with the
 //!   null draws' false-alarm rate (`power.parquet`).
@@ -19,10 +19,10 @@ use pipeline::params::NoParams;
 use pipeline::schema::Reads;
 use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
-use tables::discrepancy::fdm::{gain, predictions};
+use tables::discrepancy::fdm::{self, gain, predictions};
 use tables::discrepancy::power;
 
-use crate::figures::discrepancy_residuals::{BASELINE, EXTENDED};
+use crate::figures::discrepancy_residuals::{Models, BASELINE, EXTENDED};
 use crate::read::{f64s, ints, no_rows, read_parquet, strs};
 use crate::style::{draw_house_legend, draw_png_and_svg, house_mesh, text, PALETTE};
 
@@ -31,22 +31,21 @@ use super::loo_predictions::step_points;
 
 /// Colour of measured widths.
 const MEASURED: RGBColor = RGBColor(70, 70, 70);
-/// The baseline's name in the tables (`extended_model` equals it when nothing was named).
-const LAG_MODEL: &str = "lag_model";
 
 pipeline::params! {
     /// The parameters of `figure.fdm_discrepancy_lines`.
     pub struct LinesParams {
         /// Printer whose results are drawn.
         pub printer: String,
-        /// How many lines to draw: those the lag model predicts worst (held-out RMSE).
+        /// How many lines to draw: those the baseline predicts worst (held-out RMSE).
         pub lines: usize [1, 9] = 3,
     }
 }
 
-/// What the lines figure reads of the engine run besides its predictions: the extended
-/// model's name.
-const EXTENDED_NAME: Reads = Reads { table: &gain::TABLE, columns: &[gain::printer, gain::extended_model] };
+/// What the lines figure reads of the engine run besides its predictions: the names of
+/// the baseline and of the extended model.
+const MODEL_NAMES: Reads =
+    Reads { table: &gain::TABLE, columns: &[gain::printer, gain::baseline, gain::extended_model] };
 
 /// The engine run whose held-out predictions the lines figure draws.
 const DISCREPANCY_LINES: Input = Input::one(
@@ -68,7 +67,7 @@ const DISCREPANCY_LINES: Input = Input::one(
             predictions::extended_width_mm,
         ],
     },
-    EXTENDED_NAME,
+    MODEL_NAMES,
 ]);
 
 /// The power studies drawn together.
@@ -101,22 +100,12 @@ pub struct DiscrepancyLinesFigure;
 /// The `figure.fdm_discovery_power` stage kind.
 pub struct DiscoveryPowerFigure;
 
-/// `lag_model + width_cap` (or `lag_model`) from `gain.parquet`.
-fn read_extended_name(path: &Path, printer: &str) -> Result<String, StageError> {
-    let df = read_parquet(path)?;
-    let (printers, names) = (strs(&df, gain::printer, path)?, strs(&df, gain::extended_model, path)?);
-    (0..df.height())
-        .find(|&i| printers[i] == printer)
-        .map(|i| names[i].clone())
-        .ok_or_else(|| no_rows(path, gain::printer, &format!("printer `{printer}`")))
-}
-
 impl Stage for DiscrepancyLinesFigure {
     type Params = LinesParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.fdm_discrepancy_lines",
-        version: 1,
-        summary: "Measured vs lag model vs extended model along the lines the lag model predicts worst (held out) → discrepancy_lines.png/.svg",
+        version: 2,
+        summary: "Measured vs baseline (the lag model, or paper 000's piecewise model) vs extended model along the lines the baseline predicts worst (held out) → discrepancy_lines.png/.svg",
         implements: "DESIGN §7 steps 3-4 (extend, gain), in the style of paper 000 Fig. 6",
         inputs: &[DISCREPANCY_LINES],
         output: Output::Tables,
@@ -126,20 +115,21 @@ impl Stage for DiscrepancyLinesFigure {
         let printer = &p.printer;
         let dir = &ctx.input(&DISCREPANCY_LINES).dir;
         let lines = read_lines(&dir.join(predictions::TABLE.file()), printer)?;
-        let extended = read_extended_name(&dir.join(gain::TABLE.file()), printer)?;
+        let models = Models::read(&dir.join(gain::TABLE.file()), &fdm::ENGINE, printer)?;
         let worst = worst_lines(lines, p.lines);
-        let title = if extended == LAG_MODEL {
-            format!("{printer}: the lines the lag model predicts worst, held out (no cause named)")
+        let baseline = models.baseline_words();
+        let title = if models.unchanged() {
+            format!("{printer}: the lines the {baseline} predicts worst, held out (no cause named)")
         } else {
-            format!("{printer}: the lines the lag model predicts worst, held out, and {extended}")
+            format!("{printer}: the lines the {baseline} predicts worst, held out, and {}", models.extended)
         };
         let stem = ctx.output_path("discrepancy_lines")?;
         let height = 420 * worst.len().max(1) as u32 + 60;
         draw_png_and_svg(
             &stem,
             (1400, height),
-            |a| draw_lines(a, &title, &extended, &worst),
-            |a| draw_lines(a, &title, &extended, &worst),
+            |a| draw_lines(a, &title, &models, &worst),
+            |a| draw_lines(a, &title, &models, &worst),
         )
     }
 }
@@ -200,7 +190,7 @@ fn worst_lines(mut lines: Vec<LinePredictions>, count: usize) -> Vec<LinePredict
 fn draw_lines<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     title: &str,
-    extended: &str,
+    models: &Models,
     lines: &[LinePredictions],
 ) -> Result<(), String> {
     let area = area.margin(12, 6, 6, 14).titled(title, text(24.0)).map_err(|e| e.to_string())?;
@@ -212,7 +202,7 @@ fn draw_lines<DB: DrawingBackend>(
         .fold(0.0f64, f64::max)
         * 1.06;
     for (line, panel) in lines.iter().zip(&panels) {
-        draw_line_panel(panel, line, extended, y_max).map_err(|e| e.to_string())?;
+        draw_line_panel(panel, line, models, y_max).map_err(|e| e.to_string())?;
     }
     Ok(())
 }
@@ -220,14 +210,15 @@ fn draw_lines<DB: DrawingBackend>(
 fn draw_line_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     line: &LinePredictions,
-    extended: &str,
+    models: &Models,
     y_max: f64,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let head = format!("{}: a = {} mm/s², F = {} mm/s", line.condition, line.accel_mm_s2, line.feed_mm_s);
-    let caption = if extended == LAG_MODEL {
-        format!("{head}; held-out RMSE {:.3} mm (lag model)", line.rmse(2))
+    let baseline = models.baseline_words();
+    let caption = if models.unchanged() {
+        format!("{head}; held-out RMSE {:.3} mm ({baseline})", line.rmse(2))
     } else {
-        format!("{head}; held-out RMSE {:.3} mm (lag model) → {:.3} mm", line.rmse(2), line.rmse(3))
+        format!("{head}; held-out RMSE {:.3} mm ({baseline}) → {:.3} mm", line.rmse(2), line.rmse(3))
     };
     let x_max = line.samples.last().map_or(1.0, |s| s[0]);
     let mut chart = ChartBuilder::on(area)
@@ -239,9 +230,9 @@ fn draw_line_panel<DB: DrawingBackend>(
         .build_cartesian_2d(0.0..x_max, 0.0..y_max)?;
     draw_width_profile_mesh(&mut chart)?;
     let measured: Vec<(f64, f64)> = line.samples.iter().map(|s| (s[0], s[1])).collect();
-    let mut series = vec![(2, BASELINE, format!("{LAG_MODEL} (held out)"))];
-    if extended != LAG_MODEL {
-        series.push((3, EXTENDED, format!("{extended} (held out)")));
+    let mut series = vec![(2, BASELINE, format!("{} (held out)", models.baseline))];
+    if !models.unchanged() {
+        series.push((3, EXTENDED, format!("{} (held out)", models.extended)));
     }
     let grey = MEASURED.stroke_width(1);
     chart
@@ -505,7 +496,9 @@ mod tests {
             pred::baseline_width_mm => base, pred::extended_width_mm => ext)
         .unwrap();
         write_declared(dir.path(), &pred::TABLE, lines);
-        let gains = df!(gain::printer => ["taz5"], gain::extended_model => ["lag_model + width_cap"]).unwrap();
+        let gains = df!(gain::printer => ["taz5"], gain::baseline => ["piecewise_model"],
+            gain::extended_model => ["piecewise_model + bed_tilt"])
+        .unwrap();
         write_declared(dir.path(), &gain::TABLE, declared(&gain::TABLE, gains));
         let study = df!(
             power::base => ["taz5"; 4], power::noise => ["measured", "measured", "measured", "white"],
@@ -518,12 +511,14 @@ mod tests {
         write_declared(dir.path(), &power::TABLE, declared(&power::TABLE, study));
         let out = tempfile::tempdir().unwrap();
         let lines = worst_lines(read_lines(&dir.path().join(predictions::TABLE.file()), "taz5").unwrap(), 2);
+        let models = Models::read(&dir.path().join(gain::TABLE.file()), &fdm::ENGINE, "taz5").unwrap();
+        assert_eq!((models.baseline_words().as_str(), models.unchanged()), ("piecewise model", false));
         let stem = out.path().join("l");
         draw_png_and_svg(
             &stem,
             (1400, 900),
-            |a| draw_lines(a, "t", "ext", &lines),
-            |a| draw_lines(a, "t", "ext", &lines),
+            |a| draw_lines(a, "t", &models, &lines),
+            |a| draw_lines(a, "t", &models, &lines),
         )
         .unwrap();
         assert_drawn(&stem);
