@@ -1,8 +1,10 @@
 //! Build script of the `amrepro` binary: computes the program's code fingerprint
 //! (`src/code_fingerprint.rs`: the sources and the toolchain building them) into
 //! `AMREPRO_CODE_FINGERPRINT` and the toolchain's line into `AMREPRO_TOOLCHAIN`, and
-//! asks Cargo to run again when any file it covers, or any folder it walked, changes
-//! (Cargo reruns every build script under a new compiler or other `RUSTFLAGS` anyway).
+//! asks Cargo to run again when any file it covers, or any folder it walked, changes,
+//! or `RUSTFLAGS` in the environment. A new compiler rebuilds this script and so runs
+//! it again; flags given only in a Cargo config file for a `--target` build are not
+//! watched (they do not rebuild a build script).
 
 #[path = "src/code_fingerprint.rs"]
 mod code_fingerprint;
@@ -35,6 +37,7 @@ fn main() {
         .unwrap_or_else(|e| panic!("the code fingerprint cannot read the workspace's sources: {e}"));
     println!("cargo:rustc-env=AMREPRO_CODE_FINGERPRINT={fingerprint}");
     println!("cargo:rustc-env=AMREPRO_TOOLCHAIN={toolchain}");
+    println!("cargo:rerun-if-env-changed=RUSTFLAGS");
     for path in sources.files.iter().chain(&sources.folders) {
         println!("cargo:rerun-if-changed={}", path.display());
     }
