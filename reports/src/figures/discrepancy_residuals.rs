@@ -83,6 +83,9 @@ const DISCREPANCY: Input = Input::one(
     (DOMAINS[2].0, residual_reads!(thermal)),
 ]);
 
+/// Panels per row of the figure, one per candidate variable.
+const PANEL_COLUMNS: usize = 3;
+
 /// The `figure.discrepancy_residuals` stage kind.
 pub struct DiscrepancyResidualsFigure;
 
@@ -107,7 +110,7 @@ impl Stage for DiscrepancyResidualsFigure {
         let models = Models::read(&dir.join(fdm::gain::TABLE.file()), engine, set)?;
         let stem = ctx.output_path("discrepancy_residuals")?;
         let title = models.title(set);
-        let rows = panels.len().div_ceil(3).max(1) as u32;
+        let rows = panels.len().div_ceil(PANEL_COLUMNS).max(1) as u32;
         draw_png_and_svg(
             &stem,
             (1500, 370 * rows + 40),
@@ -189,6 +192,8 @@ struct ResidualPanel {
     /// whose every bin holds one value (the FDM phase, a droplet count); a variable
     /// without a unit binned in ranges (a layer or nozzle index) keeps a numeric axis.
     labels: Vec<(f64, String)>,
+    /// Some bin spans a range of values.
+    binned_in_ranges: bool,
 }
 
 fn read_residuals(df: &DataFrame, path: &Path, engine: &Engine, set: &str) -> Result<Vec<ResidualPanel>, StageError> {
@@ -210,12 +215,14 @@ fn read_residuals(df: &DataFrame, path: &Path, engine: &Engine, set: &str) -> Re
                     unit: units[i].clone(),
                     models: BTreeMap::new(),
                     labels: Vec::new(),
+                    binned_in_ranges: false,
                 });
                 panels.len() - 1
             }
         };
         let panel = &mut panels[index];
         let x = 0.5 * (lo[i] + hi[i]);
+        panel.binned_in_ranges |= lo[i] != hi[i];
         if units[i].is_empty() && !panel.labels.iter().any(|l| l.0 == x) {
             panel.labels.push((x, labels[i].clone()));
         }
@@ -227,12 +234,8 @@ fn read_residuals(df: &DataFrame, path: &Path, engine: &Engine, set: &str) -> Re
     if panels.is_empty() {
         return Err(no_rows(path, engine.set, &format!("data set `{set}`")));
     }
-    let binned_in_ranges =
-        |variable: &str| (0..df.height()).any(|i| sets[i] == set && variables[i] == variable && lo[i] != hi[i]);
-    for panel in &mut panels {
-        if binned_in_ranges(&panel.variable) {
-            panel.labels.clear();
-        }
+    for panel in panels.iter_mut().filter(|p| p.binned_in_ranges) {
+        panel.labels.clear();
     }
     Ok(panels)
 }
@@ -245,9 +248,7 @@ fn draw_residuals<DB: DrawingBackend>(
 ) -> Result<(), String> {
     let width_px = area.dim_in_pixel().0 as f64;
     let area = area.margin(12, 6, 6, 14).titled(title, text(title_size(title, width_px))).map_err(|e| e.to_string())?;
-    let cols = 3;
-    let rows = panels.len().div_ceil(cols);
-    let cells = area.split_evenly((rows, cols));
+    let cells = area.split_evenly((panels.len().div_ceil(PANEL_COLUMNS), PANEL_COLUMNS));
     // No panel's scale is finer than a third of the largest mean of any, so that a
     // variable without structure does not look as if it had some.
     let floor = panels.iter().map(largest_mean).fold(0.0f64, f64::max) / 3.0;
