@@ -55,7 +55,7 @@ fn record(tau_excess: f64) -> ThermalRecord {
             if speed[k] >= 19.0 && k % 400 > 120 {
                 let excess_mm = lagged[k] / (H_MM * speed[k]) - W0_MM;
                 let width_mm = W0_MM + 0.002 + 1.2 * excess_mm + rng.random_range(-0.003..0.003);
-                widths.push(WidthObservation { layer, sample: k, width_mm });
+                widths.push(WidthObservation { layer, sample: k, width_mm, age_s: 0.1 });
             }
         }
     }

@@ -76,7 +76,8 @@
 //!   contour line does not know the age, so the run's pattern of ages passes for a
 //!   longer lag, `m` fitted to contour widths runs above the printer's (fitted to the
 //!   deposit's true widths it does not) and its jackknife interval misses the truth;
-//!   the power study's coverage column measures it. Tried and not kept: a contour map
+//!   the power study's coverage column measures it. The residuals against
+//!   `bead_width.age_s` (see [`VARIABLES`]) show that contraction on every print. Tried and not kept: a contour map
 //!   `a + b·(w − w0) + c·age` removes most of that bias, but the layers then agree so
 //!   closely that a small τ-like difference between the printer's straight-run
 //!   deposit and eq. 34's lag, present without any effect (the true widths show it
@@ -152,6 +153,9 @@ pub struct WidthObservation {
     pub sample: usize,
     /// Width at the threshold contour, `w_l + w_r`, mm.
     pub width_mm: f64,
+    /// The bead's age when the width was read: its frame's estimated capture time minus
+    /// the sample's time, s (shown against, not fitted; see `tau_mismatch` below).
+    pub age_s: f64,
 }
 
 /// What the straight-run width of eq. 34 needs of the print.
@@ -218,6 +222,21 @@ pub fn straight_run_samples(
 /// ramp, where the deposit is not a straight bead.
 pub const STRAIGHT_RUN_SPEED_FRACTION: f64 = 0.95;
 
+/// Per sample of a speed profile: the time since the head last ran below
+/// [`STRAIGHT_RUN_SPEED_FRACTION`] of its top speed (a corner's or the seam's ramp; the
+/// layer's start counts as one), s.
+fn time_since_corner_s(speed_mm_s: &[f64], dt_s: f64) -> Vec<f64> {
+    let slow = STRAIGHT_RUN_SPEED_FRACTION * speed_mm_s.iter().copied().fold(0.0, f64::max);
+    let mut samples_since = 0u32;
+    speed_mm_s
+        .iter()
+        .map(|&v| {
+            samples_since = if v < slow { 0 } else { samples_since + 1 };
+            f64::from(samples_since) * dt_s
+        })
+        .collect()
+}
+
 /// What one filmed print gives the model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ThermalRecord {
@@ -225,6 +244,8 @@ pub struct ThermalRecord {
     temps: Vec<TemperatureObservation>,
     widths: Vec<WidthObservation>,
     flow: FlowModel,
+    /// Per trajectory sample: time since the head last ran below the straight-run speed, s.
+    since_corner_s: Vec<f64>,
     layers: usize,
     samples: usize,
     layer_duration_s: f64,
@@ -311,11 +332,13 @@ impl ThermalRecord {
             temp_c: layer_pair_scale(temps.iter().map(|t| (t.layer, t.sample, t.temp_c)), layers, 1e-3),
             width_mm: layer_pair_scale(parts.widths.iter().map(|w| (w.layer, w.sample, w.width_mm)), layers, 1e-4),
         };
+        let since_corner_s = time_since_corner_s(&flow.speed_mm_s, flow.dt_s);
         Ok(Self {
             frames,
             temps,
             widths: parts.widths.to_vec(),
             flow,
+            since_corner_s,
             layers,
             samples: parts.samples,
             layer_duration_s: parts.layer_duration_s,
@@ -558,15 +581,25 @@ pub fn candidate_index(name: &str) -> Option<usize> {
     CANDIDATES.iter().position(|c| c.name() == name)
 }
 
-/// The variables the residuals are shown against.
-pub static VARIABLES: [Variable; 3] = [
-    Variable { name: "layer", unit: "", kind: VariableKind::Continuous },
-    Variable { name: "time_in_layer_s", unit: "s", kind: VariableKind::Continuous },
-    Variable {
-        name: "observation",
-        unit: "",
-        kind: VariableKind::Categorical(&["capture_offset", "centre_temperature", "bead_width"]),
-    },
+/// The variables the residuals are shown against, one kind of observation each (a
+/// variable is NaN on the other kinds, which the show step leaves out), so that a
+/// panel's residuals share one noise scale and one mechanism's signature is not
+/// diluted by the thousands of observations it does not move: the capture offsets
+/// against the layer and the recorded time (camera latency: a constant; clock rate: a
+/// trend in time); the centre temperatures against the layer and the time (heat carried
+/// or a warming bed: a rise over the layers); the bead widths against the layer and the
+/// time since the head last ran below the straight-run speed (a τ mismatch: the thin
+/// stretch after every corner recovers over a different time, so the residual changes
+/// with that time); and the bead widths against the bead's age when its frame was taken
+/// (a cooling bead's contour contracts with age, which no candidate models).
+pub static VARIABLES: [Variable; 7] = [
+    Variable { name: "bead_width.layer", unit: "", kind: VariableKind::Continuous },
+    Variable { name: "centre_temperature.layer", unit: "", kind: VariableKind::Continuous },
+    Variable { name: "capture_offset.layer", unit: "", kind: VariableKind::Continuous },
+    Variable { name: "bead_width.time_since_corner_s", unit: "s", kind: VariableKind::Continuous },
+    Variable { name: "centre_temperature.time_in_layer_s", unit: "s", kind: VariableKind::Continuous },
+    Variable { name: "capture_offset.time_in_layer_s", unit: "s", kind: VariableKind::Continuous },
+    Variable { name: "bead_width.age_s", unit: "s", kind: VariableKind::Continuous },
 ];
 
 /// Standard deviation of the weak prior on the first carried substrate excess `s_1 = f·g·span`,
@@ -806,16 +839,25 @@ impl Model for ThermalModel {
 
     fn variable_values(&self, group: &ThermalBlock, variable: usize) -> Vec<f64> {
         let r = &self.record;
+        let layer = group.layer as f64;
         let frames = group.frames.iter().map(|&i| &r.frames[i]);
         let temps = group.temps.iter().map(|&i| &r.temps[i]);
         let widths = group.widths.iter().map(|&i| &r.widths[i]);
-        match variable {
-            0 => vec![group.layer as f64; group.observed.len()],
-            1 => (frames.map(|f| f.recorded_time_s).chain(temps.map(|t| t.t_s)))
-                .chain(widths.map(|w| w.sample as f64 * r.flow.dt_s))
-                .collect(),
-            _ => frames.map(|_| 0.0).chain(temps.map(|_| 1.0)).chain(widths.map(|_| 2.0)).collect(),
-        }
+        // Each variable's values on its own kind, NaN on the others (in observed order).
+        let (on_frames, on_temps, on_widths): (Vec<f64>, Vec<f64>, Vec<f64>) = match variable {
+            0 => (vec![], vec![], widths.map(|_| layer).collect()),
+            1 => (vec![], temps.map(|_| layer).collect(), vec![]),
+            2 => (frames.map(|_| layer).collect(), vec![], vec![]),
+            3 => (vec![], vec![], widths.map(|w| r.since_corner_s[w.sample]).collect()),
+            4 => (vec![], temps.map(|t| t.t_s).collect(), vec![]),
+            5 => (frames.map(|f| f.recorded_time_s).collect(), vec![], vec![]),
+            _ => (vec![], vec![], widths.map(|w| w.age_s).collect()),
+        };
+        let padded = |values: Vec<f64>, len: usize| values.into_iter().chain(std::iter::repeat(f64::NAN)).take(len);
+        padded(on_frames, group.frames.len())
+            .chain(padded(on_temps, group.temps.len()))
+            .chain(padded(on_widths, group.widths.len()))
+            .collect()
     }
 
     fn fit(
@@ -952,6 +994,7 @@ mod tests {
             temps: vec![],
             widths: vec![],
             flow: flow_model,
+            since_corner_s: vec![],
             layers,
             samples,
             layer_duration_s: duration,
@@ -977,7 +1020,7 @@ mod tests {
                 if speed[k] >= 19.0 {
                     let wobble = 1e-4 * (((k * 11 + n * 7) % 5) as f64 - 2.0);
                     let width_mm = W0_MM + 0.002 + 1.1 * excess[k] + wobble;
-                    widths.push(WidthObservation { layer: n, sample: k, width_mm });
+                    widths.push(WidthObservation { layer: n, sample: k, width_mm, age_s: 0.1 });
                 }
             }
         }
@@ -1091,6 +1134,43 @@ mod tests {
         assert_eq!(s[0], 0.0);
         assert!((s[1] - 0.4 * 155.0 * 0.2).abs() < 1e-12);
         assert!((s[2] - 0.4 * (s[1] + (155.0 - s[1]) * 0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn each_variable_reads_one_kind_and_a_tau_mismatch_shows_against_the_time_since_the_corner() {
+        let (_, speed) = flow_and_speed(200);
+        let since = time_since_corner_s(&speed, DT_S);
+        // Below 95 % of the top speed (19 mm/s: samples 0-18 of every 100) the clock is at 0.
+        assert_eq!((since[18], since[19], since[99], since[100]), (0.0, DT_S, 81.0 * DT_S, 0.0));
+
+        let model = ThermalModel::new(synthetic_with_tau(8, 0.0, 0.0, None, 0.0, 0.3));
+        let blocks = model.record().layer_groups();
+        let block = &blocks[3];
+        let kinds = [block.frames.len(), block.temps.len(), block.widths.len()];
+        for (v, variable) in VARIABLES.iter().enumerate() {
+            let values = model.variable_values(block, v);
+            assert_eq!(values.len(), block.observed.len(), "{}", variable.name);
+            let kind = [2, 1, 0, 2, 1, 0, 2][v];
+            let mut start = 0;
+            for (k, &n) in kinds.iter().enumerate() {
+                let part = &values[start..start + n];
+                assert!(part.iter().all(|x| x.is_finite() == (k == kind)), "{} on kind {k}", variable.name);
+                start += n;
+            }
+        }
+
+        let settings = Settings { bootstrap_draws: 100, max_rounds: 1, ..Settings::standard(3) };
+        let found = discover(&model, &blocks, &[], &settings).unwrap();
+        assert_eq!(found.named, [TAU_MISMATCH]);
+        let share = |structure: &[::discrepancy::show::VariableStructure], name: &str| {
+            let v = VARIABLES.iter().position(|x| x.name == name).unwrap();
+            structure.iter().find(|s| s.variable == v).unwrap().structure
+        };
+        let (before, after) = (&found.structure_before, &found.structure_after);
+        let signature = share(before, "bead_width.time_since_corner_s");
+        assert!(signature > 0.5, "the lag's signature carries {signature}");
+        assert!(share(after, "bead_width.time_since_corner_s") < 0.1 * signature);
+        assert!(share(before, "centre_temperature.layer") < 0.05);
     }
 
     #[test]

@@ -87,19 +87,26 @@ macro_rules! engine_reads {
 }
 pub(super) use engine_reads;
 
+/// What [`Structure::read`] reads of a domain's `residuals.parquet`, as an extra
+/// [`engine_reads!`] entry.
+macro_rules! structure_reads {
+    ($domain:ident) => {{
+        use tables::discrepancy::$domain::{residuals, ENGINE};
+        pipeline::schema::Reads {
+            table: &residuals::TABLE,
+            columns: &[ENGINE.set, residuals::model, residuals::variable, residuals::structure],
+        }
+    }};
+}
+pub(super) use structure_reads;
+
 /// The engine run on the lag model.
 const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("fdm.discrepancy")],
     "the causes, extension, gain and residual structure of the lag model (`causes.parquet`, `extension.parquet`, `gain.parquet`, `residuals.parquet`)",
 )
-.reading(engine_reads!(
-    fdm,
-    Reads {
-        table: &residuals::TABLE,
-        columns: &[residuals::printer, residuals::model, residuals::variable, residuals::structure],
-    },
-));
+.reading(engine_reads!(fdm, structure_reads!(fdm)));
 
 /// The power studies and the engine runs on other baselines, told apart by their tables
 /// (a power study writes no `causes`, an engine run no `power`), each checked for what
@@ -152,7 +159,7 @@ impl Stage for DiscrepancyFdmSection {
         let causes = Cause::read(dir, &FDM)?;
         let params = Param::read(dir, &FDM)?;
         let gains = GainRow::read(dir, &FDM)?;
-        let structure = Structure::read(&dir.join(residuals::TABLE.file()))?;
+        let structure = Structure::read(dir, &FDM)?;
         // The other inputs: power studies (power.parquet), and engine runs on another
         // baseline (causes.parquet without power.parquet).
         let (mut power_rows, mut power_stages, mut other_baselines) = (Vec::new(), Vec::new(), Vec::new());
@@ -333,27 +340,30 @@ impl GainRow {
     }
 }
 
-/// One variable's structure share per (printer, model).
-struct Structure {
-    printer: String,
+/// One variable's structure share per (data set, model) of a domain's `residuals.parquet`.
+pub(super) struct Structure {
+    set: String,
     model: String,
     variable: String,
     share: f64,
 }
 
 impl Structure {
-    fn read(path: &Path) -> Result<Vec<Self>, StageError> {
+    /// Reads `names`' residual table in `dir`, one row per (data set, model, variable).
+    /// The columns other than the data set's are named alike in every domain.
+    pub(super) fn read(dir: &Path, names: &Names) -> Result<Vec<Self>, StageError> {
         use residuals as r;
-        let df = read_parquet(path)?;
-        let (printer, model, variable) =
-            (strs(&df, r::printer, path)?, strs(&df, r::model, path)?, strs(&df, r::variable, path)?);
-        let share = f64s(&df, r::structure, path)?;
+        let path = dir.join(names.engine.residuals.file());
+        let df = read_parquet(&path)?;
+        let (set, model, variable) =
+            (strs(&df, names.engine.set, &path)?, strs(&df, r::model, &path)?, strs(&df, r::variable, &path)?);
+        let share = f64s(&df, r::structure, &path)?;
         let mut out: Vec<Self> = Vec::new();
         for i in 0..df.height() {
-            let seen = out.iter().any(|s| s.printer == printer[i] && s.model == model[i] && s.variable == variable[i]);
+            let seen = out.iter().any(|s| s.set == set[i] && s.model == model[i] && s.variable == variable[i]);
             if !seen {
                 out.push(Self {
-                    printer: printer[i].clone(),
+                    set: set[i].clone(),
                     model: model[i].clone(),
                     variable: variable[i].clone(),
                     share: share[i],
@@ -361,6 +371,34 @@ impl Structure {
             }
         }
         Ok(out)
+    }
+
+    /// The sentence naming the variable the baseline's held-out residuals of `set` carry
+    /// the most structure against, with its share after the extension when `extended`
+    /// (empty when the table has no row of `set`); `whose` names the baseline (`Its`).
+    pub(super) fn strongest(structure: &[Self], set: &str, extended: bool, whose: &str) -> String {
+        let strongest = structure
+            .iter()
+            .filter(|s| s.set == set && s.model == "baseline")
+            .max_by(|a, b| a.share.total_cmp(&b.share));
+        strongest.map_or(String::new(), |s| {
+            let after = structure
+                .iter()
+                .find(|t| t.set == set && t.model == "extended" && t.variable == s.variable)
+                .map_or(f64::NAN, |t| t.share);
+            let after = if extended { format!(" ({:.0} % after the extension)", 100.0 * after) } else { String::new() };
+            if (100.0 * s.share).round() == 0.0 {
+                return format!(
+                    " {whose} held-out residuals carry no structure against any variable: the largest share of their sum of squares that a variable's bin means explain, against <code>{}</code>, is under 0.5 %.",
+                    escape(&s.variable)
+                );
+            }
+            format!(
+                " {whose} held-out residuals carry the most structure against <code>{}</code>: the bin means there explain {:.0} % of the residual sum of squares{after}.",
+                escape(&s.variable),
+                100.0 * s.share,
+            )
+        })
     }
 }
 
@@ -482,23 +520,7 @@ fn printer_name(printer: &str) -> String {
 
 /// The paragraph that says what was found, in computed numbers.
 fn finding(g: &GainRow, causes: &[&Cause], structure: &[Structure]) -> String {
-    let strongest = structure
-        .iter()
-        .filter(|s| s.printer == g.printer && s.model == "baseline")
-        .max_by(|a, b| a.share.total_cmp(&b.share));
-    let extended = causes.iter().any(|c| c.named);
-    let shows = strongest.map_or(String::new(), |s| {
-        let after = structure
-            .iter()
-            .find(|t| t.printer == g.printer && t.model == "extended" && t.variable == s.variable)
-            .map_or(f64::NAN, |t| t.share);
-        let after = if extended { format!(" ({:.0} % after the extension)", 100.0 * after) } else { String::new() };
-        format!(
-            " Its held-out residuals carry the most structure against <code>{}</code>: the bin means there explain {:.0} % of the residual sum of squares{after}.",
-            escape(&s.variable),
-            100.0 * s.share,
-        )
-    });
+    let shows = Structure::strongest(structure, &g.printer, causes.iter().any(|c| c.named), "Its");
     let first = causes.iter().find(|c| c.round == 1);
     let rmse = first.map_or(g.before, |c| c.before);
     let mut text = format!(
@@ -820,6 +842,29 @@ mod tests {
         let text = finding(&GainRow { extended: "lag_model".into(), ..g }, &refs, &[]);
         assert!(text.contains("No significant discrepancy") && text.contains("no candidate is significant"), "{text}");
         assert!(!text.contains("NaN"), "{text}");
+    }
+
+    #[test]
+    fn the_strongest_structure_is_named_with_its_share_after_the_extension() {
+        let row = |set: &str, model: &str, variable: &str, share: f64| Structure {
+            set: set.into(),
+            model: model.into(),
+            variable: variable.into(),
+            share,
+        };
+        let table = [
+            row("a", "baseline", "layer", 0.02),
+            row("a", "baseline", "bead_width.age_s", 0.71),
+            row("a", "extended", "bead_width.age_s", 0.64),
+            row("b", "baseline", "layer", 0.004),
+            row("b", "baseline", "nozzle", 0.001),
+        ];
+        let a = Structure::strongest(&table, "a", true, "Its");
+        assert!(a.contains("<code>bead_width.age_s</code>") && a.contains("71 %") && a.contains("(64 % after"), "{a}");
+        assert!(!Structure::strongest(&table, "a", false, "Its").contains("after the extension"));
+        let b = Structure::strongest(&table, "b", false, "The baseline's");
+        assert!(b.contains("no structure against any variable") && b.contains("<code>layer</code>"), "{b}");
+        assert_eq!(Structure::strongest(&table, "c", true, "Its"), "");
     }
 
     #[test]

@@ -18,7 +18,8 @@ use tables::inkjet::control_gain;
 use tables::report::comparison;
 
 use super::discrepancy_fdm::{
-    causes_table, engine_reads, parameter_table, percent, Cause, GainRow, Names, Param, PowerRow, POWER_READS,
+    causes_table, engine_reads, parameter_table, percent, structure_reads, Cause, GainRow, Names, Param, PowerRow,
+    Structure, POWER_READS,
 };
 use super::{comparison_frame, Row};
 use crate::html::{escape, format_sig};
@@ -54,9 +55,9 @@ pub struct DiscrepancyInkjetSection;
 const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("inkjet.discrepancy")],
-    "the causes, extension and gain per dataset (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
+    "the causes, extension, gain and residual structure per dataset (`causes.parquet`, `extension.parquet`, `gain.parquet`, `residuals.parquet`)",
 )
-.reading(engine_reads!(inkjet));
+.reading(engine_reads!(inkjet, structure_reads!(inkjet)));
 
 /// The optional studies, told apart by their tables.
 const STUDIES: Input = Input::many(
@@ -98,7 +99,7 @@ impl Stage for DiscrepancyInkjetSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_inkjet",
-        version: 2,
+        version: 3,
         summary: "What the layer-to-layer model gets wrong on ink-jet scans, the cause named, the extension and its gain, and (with a power study) how often hidden effects are named → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 002's layer-to-layer model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -112,11 +113,12 @@ impl Stage for DiscrepancyInkjetSection {
         let causes = Cause::read(dir, &INKJET.names)?;
         let params = Param::read(dir, &INKJET.names)?;
         let gains = GainRow::read(dir, &INKJET.names)?;
+        let structure = Structure::read(dir, &INKJET.names)?;
         let mut rows = Vec::new();
         let mut html = String::from("<h3>What the layer-to-layer model gets wrong, and why</h3>\n");
         html += &method(&causes);
         for g in &gains {
-            html += &dataset_part(g, &causes, &params, &stage, &mut rows, &INKJET);
+            html += &dataset_part(g, &causes, &params, &structure, &stage, &mut rows, &INKJET);
         }
         for input in ctx.inputs_of(&STUDIES) {
             let control = input.dir.join(control_gain::TABLE.file());
@@ -154,6 +156,7 @@ pub(super) fn dataset_part(
     g: &GainRow,
     causes: &[Cause],
     params: &[Param],
+    structure: &[Structure],
     stage: &str,
     rows: &mut Vec<Row>,
     text: &DatasetText,
@@ -182,7 +185,8 @@ pub(super) fn dataset_part(
             percent(g.gain.2 / 100.0)
         )
     };
-    let _ = writeln!(html, "<p>{} {}; {verdict}.</p>", g.groups, names.groups);
+    let shows = Structure::strongest(structure, dataset, !named.is_empty(), "The baseline's");
+    let _ = writeln!(html, "<p>{} {}; {verdict}.{shows}</p>", g.groups, names.groups);
     html += &causes_table(&mine, names);
     let fitted: Vec<&Param> = params.iter().filter(|p| &p.printer == dataset).collect();
     if !fitted.is_empty() {

@@ -19,7 +19,9 @@ use pipeline::{StageContext, StageError};
 use tables::report::comparison;
 use tables::thermal::control_gain;
 
-use super::discrepancy_fdm::{engine_reads, Cause, GainRow, Names, Param, PowerRow, POWER_READS};
+use super::discrepancy_fdm::{
+    engine_reads, structure_reads, Cause, GainRow, Names, Param, PowerRow, Structure, POWER_READS,
+};
 use super::discrepancy_inkjet::{dataset_part, difference_words, power_table, with_interval, DatasetText};
 use super::{comparison_frame, Row};
 use crate::html::escape;
@@ -47,9 +49,9 @@ pub struct DiscrepancyThermalSection;
 const DISCREPANCY: Input = Input::one(
     "discrepancy",
     &[Source::Stage("thermal.discrepancy")],
-    "the causes, extension and gain per filmed print (`causes.parquet`, `extension.parquet`, `gain.parquet`)",
+    "the causes, extension, gain and residual structure per filmed print (`causes.parquet`, `extension.parquet`, `gain.parquet`, `residuals.parquet`)",
 )
-.reading(engine_reads!(thermal));
+.reading(engine_reads!(thermal, structure_reads!(thermal)));
 
 /// The optional studies, told apart by their tables.
 const STUDIES: Input = Input::many(
@@ -92,7 +94,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 6,
+        version: 7,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -106,11 +108,12 @@ impl Stage for DiscrepancyThermalSection {
         let causes = Cause::read(dir, &THERMAL.names)?;
         let params = Param::read(dir, &THERMAL.names)?;
         let gains = GainRow::read(dir, &THERMAL.names)?;
+        let structure = Structure::read(dir, &THERMAL.names)?;
         let mut rows = Vec::new();
         let mut html = String::from("<h3>What the thermal monitor's models get wrong, and why</h3>\n");
         html += &method(&causes);
         for g in &gains {
-            html += &dataset_part(g, &causes, &params, &stage, &mut rows, &THERMAL);
+            html += &dataset_part(g, &causes, &params, &structure, &stage, &mut rows, &THERMAL);
         }
         for input in ctx.inputs_of(&STUDIES) {
             let control = input.dir.join("control_gain.parquet");
@@ -148,7 +151,9 @@ latency, a camera clock running at another rate, a fraction of each layer's resi
 excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
 layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \
 other than the nominal; the second and the fourth are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided by \
-its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. A group is a whole \
+its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. The residual figures and the structure shares below show each kind against its own variables: \
+the capture offsets against the layer and the recorded time, the centre temperatures against the layer and the time, the widths against the layer, the time since \
+the head last left a corner's slow-down and the bead's age when its frame was taken. A group is a whole \
 filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \
 squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate \
 of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
@@ -157,7 +162,8 @@ it, even on a print without them, so they need a model of the contour first. Par
 the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: the camera trails the nozzle, so the monitor \
 reads each width shortly after the bead was laid, at an age that varies along every straight run with where the frames fall, and a cooling \
 bead's contour contracts with age; the contour line does not know the age, the run's pattern of ages passes for a longer lag, and the τ fitted to contour \
-widths runs above the printer's, its interval missing it (the power study's coverage column says how often). The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
+widths runs above the printer's, its interval missing it (the power study's coverage column says how often); no candidate models the age, and the \
+residuals against it show how much of the widths' misfit it holds. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
 share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
 prints. Gain intervals are a bootstrap over layers.</p>\n"
     )

@@ -102,7 +102,8 @@ impl Stage for DiscrepancyStage {
         name: "thermal.discrepancy",
         // 3: the noise scales are the mean-of-middle-two median (models::stats), not the upper one.
         // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
-        version: 4,
+        // 5: residuals against six variables of one observation kind each (was three mixing them).
+        version: 5,
         summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
         inputs: &[PRINTS],
@@ -242,14 +243,16 @@ fn straight_run_widths(
 ) -> Result<Vec<WidthObservation>, StageError> {
     let (layer, sample, frame) =
         (ints(df, widths::layer, file)?, ints(df, widths::sample, file)?, ints(df, widths::frame_index, file)?);
-    let (left, right) = (f64s(df, widths::w_left_mm, file)?, f64s(df, widths::w_right_mm, file)?);
-    let timed = |f: i64| usize::try_from(f).ok().and_then(|f| estimated_time_s.get(f)).is_some_and(|t| t.is_finite());
+    let (left, right, t) =
+        (f64s(df, widths::w_left_mm, file)?, f64s(df, widths::w_right_mm, file)?, f64s(df, widths::t_s, file)?);
+    let capture_time_s = |f: i64| usize::try_from(f).ok().and_then(|f| estimated_time_s.get(f)).copied();
     let mut out = Vec::new();
     for i in 0..df.height() {
         let (Ok(l), Ok(k)) = (usize::try_from(layer[i]), usize::try_from(sample[i])) else { continue };
         let width_mm = left[i] + right[i];
-        if width_mm.is_finite() && straight.get(k) == Some(&true) && timed(frame[i]) {
-            out.push(WidthObservation { layer: l, sample: k, width_mm });
+        let Some(captured_s) = capture_time_s(frame[i]).filter(|t| t.is_finite()) else { continue };
+        if width_mm.is_finite() && straight.get(k) == Some(&true) {
+            out.push(WidthObservation { layer: l, sample: k, width_mm, age_s: captured_s - t[i] });
         }
     }
     Ok(out)
