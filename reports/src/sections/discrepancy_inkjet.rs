@@ -35,6 +35,7 @@ const INKJET: DatasetText = DatasetText {
     kind: "inkjet.discrepancy",
     power_kind: "inkjet.discovery",
     prefix: "inkjet",
+    rmse_over: "",
 };
 
 /// What a domain's per-dataset parts call things: its tables' names, its report section,
@@ -46,6 +47,9 @@ pub(super) struct DatasetText {
     /// The power study's stage kind without its `_power` suffix.
     pub(super) power_kind: &'static str,
     pub(super) prefix: &'static str,
+    /// What the data set's held-out RMSE is over, when its observations are of several
+    /// kinds (empty: one kind).
+    pub(super) rmse_over: &'static str,
 }
 
 /// The `report.discrepancy_inkjet` stage kind.
@@ -175,8 +179,9 @@ pub(super) fn dataset_part(
         }
     } else {
         format!(
-            "named: <b>{}</b>; the held-out RMSE falls from {} to {} {}, a gain of {} % (95 % interval {} to {} %)",
+            "named: <b>{}</b>; the held-out RMSE{} falls from {} to {} {}, a gain of {} % (95 % interval {} to {} %)",
             named.join("</b>, then <b>"),
+            text.rmse_over,
             format_sig(g.before),
             format_sig(g.after),
             names.unit_label,

@@ -40,6 +40,7 @@ const THERMAL: DatasetText = DatasetText {
     kind: "thermal.discrepancy",
     power_kind: "thermal.discovery",
     prefix: "thermal",
+    rmse_over: " over every observation of the layers (the table below scores each candidate on the kind of observation it moves)",
 };
 
 /// The `report.discrepancy_thermal` stage kind.
@@ -94,7 +95,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 7,
+        version: 8,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
