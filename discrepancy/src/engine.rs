@@ -202,7 +202,9 @@ pub struct Estimate {
     pub ci_hi: f64,
 }
 
-/// Held-out RMSE of the starting and the final model.
+/// Held-out RMSE of the starting and the final model, over the observations the named
+/// mechanisms move ([`Model::moved_by`]; all of them when a named mechanism may move any,
+/// or when nothing was named), so that it is on the footing of the rounds' scores.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gain {
     /// Starting model.
@@ -505,16 +507,47 @@ fn finish<M: Model>(
     };
     let structure_before = residual_structure(model, groups, &residuals(&baseline), settings.bins, settings.level);
     let structure_after = residual_structure(model, groups, &residuals(&extended), settings.bins, settings.level);
-    let (lo, hi) =
-        bootstrap_ratio_interval(&baseline.sse, &extended.sse, settings.bootstrap_draws, settings.level, settings.seed);
-    let gain = Gain {
-        rmse_before: baseline.rmse(),
-        rmse_after: extended.rmse(),
-        gain_pct: 100.0 * (1.0 - extended.rmse() / baseline.rmse()),
-        ci_pct: (100.0 * lo, 100.0 * hi),
-    };
     let named = extended.active[baseline.active.len()..].to_vec();
+    let gain = gain_on_moved(model, groups, &baseline, &extended, &named, settings);
     Ok(Discovery { rounds, named, baseline, extended, structure_before, structure_after, final_fit, extension, gain })
+}
+
+/// The [`Gain`] of `extended` over `baseline` on the observations `named` move.
+fn gain_on_moved<M: Model>(
+    model: &M,
+    groups: &[M::Group],
+    baseline: &HeldOut<M::Fit>,
+    extended: &HeldOut<M::Fit>,
+    named: &[usize],
+    settings: &Settings,
+) -> Gain {
+    let (before, after, samples) = match moved_by_any(model, groups, named) {
+        Some(masks) => restricted(groups, baseline, extended, &masks),
+        None => (baseline.sse.clone(), extended.sse.clone(), baseline.samples.clone()),
+    };
+    let (lo, hi) = bootstrap_ratio_interval(&before, &after, settings.bootstrap_draws, settings.level, settings.seed);
+    let errors = |sse| Errors { sse, samples: &samples };
+    let (rmse_before, rmse_after) = (errors(&before).rmse(), errors(&after).rmse());
+    Gain {
+        rmse_before,
+        rmse_after,
+        gain_pct: 100.0 * (1.0 - rmse_after / rmse_before),
+        ci_pct: (100.0 * lo, 100.0 * hi),
+    }
+}
+
+/// Each group's mask of the observations any of `mechanisms` moves; `None` (all of them)
+/// when there are none or one may move any.
+fn moved_by_any<M: Model>(model: &M, groups: &[M::Group], mechanisms: &[usize]) -> Option<Vec<Vec<bool>>> {
+    let mut union: Option<Vec<Vec<bool>>> = None;
+    for &c in mechanisms {
+        let masks = moved(model, groups, c)?;
+        union = Some(match union {
+            None => masks,
+            Some(u) => u.iter().zip(&masks).map(|(a, b)| a.iter().zip(b).map(|(x, y)| *x || *y).collect()).collect(),
+        });
+    }
+    union
 }
 
 /// Every parameter of the fitted model with its jackknife interval over the folds.

@@ -20,7 +20,8 @@
 //!   and the search repeats. Too few groups to reach α/m is a verdict of its own.
 //! - Extend and gain (also in [`engine`]): the extended model fitted on all groups with
 //!   delete-one-group jackknife intervals (the cross-validation's own fold fits), and
-//!   the held-out RMSE before and after with a bootstrap-over-groups interval.
+//!   the held-out RMSE before and after with a bootstrap-over-groups interval, over the
+//!   observations the named mechanisms move (as each was scored in its round).
 //! - [`stats`]: the tests and intervals; [`least_squares`]: a bounded
 //!   Levenberg–Marquardt solver for the domains' nonlinear fits.
 //!

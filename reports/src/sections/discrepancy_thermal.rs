@@ -40,7 +40,7 @@ const THERMAL: DatasetText = DatasetText {
     kind: "thermal.discrepancy",
     power_kind: "thermal.discovery",
     prefix: "thermal",
-    rmse_over: " over every observation of the layers (the table below scores each candidate on the kind of observation it moves)",
+    rmse_over: " over the kinds of observation its named causes move, on which the table below scores each candidate,",
 };
 
 /// The `report.discrepancy_thermal` stage kind.
@@ -95,7 +95,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 8,
+        version: 9,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -166,7 +166,7 @@ bead's contour contracts with age; the contour line does not know the age, the r
 widths runs above the printer's, its interval missing it (the power study's coverage column says how often); no candidate models the age, and the \
 residuals against it show how much of the widths' misfit it holds. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
 share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
-prints. Gain intervals are a bootstrap over layers.</p>\n"
+prints. A print's gain is over the kinds of observation its named causes move, its interval a bootstrap over layers.</p>\n"
     )
 }
 

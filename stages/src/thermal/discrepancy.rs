@@ -103,7 +103,8 @@ impl Stage for DiscrepancyStage {
         // 3: the noise scales are the mean-of-middle-two median (models::stats), not the upper one.
         // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
         // 5: residuals against seven variables of one observation kind each (was three mixing them).
-        version: 5,
+        // 6: gain.parquet's RMSEs are over the observations the named causes move (was all kinds).
+        version: 6,
         summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
         inputs: &[PRINTS],
