@@ -193,7 +193,7 @@ macro_rules! engine_tables {
                 groups: Int64 "1",
                 #[doc = "Held-out RMSE of the baseline"]
                 #[doc = $scale]
-                #[doc = "."]
+                #[doc = ", over the observations the named causes move, as `causes` scores them (over all of them when nothing is named or a cause may move any)."]
                 $before: Float64 $unit,
                 /// Held-out RMSE of the final model.
                 $after: Float64 $unit,

@@ -86,10 +86,10 @@
 //!   moderate strength is then named less often, its layers' gains no longer all
 //!   positive. The difference is not the stacking of layers: leaving out layer 0's
 //!   widths (the only layer on the bed) keeps it; the true widths of every layer, read
-//!   against eq. 34, recover from a corner a little faster than its lag. Leaving the
-//!   seam out of the straight runs too (each layer starts on the previous one's stop),
-//!   the age brings the τ interval's coverage to its level, and a map quadratic in the
-//!   age changes nothing more: the null alarms stay. Keeping the
+//!   against eq. 34, recover from a corner a little faster than its lag. With the seam
+//!   also left out of the straight runs (each layer starts on the previous one's
+//!   stop), the age brings the τ interval's coverage to its level, and a map quadratic
+//!   in the age changes nothing more: the null alarms stay. Keeping the
 //!   age needs that difference modelled, or a test of a relevant size of effect rather
 //!   than of none. A quadratic or cubic map in `w − w0` alone leaves the bias as it is.
 //!
