@@ -33,18 +33,22 @@ fn the_shipped_spec_names_the_camera_latency_and_the_tau_error_and_nothing_wrong
     // Eight layers per print, each a group.
     let groups = causes.column("groups").unwrap().i64().unwrap();
     assert!(groups.iter().all(|g| g == Some(8)));
-    // The latency's interval covers what the camera did (10 ms). The τ excess is found
-    // near the 30 % printed, but its interval is known not to cover it: the widths are
-    // read at ages that vary along each straight run, which the contour line does not
-    // know and which read as more τ excess than printed (the power study's coverage
-    // column).
+    // The latency's interval covers what the camera did (10 ms), and the τ excess's the
+    // 30 % printed: the contour map knows each width's age, which would otherwise read
+    // as more τ excess than printed.
     let extension = read_table(&out.join("thermal_extension.parquet"));
     let (param, estimate) = (strings(&extension, "parameter"), floats(&extension, "estimate"));
     let (lo, hi) = (floats(&extension, "ci_lo"), floats(&extension, "ci_hi"));
     let k = param.iter().position(|p| p == "latency_s").unwrap();
     assert!(lo[k] <= 0.01 && 0.01 <= hi[k], "[{}, {}]", lo[k], hi[k]);
     let k = param.iter().position(|p| p == "tau_excess").unwrap();
-    assert!((0.2..0.45).contains(&estimate[k]) && lo[k] < estimate[k] && estimate[k] < hi[k], "{}", estimate[k]);
+    assert!(
+        lo[k] <= 0.3 && 0.3 <= hi[k] && lo[k] < estimate[k] && estimate[k] < hi[k],
+        "{} [{}, {}]",
+        estimate[k],
+        lo[k],
+        hi[k]
+    );
     let gain = read_table(&out.join("thermal_gain.parquet"));
     let (sets, ci_lo) = (strings(&gain, "dataset"), floats(&gain, "gain_ci_lo_pct"));
     let latency = sets.iter().position(|d| d == "print_camera_latency").unwrap();
@@ -126,12 +130,12 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("specs/studies/discrepancy_thermal_power.toml"),
     )
     .unwrap();
-    let study = "null_draws = 200, draws = 40, camera_latency = \"0.005, 0.01\", layer_heat_accumulation = \"0.3, 0.6\", tau_mismatch = \"0.15, 0.3\", heat_diffusion_widening = \"1\", melt_squeeze_out = \"0.2\"";
+    let study = "null_draws = 200, draws = 40, camera_latency = \"0.005, 0.01\", layer_heat_accumulation = \"0.3, 0.6\", tau_mismatch = \"0.15, 0.3\", heat_diffusion_widening = \"1\", melt_squeeze_out = \"0.2\", min_gain_pct = 1.0";
     assert!(shipped.contains(study), "the shipped study changed; update this test");
     // Six null prints, two of each effect at its larger strength; two control prints.
     let cut = shipped.replace(
         study,
-        "null_draws = 6, draws = 2, camera_latency = \"0.01\", layer_heat_accumulation = \"0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"\", melt_squeeze_out = \"\"",
+        "null_draws = 6, draws = 2, camera_latency = \"0.01\", layer_heat_accumulation = \"0.6\", tau_mismatch = \"0.3\", heat_diffusion_widening = \"\", melt_squeeze_out = \"\", min_gain_pct = 1.0",
     );
     let spec = tmp.path().join("study.toml");
     let cut = cut.replace("prints = 20, reprint_layers = 20", "prints = 2, reprint_layers = 2");
@@ -150,11 +154,12 @@ fn a_small_fixed_seed_power_study_meets_the_targets_within_binomial_slack() {
     let (named, wrongs) = (correct[1..].iter().sum::<i64>(), wrong[1..].iter().sum::<i64>());
     assert!(named >= 5, "named {named} of 6");
     assert_eq!(wrongs, 0, "wrong {wrongs} of 6");
-    // Coverage of the strength intervals not significantly below 90 % for the latency
-    // and the carried heat: with four intervals, the Clopper–Pearson upper bound reaches
-    // 0.9 from two covered on. (The τ excess's intervals are known to miss: see above.)
+    // Coverage of the strength intervals, pooled over the three cells, not significantly
+    // below 90 % (the Clopper–Pearson upper bound reaches it).
     let (covered, with) = (ints("covered"), ints("with_interval"));
-    assert!(2 * (covered[1] + covered[2]) >= with[1] + with[2], "{covered:?} of {with:?}");
+    let (covered, with) = (covered[1..].iter().sum::<i64>(), with[1..].iter().sum::<i64>());
+    let (_, upper) = discrepancy::stats::clopper_pearson(covered as usize, with as usize, 0.95);
+    assert!(upper >= 0.9, "{covered} of {with} covered");
     // The null's first-round p-values are valid: nowhere significantly above the
     // uniform (one-sided Kolmogorov–Smirnov, p > 1 %).
     let draws_table = read_table(&tmp.path().join("out/discrepancy/thermal_power_draws.parquet"));

@@ -19,6 +19,14 @@
 //! "too few groups" and nothing is named. The search stops at the first round with no
 //! significant candidate, or after `max_rounds`.
 //!
+//! **The smallest gain worth naming.** With thousands of observations per group, every
+//! group can agree on a difference far too small to matter (a model's own µm-level
+//! departures from a paper's equation), and the test above would name it. A positive
+//! [`Settings::min_gain_pct`] `δ` makes each test a minimum-effect test (Murphy &
+//! Myors, 1999): H0 is "the candidate's held-out RMSE gain is at most δ", tested by the
+//! same sign flips on `d_g − 2·ln(1/(1 − δ))`, the evidence beyond a gain of exactly δ
+//! in group g. δ = 0 is the test above.
+//!
 //! **Extend**: the final model is fitted on all groups; each parameter's 95 % interval
 //! is the delete-one-group jackknife of its cross-validation fold fits (the same fits
 //! that scored it, so no extra fitting), with a t quantile on `G − 1` degrees of
@@ -50,12 +58,20 @@ pub struct Settings {
     pub level: f64,
     /// Seed of the bootstrap and of Monte Carlo sign flips.
     pub seed: u64,
+    /// Smallest held-out RMSE gain worth naming, % (module doc: 0 tests for any gain).
+    pub min_gain_pct: f64,
 }
 
 impl Settings {
-    /// α = 0.05, 3 rounds, 12 bins, 2000 bootstrap draws, 95 % intervals.
+    /// α = 0.05, 3 rounds, 12 bins, 2000 bootstrap draws, 95 % intervals, any gain.
     pub fn standard(seed: u64) -> Self {
-        Self { alpha: 0.05, max_rounds: 3, bins: 12, bootstrap_draws: 2000, level: 0.95, seed }
+        Self { alpha: 0.05, max_rounds: 3, bins: 12, bootstrap_draws: 2000, level: 0.95, seed, min_gain_pct: 0.0 }
+    }
+
+    /// The per-group evidence `d_g = ln(SSE_before / SSE_after)` of a gain of exactly
+    /// [`Self::min_gain_pct`] (module doc).
+    pub fn min_log_gain(&self) -> f64 {
+        -2.0 * (1.0 - self.min_gain_pct / 100.0).ln()
     }
 
     /// Checks the ranges.
@@ -69,6 +85,9 @@ impl Settings {
         }
         if self.bins == 0 {
             return bad("bins must be at least 1");
+        }
+        if !(0.0..100.0).contains(&self.min_gain_pct) {
+            return bad("min_gain_pct must be in [0, 100)");
         }
         Ok(())
     }
@@ -392,7 +411,7 @@ fn run_round<M: Model>(
     let best = candidates
         .iter()
         .enumerate()
-        .filter(|(_, c)| c.failure.is_none() && c.p_adjusted <= settings.alpha && c.gain_pct > 0.0)
+        .filter(|(_, c)| c.failure.is_none() && c.p_adjusted <= settings.alpha && c.gain_pct > settings.min_gain_pct)
         .max_by(|a, b| a.1.gain_pct.total_cmp(&b.1.gain_pct))
         .map(|(i, _)| i);
     let (verdict, accepted) = match (too_few, best) {
@@ -442,7 +461,7 @@ fn score(
         rmse_after,
         gain_pct: 100.0 * (1.0 - rmse_after / rmse_before),
         gain_ci_pct: (100.0 * lo, 100.0 * hi),
-        p_value: sign_flip_p_value(&log_gains, seed),
+        p_value: sign_flip_p_value(&beyond(&log_gains, settings.min_log_gain()), seed),
         log_gains,
         p_adjusted: 1.0,
         named: false,
@@ -478,6 +497,11 @@ fn restricted<G: Group, F>(
         samples.push(n);
     }
     (sse_before, sse_after, samples)
+}
+
+/// Each group's evidence beyond a gain of `min_log_gain` (module doc).
+fn beyond(log_gains: &[f64], min_log_gain: f64) -> Vec<f64> {
+    log_gains.iter().map(|d| d - min_log_gain).collect()
 }
 
 /// `ln(before/after)` per group, with a floor far below any real squared error so that
@@ -626,6 +650,27 @@ mod tests {
         assert_eq!(d.named, vec![RIPPLE], "{:?}", d.rounds);
         let amp = d.extension.iter().find(|e| e.mechanism == Some(RIPPLE)).unwrap();
         assert!((amp.estimate - 0.08).abs() < 0.02, "{amp:?}");
+    }
+
+    #[test]
+    fn a_gain_below_the_smallest_worth_naming_is_not_named() {
+        // 4000 samples per group: every group finds a trend that lowers the held-out
+        // RMSE by well under 1 %, so the test for any gain names it.
+        let groups = draw(9, 4000, 0.05, 0.0, Hidden { slope: 0.02, ..Hidden::default() }, 6);
+        let any = discover(&Toy, &groups, &[], &settings(6)).unwrap();
+        assert_eq!(any.named, vec![TREND], "{:?}", any.rounds);
+        let trend = |d: &Discovery<_>| d.rounds[0].candidates.iter().find(|c| c.mechanism == TREND).unwrap().clone();
+        let gain_pct = trend(&any).gain_pct;
+        assert!(gain_pct > 0.0 && gain_pct < 1.0, "{gain_pct}");
+        // Worth naming only above twice its gain: not named, and the evidence is against it.
+        let above = discover(&Toy, &groups, &[], &Settings { min_gain_pct: 2.0 * gain_pct, ..settings(6) }).unwrap();
+        assert!(above.named.is_empty() && trend(&above).p_value > 0.5, "{:?}", above.rounds);
+        // The scores do not change, only the test.
+        assert_eq!((trend(&above).gain_pct, &trend(&above).log_gains), (gain_pct, &trend(&any).log_gains));
+        let below = discover(&Toy, &groups, &[], &Settings { min_gain_pct: gain_pct / 4.0, ..settings(6) }).unwrap();
+        assert_eq!(below.named, vec![TREND], "{:?}", below.rounds);
+        assert!(Settings { min_gain_pct: 100.0, ..settings(6) }.check().is_err());
+        assert!(Settings { min_gain_pct: -1.0, ..settings(6) }.check().is_err());
     }
 
     #[test]

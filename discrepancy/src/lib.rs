@@ -14,9 +14,10 @@
 //! - [`engine`]: the rounds. Each candidate is fitted and scored by leave-one-group-out
 //!   cross-validation; per held-out group the log ratio of squared error before and
 //!   after is the unit of evidence. A one-sided sign-flip permutation test over groups
-//!   gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm
-//!   rate at α over the candidates of a round, and the cause named is the significant
-//!   candidate with the largest held-out gain. The extended model becomes the baseline
+//!   gives each candidate a p-value (of "no gain", or with `min_gain_pct` of "no gain
+//!   worth naming", a minimum-effect test), Holm's step-down holds the family-wise
+//!   false-alarm rate at α over the candidates of a round, and the cause named is the
+//!   significant candidate with the largest held-out gain. The extended model becomes the baseline
 //!   and the search repeats. Too few groups to reach α/m is a verdict of its own.
 //! - Extend and gain (also in [`engine`]): the extended model fitted on all groups with
 //!   delete-one-group jackknife intervals (the cross-validation's own fold fits), and

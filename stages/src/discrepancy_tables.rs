@@ -21,10 +21,27 @@ use tables::discrepancy::{power, Engine};
 use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 pipeline::params! {
-    /// The family-wise false-alarm rate, as every discrepancy stage and study declares it.
+    /// What the engine's test asks, as every discrepancy stage and study declares it.
     pub struct FalseAlarm {
         /// Family-wise false-alarm rate of each round, over its candidates (Holm).
         pub alpha: f64 [0.001, 0.5] = 0.05,
+        /// Smallest held-out RMSE gain worth naming (%): each candidate is tested against "its gain is at most this" (a minimum-effect test; 0 tests for any gain).
+        pub min_gain_pct: f64 [0.0, 50.0] = 0.0,
+    }
+}
+
+impl FalseAlarm {
+    /// The engine's settings of a study stage (a power or control study) with
+    /// `max_rounds` rounds, seed `seed`, `bootstrap_draws` draws of each gain interval
+    /// (the studies use the fits, not those intervals) and the default bins.
+    pub(crate) fn study_settings(&self, max_rounds: i64, seed: u64, bootstrap_draws: usize) -> Settings {
+        Settings {
+            alpha: self.alpha,
+            min_gain_pct: self.min_gain_pct,
+            max_rounds: max_rounds as usize,
+            bootstrap_draws,
+            ..Settings::standard(seed)
+        }
     }
 }
 
@@ -50,17 +67,11 @@ impl EngineParams {
             bootstrap_draws: self.bootstrap_draws as usize,
             level: 0.95,
             seed,
+            min_gain_pct: self.false_alarm.min_gain_pct,
         };
         settings.check().map_err(|e| ParamError::new("alpha", e.to_string()))?;
         Ok(settings)
     }
-}
-
-/// The engine's settings for a study stage (a power or control study) from its `alpha`
-/// and `max_rounds` and seed, with `bootstrap_draws` draws of each gain interval (the
-/// studies use the fits, not those intervals) and the default bins.
-pub(crate) fn study_settings(alpha: f64, max_rounds: i64, seed: u64, bootstrap_draws: usize) -> Settings {
-    Settings { alpha, max_rounds: max_rounds as usize, bootstrap_draws, ..Settings::standard(seed) }
 }
 
 /// The name of a mechanism of the model (`None`: the baseline).
@@ -139,7 +150,8 @@ fn to_column(declared: &Column, values: &[Value]) -> polars::prelude::Column {
 
 /// Rows of the four tables every domain's discrepancy stage writes.
 pub(crate) struct DiscrepancyTables {
-    alpha: f64,
+    /// The test's α and smallest gain worth naming, %.
+    test: (f64, f64),
     residuals: Table,
     causes: Table,
     extension: Table,
@@ -152,9 +164,9 @@ fn s(text: &str) -> Value {
 
 impl DiscrepancyTables {
     /// Empty tables of the domain's declarations.
-    pub(crate) fn new(engine: &Engine, alpha: f64) -> Self {
+    pub(crate) fn new(engine: &Engine, settings: &Settings) -> Self {
         Self {
-            alpha,
+            test: (settings.alpha, settings.min_gain_pct),
             residuals: Table::new(engine.residuals),
             causes: Table::new(engine.causes),
             extension: Table::new(engine.extension),
@@ -202,7 +214,7 @@ impl DiscrepancyTables {
     }
 
     fn add_causes<M: Model>(&mut self, label: &str, model: &M, groups: usize, found: &Discovery<M::Fit>) {
-        let alpha = self.alpha;
+        let (alpha, min_gain_pct) = self.test;
         for round in &found.rounds {
             let base: Vec<String> = round.base.iter().map(|&c| mechanism_name(model, Some(c))).collect();
             for c in &round.candidates {
@@ -221,6 +233,7 @@ impl DiscrepancyTables {
                     Value::F(c.p_value),
                     Value::F(c.p_adjusted),
                     Value::F(alpha),
+                    Value::F(min_gain_pct),
                     Value::B(c.named),
                     s(round.verdict.label()),
                     Value::S(c.failure.clone().unwrap_or_default()),

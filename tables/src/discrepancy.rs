@@ -143,6 +143,8 @@ macro_rules! engine_tables {
                 p_adjusted: Float64 "1",
                 /// The family-wise false-alarm rate a round is held at.
                 alpha: Float64 "1",
+                /// The smallest held-out gain worth naming: `p_value` tests "the gain is at most this" (0: any gain).
+                min_gain_pct: Float64 "%",
                 /// The cause named in this round (at most one per data set and round).
                 named: Bool "",
                 /// The round's verdict: `named`, `none` (no significant candidate) or `too_few_groups` (nothing can be named).

@@ -9,8 +9,10 @@
 //!   in the frame its width is read from (at the monitor's measuring age);
 //! - each straight-run sample's *bead width* `w_l + w_r` at the threshold contour: a
 //!   sample at the feed speed, at least a clearance (the stage's `width_clearance_mm`)
-//!   from every CAD vertex, read in a frame with a capture-time estimate (a frame placed
-//!   by dead reckoning has no sub-millimetre position).
+//!   from every CAD vertex and from the seam (the path's first and last points, where
+//!   each layer starts on the previous one's stop), read in a frame with a capture-time
+//!   estimate (a frame placed by dead reckoning has no sub-millimetre position), with
+//!   its *age*: that frame's estimated capture time minus the sample's time.
 //!
 //! **Baseline.** Paper 003 as the project uses it: eq. 28, `t_c = t_r + t_f` with small
 //! zero-mean fluctuations, so the expected offset is 0; and, as the paper prints and
@@ -22,11 +24,17 @@
 //! `trajectory.csv`; eqs 5-11 reduce to it where the path does not turn), so after
 //! every corner the bead is thin while the head accelerates and the flow still lags,
 //! and recovers over a few τ. The monitor's threshold contour is not the deposit: a
-//! thinner bead holds less heat and its contour shrinks more than its deposit, so the
-//! baseline reads the contour as `a + b·(w − w0)`, its intercept `a` and *contour gain*
-//! `b` fitted to the training layers in every fit (nuisances of the baseline, like the
-//! temperature profile); without them the τ candidate would take the contour's own
-//! amplification of the thin stretch for a longer τ.
+//! thinner bead holds less heat and its contour shrinks more than its deposit, and a
+//! cooling bead's contour contracts with its age. The camera trails the nozzle, so each
+//! width is read shortly after the bead was laid, at an age that varies along every
+//! straight run with where the frames fall. The baseline reads the contour as
+//! `a + b·(w − w0) + c·age` ([`ContourMap`]), its intercept `a`, *contour gain* `b` and
+//! contraction rate `c` fitted in closed form to the training layers in every fit
+//! (nuisances of the baseline, like the temperature profile). Without the gain the τ
+//! candidate would take the contour's own amplification of the thin stretch for a
+//! longer τ; without the age, the run's pattern of ages passes for a longer lag (the τ
+//! excess fitted through a map without it ran above the printer's, and its intervals
+//! missed the truth).
 //!
 //! **Candidates** (each a small parametric extension with its physics):
 //! - `camera_latency`: a constant delay between the recorded and the true capture time,
@@ -69,29 +77,16 @@
 //!
 //! - `tau_mismatch`: the flow reaches the nozzle with a time constant `τ0·(1 + m)`
 //!   instead of eq. 34's nominal τ0, so the thin stretch after every corner is longer or
-//!   shorter (the printer's effect); fitted with the contour line re-fitted at each `m`.
-//!   Known limitation: the monitor reads each width at an age (its frame's estimated
-//!   capture time minus the sample's time) that varies along every straight run with
-//!   where the frames fall, and a cooling bead's contour contracts with age; the
-//!   contour line does not know the age, so the run's pattern of ages passes for a
-//!   longer lag, `m` fitted to contour widths runs above the printer's (fitted to the
-//!   deposit's true widths it does not) and its jackknife interval misses the truth;
-//!   the power study's coverage column measures it. The residuals against
-//!   `bead_width.age_s` (see [`VARIABLES`]) show that contraction on every print.
-//!   Tried and not kept: a contour map
-//!   `a + b·(w − w0) + c·age` removes most of that bias, but the layers then agree so
-//!   closely that a small τ-like difference between the printer's straight-run
-//!   deposit and eq. 34's lag, present without any effect (the true widths show it
-//!   too), is named as a τ mismatch on many null prints, and the τ at the study's
-//!   moderate strength is then named less often, its layers' gains no longer all
-//!   positive. The difference is not the stacking of layers: leaving out layer 0's
-//!   widths (the only layer on the bed) keeps it; the true widths of every layer, read
-//!   against eq. 34, recover from a corner a little faster than its lag. With the seam
-//!   also left out of the straight runs (each layer starts on the previous one's
-//!   stop), the age brings the τ interval's coverage to its level, and a map quadratic
-//!   in the age changes nothing more: the null alarms stay. Keeping the
-//!   age needs that difference modelled, or a test of a relevant size of effect rather
-//!   than of none. A quadratic or cubic map in `w − w0` alone leaves the bias as it is.
+//!   shorter (the printer's effect); fitted with the contour map re-fitted at each `m`.
+//!   The printer's own straight-run deposit differs from eq. 34's lag without any
+//!   effect: its true widths recover from a corner a little faster than the lag, by far
+//!   less than a pixel (the squeeze under the nozzle face at the corners, not the
+//!   stacking of layers: leaving out layer 0, the only layer on the bed, keeps it).
+//!   Every layer shares that difference and `m` matches part of it, so a test for any
+//!   gain names a τ mismatch on many prints without one; the thermal
+//!   specs therefore ask for a gain worth naming (the engine's `min_gain_pct`, a
+//!   minimum-effect test), which that difference does not reach. A map quadratic in the
+//!   age, or quadratic or cubic in `w − w0`, changes nothing of this.
 //!
 //! The other thermal effects that change the deposit (`heat_diffusion_widening`,
 //! `melt_squeeze_out`) have no candidate: they act at the corners, where the threshold
@@ -208,8 +203,10 @@ impl FlowModel {
     }
 }
 
-/// The samples whose bead width the model describes: at least `fraction_of_feed` of
-/// the feed speed and `clearance_mm` from every vertex of `path_mm`.
+/// The samples whose bead width the model describes: at least
+/// [`STRAIGHT_RUN_SPEED_FRACTION`] of the feed speed and `clearance_mm` from every vertex
+/// of `path_mm` and from the seam (the trajectory's first and last points, where each
+/// layer starts on the previous one's stop).
 pub fn straight_run_samples(
     trajectory: &Trajectory,
     path_mm: &[[f64; 2]],
@@ -217,11 +214,14 @@ pub fn straight_run_samples(
     clearance_mm: f64,
 ) -> Vec<bool> {
     let speed = trajectory.speed_mm_s();
+    let point = |k: usize| [trajectory.x_mm[k], trajectory.y_mm[k]];
+    let Some(last) = trajectory.len().checked_sub(1) else { return Vec::new() };
+    let seam = [point(0), point(last)];
     (0..trajectory.len())
         .map(|k| {
-            let p = [trajectory.x_mm[k], trajectory.y_mm[k]];
+            let p = point(k);
             speed[k] >= STRAIGHT_RUN_SPEED_FRACTION * feed_mm_s
-                && path_mm.iter().all(|v| (v[0] - p[0]).hypot(v[1] - p[1]) >= clearance_mm)
+                && path_mm.iter().chain(&seam).all(|v| (v[0] - p[0]).hypot(v[1] - p[1]) >= clearance_mm)
         })
         .collect()
 }
@@ -323,6 +323,13 @@ impl ThermalRecord {
             .find(|w| !w.width_mm.is_finite() || w.sample >= parts.samples || flow.speed_mm_s[w.sample] <= 0.0)
         {
             return Err(invalid("width_mm", w.width_mm, "widths must be finite, at samples where the head moves"));
+        }
+        if let Some(w) = parts.widths.iter().find(|w| !w.age_s.is_finite()) {
+            return Err(invalid(
+                "age_s",
+                w.age_s,
+                "every width's age (capture time minus deposition time) must be finite",
+            ));
         }
         let layers = (frames.iter().map(|f| f.layer))
             .chain(parts.temps.iter().map(|t| t.layer))
@@ -551,6 +558,26 @@ static TAU: [Parameter; 1] = [linear(
     "relative excess of the flow's time constant over eq. 34's nominal: τ = τ0·(1 + m)",
 )];
 
+/// The baseline's own parameters: how the threshold contour reads a straight bead
+/// ([`ContourMap`]; its intercept is a level, not a property of the monitor, and is
+/// not listed).
+static CONTOUR: [Parameter; 2] = [
+    linear(
+        "contour_gain",
+        "1",
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        "contour millimetres per millimetre of deposit: above 1, a thinner bead's contour shrinks more than its deposit",
+    ),
+    linear(
+        "contour_age_mm_per_s",
+        "mm/s",
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        "how fast the contour width changes with the bead's age when its frame is taken: negative, it contracts as the bead cools",
+    ),
+];
+
 /// Every candidate, in index order.
 pub static CANDIDATES: [Candidate; 5] = [
     Candidate::new(
@@ -645,8 +672,8 @@ pub struct ThermalFit {
     pub profile_c: Vec<f64>,
     /// Relative excess of the flow's τ over the nominal (0 unless `tau_mismatch` is active).
     pub tau_excess: f64,
-    /// The contour line `(a, b)`: a width reads `a + b·(w − w0)` (NaN: no widths).
-    pub contour_line: (f64, f64),
+    /// How the contour reads the bead (`None`: no widths).
+    pub contour: Option<ContourMap>,
     /// Each sample's straight-run width minus w0 under the fitted τ, mm.
     pub width_excess_mm: Vec<f64>,
 }
@@ -754,25 +781,59 @@ impl ThermalModel {
 /// The widths' part of a fit.
 struct WidthFit {
     tau_excess: f64,
-    contour_line: (f64, f64),
+    contour: Option<ContourMap>,
     width_excess_mm: Vec<f64>,
 }
 
-/// Least-squares line `y = a + b·x` through `(x, y)`; `None` when x does not vary.
-fn line_fit(points: impl Iterator<Item = (f64, f64)>) -> Option<(f64, f64)> {
-    let (mut n, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (x, y) in points {
-        n += 1.0;
-        sx += x;
-        sy += y;
-        sxx += x * x;
-        sxy += x * y;
+/// How the monitor's threshold contour reads a straight bead: `a + b·(w − w0) + c·age`
+/// (module doc).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContourMap {
+    /// Contour width of a bead of the nominal width read at age 0, mm.
+    pub intercept_mm: f64,
+    /// Contour millimetres per millimetre of deposit (the contour gain).
+    pub gain: f64,
+    /// Contour millimetres per second of the bead's age (negative: it contracts as it cools).
+    pub age_mm_per_s: f64,
+}
+
+impl ContourMap {
+    /// The contour width of a bead `excess_mm` wider than w0 read at `age_s`, mm.
+    pub fn width_mm(&self, excess_mm: f64, age_s: f64) -> f64 {
+        self.intercept_mm + self.gain * excess_mm + self.age_mm_per_s * age_s
     }
-    let det = n * sxx - sx * sx;
-    (det > 1e-12 * n * n.max(1.0)).then(|| {
-        let b = (n * sxy - sx * sy) / det;
-        ((sy - b * sx) / n, b)
-    })
+
+    /// The least-squares map through `(excess_mm, age_s, width_mm)`, solved on centred
+    /// sums. Where the ages do not vary independently of the excess (a monitor that
+    /// reads every width at one age) the map is the line `a + b·(w − w0)`; `None` when
+    /// the excess does not vary either.
+    fn fit(points: impl Iterator<Item = (f64, f64, f64)> + Clone) -> Option<Self> {
+        let (mut n, mut mean) = (0.0, [0.0; 3]);
+        for (x, age, y) in points.clone() {
+            n += 1.0;
+            mean = [mean[0] + x, mean[1] + age, mean[2] + y];
+        }
+        let mean = mean.map(|m| m / n);
+        let (mut sxx, mut sxa, mut saa, mut sxy, mut say) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (x, age, y) in points {
+            let (x, age, y) = (x - mean[0], age - mean[1], y - mean[2]);
+            sxx += x * x;
+            sxa += x * age;
+            saa += age * age;
+            sxy += x * y;
+            say += age * y;
+        }
+        let det = sxx * saa - sxa * sxa;
+        let (gain, age_mm_per_s) = if det > 1e-9 * sxx * saa && det > 0.0 {
+            ((saa * sxy - sxa * say) / det, (sxx * say - sxa * sxy) / det)
+        } else if sxx > 0.0 {
+            (sxy / sxx, 0.0)
+        } else {
+            return None;
+        };
+        let map = Self { intercept_mm: mean[2] - gain * mean[0] - age_mm_per_s * mean[1], gain, age_mm_per_s };
+        [map.intercept_mm, gain, age_mm_per_s].iter().all(|v| v.is_finite()).then_some(map)
+    }
 }
 
 impl ThermalModel {
@@ -781,9 +842,9 @@ impl ThermalModel {
         train.iter().flat_map(|b| b.widths.iter().map(|&i| &self.record.widths[i]))
     }
 
-    /// The contour line through `train`'s widths against the model's `excess`.
-    fn contour_line(&self, train: &[&ThermalBlock], excess: &[f64]) -> Option<(f64, f64)> {
-        line_fit(self.train_widths(train).map(|w| (excess[w.sample], w.width_mm)))
+    /// The contour map through `train`'s widths against the model's `excess` and their ages.
+    fn contour_map(&self, train: &[&ThermalBlock], excess: &[f64]) -> Option<ContourMap> {
+        ContourMap::fit(self.train_widths(train).map(|w| (excess[w.sample], w.age_s, w.width_mm)))
     }
 
     fn width_fit(
@@ -792,7 +853,7 @@ impl ThermalModel {
         train: &[&ThermalBlock],
         warm: Option<&ThermalFit>,
     ) -> Result<WidthFit, ModelError> {
-        let none = || WidthFit { tau_excess: 0.0, contour_line: (f64::NAN, f64::NAN), width_excess_mm: vec![] };
+        let none = || WidthFit { tau_excess: 0.0, contour: None, width_excess_mm: vec![] };
         let tau_active = active.contains(&TAU_MISMATCH);
         if self.train_widths(train).next().is_none() {
             return if tau_active {
@@ -803,21 +864,21 @@ impl ThermalModel {
         }
         let tau_excess = if tau_active { self.fit_tau_excess(train, warm)? } else { 0.0 };
         let width_excess_mm = self.record.flow.width_excess_mm(tau_excess);
-        let contour_line = self
-            .contour_line(train, &width_excess_mm)
-            .ok_or_else(|| ModelError::Fit("the training widths do not vary with the flow: no contour line".into()))?;
-        Ok(WidthFit { tau_excess, contour_line, width_excess_mm })
+        let contour = self
+            .contour_map(train, &width_excess_mm)
+            .ok_or_else(|| ModelError::Fit("the training widths do not vary with the flow: no contour map".into()))?;
+        Ok(WidthFit { tau_excess, contour: Some(contour), width_excess_mm })
     }
 
-    /// `m` by Levenberg-Marquardt, the contour line solved in closed form at every `m`.
+    /// `m` by Levenberg-Marquardt, the contour map solved in closed form at every `m`.
     fn fit_tau_excess(&self, train: &[&ThermalBlock], warm: Option<&ThermalFit>) -> Result<f64, ModelError> {
         let widths: Vec<&WidthObservation> = self.train_widths(train).collect();
         let scale = self.record.scales.width_mm;
         let residuals = |x: &[f64], r: &mut [f64]| -> bool {
             let excess = self.record.flow.width_excess_mm(x[0]);
-            let Some((a, b)) = self.contour_line(train, &excess) else { return false };
+            let Some(contour) = self.contour_map(train, &excess) else { return false };
             for (ri, w) in r.iter_mut().zip(&widths) {
-                *ri = (w.width_mm - a - b * excess[w.sample]) / scale;
+                *ri = (w.width_mm - contour.width_mm(excess[w.sample], w.age_s)) / scale;
             }
             true
         };
@@ -836,7 +897,7 @@ impl Model for ThermalModel {
         "capture_and_layer_model"
     }
     fn params(&self) -> &'static [Parameter] {
-        &[]
+        &CONTOUR
     }
     fn candidates(&self) -> &[&'static dyn Mechanism] {
         &MECHANISMS
@@ -876,7 +937,7 @@ impl Model for ThermalModel {
     ) -> Result<ThermalFit, ModelError> {
         let (latency_s, clock_rate) = self.frame_fit(active, train)?;
         let SubstrateFit { heat, warming_c_per_layer, profile_c } = self.temperature_fit(active, train, warm)?;
-        let WidthFit { tau_excess, contour_line, width_excess_mm } = self.width_fit(active, train, warm)?;
+        let WidthFit { tau_excess, contour, width_excess_mm } = self.width_fit(active, train, warm)?;
         Ok(ThermalFit {
             active: active.to_vec(),
             latency_s,
@@ -885,7 +946,7 @@ impl Model for ThermalModel {
             warming_c_per_layer,
             profile_c,
             tau_excess,
-            contour_line,
+            contour,
             width_excess_mm,
         })
     }
@@ -913,11 +974,14 @@ impl Model for ThermalModel {
             }
             out.push(r.reading(c, s[t.layer]) / r.scales.temp_c);
         }
-        if !group.widths.is_empty() && fit.width_excess_mm.is_empty() {
+        if let Some(contour) = fit.contour {
+            out.extend(group.widths.iter().map(|&i| {
+                let w = &r.widths[i];
+                contour.width_mm(fit.width_excess_mm[w.sample], w.age_s) / r.scales.width_mm
+            }));
+        } else if !group.widths.is_empty() {
             return Err(ModelError::Predict("the training layers have no bead widths".into()));
         }
-        let (a, b) = fit.contour_line;
-        out.extend(group.widths.iter().map(|&i| (a + b * fit.width_excess_mm[r.widths[i].sample]) / r.scales.width_mm));
         Ok(out)
     }
 
@@ -932,7 +996,10 @@ impl Model for ThermalModel {
     }
 
     fn estimates(&self, fit: &ThermalFit) -> Vec<f64> {
-        let mut out = Vec::new();
+        let mut out = match fit.contour {
+            Some(c) => vec![c.gain, c.age_mm_per_s],
+            None => vec![f64::NAN; CONTOUR.len()],
+        };
         for &m in &fit.active {
             match m {
                 CAMERA_LATENCY => out.push(fit.latency_s),
@@ -1027,8 +1094,10 @@ mod tests {
                 temps.push(TemperatureObservation { layer: n, sample: k, t_s, temp_c: probe.reading(c, s_n) });
                 if speed[k] >= 19.0 {
                     let wobble = 1e-4 * (((k * 11 + n * 7) % 5) as f64 - 2.0);
-                    let width_mm = W0_MM + 0.002 + 1.1 * excess[k] + wobble;
-                    widths.push(WidthObservation { layer: n, sample: k, width_mm, age_s: 0.1 });
+                    // Frames of every age: the contour contracts by 0.18 mm/s as the bead cools.
+                    let age_s = 0.04 + 0.02 * ((k / 25 + n * 3) % 7) as f64;
+                    let width_mm = W0_MM + 0.002 + 1.1 * excess[k] - 0.18 * age_s + wobble;
+                    widths.push(WidthObservation { layer: n, sample: k, width_mm, age_s });
                 }
             }
         }
@@ -1056,6 +1125,26 @@ mod tests {
         .unwrap()
     }
 
+    #[test]
+    fn a_width_without_a_finite_age_is_refused_by_name() {
+        let shape = synthetic(2, 0.0, 0.0, None, 0.0);
+        let mut widths = shape.widths.clone();
+        widths[3].age_s = f64::NAN;
+        let (flow, speed) = flow_and_speed(shape.samples);
+        let parts = RecordParts {
+            frames: &shape.frames,
+            temps: &shape.temps,
+            widths: &widths,
+            deposition: deposition(&flow, &speed),
+            samples: shape.samples,
+            layer_duration_s: shape.layer_duration_s,
+            nozzle_temp_c: shape.nozzle_temp_c,
+            bed_temp_c: shape.bed_temp_c,
+        };
+        let err = ThermalRecord::new(parts).unwrap_err();
+        assert!(matches!(err, ThermalError::InvalidParameter { name: "age_s", .. }), "{err}");
+    }
+
     fn fit_all(record: ThermalRecord, active: &[usize]) -> ThermalFit {
         let model = ThermalModel::new(record);
         let blocks = model.record().layer_groups();
@@ -1076,8 +1165,13 @@ mod tests {
         assert!((fit.warming_c_per_layer - 1.5).abs() < 0.01, "{}", fit.warming_c_per_layer);
         let fit = fit_all(synthetic_with_tau(8, 0.0, 0.0, None, 0.0, 0.3), &[TAU_MISMATCH]);
         assert!((fit.tau_excess - 0.3).abs() < 0.01, "{}", fit.tau_excess);
-        let (a, b) = fit.contour_line;
-        assert!((a - W0_MM - 0.002).abs() < 1e-3 && (b - 1.1).abs() < 0.01, "{a} {b}");
+        let contour = fit.contour.unwrap();
+        assert!((contour.intercept_mm - W0_MM - 0.002).abs() < 1e-3, "{contour:?}");
+        assert!((contour.gain - 1.1).abs() < 0.01 && (contour.age_mm_per_s + 0.18).abs() < 0.002, "{contour:?}");
+        // The extension lists the baseline's contour parameters first, then the mechanism's.
+        let model = ThermalModel::new(synthetic(2, 0.0, 0.0, None, 0.0));
+        assert_eq!(model.estimates(&fit), vec![contour.gain, contour.age_mm_per_s, fit.tau_excess]);
+        assert_eq!(model.params().len() + TAU.len(), 3);
     }
 
     /// Held-out squared error of `group` under `fit`, over all its observations (fits
@@ -1215,6 +1309,33 @@ mod tests {
     }
 
     #[test]
+    fn a_straight_run_keeps_its_clearance_from_the_vertices_and_the_seam() {
+        // 0.1 mm samples at 20 mm/s along y = 0 from x = 0 to 100 mm; one vertex at 50 mm.
+        let x_mm: Vec<f64> = (0..=1000).map(|k| k as f64 * 0.1).collect();
+        let n = x_mm.len();
+        let trajectory = Trajectory {
+            dt_s: 0.005,
+            t_s: (0..n).map(|k| k as f64 * 0.005).collect(),
+            y_mm: vec![0.0; n],
+            vx_mm_s: vec![20.0; n],
+            vy_mm_s: vec![0.0; n],
+            s_mm: x_mm.clone(),
+            path_curvature_per_mm: vec![0.0; n],
+            corners: vec![],
+            x_mm,
+        };
+        let straight = straight_run_samples(&trajectory, &[[50.0, 0.0]], 20.0, 2.0);
+        let kept = |x: f64| straight[(x * 10.0).round() as usize];
+        assert!(!kept(0.0) && !kept(1.9) && kept(2.1) && kept(47.9) && !kept(48.1));
+        assert!(!kept(51.9) && kept(52.1) && kept(97.9) && !kept(98.1) && !kept(100.0));
+        let slow = straight_run_samples(&trajectory, &[[50.0, 0.0]], 25.0, 2.0);
+        assert!(slow.iter().all(|k| !k), "below the feed's fraction, nothing is a straight run");
+        let empty =
+            Trajectory { t_s: vec![], x_mm: vec![], y_mm: vec![], vx_mm_s: vec![], vy_mm_s: vec![], ..trajectory };
+        assert!(straight_run_samples(&empty, &[], 20.0, 2.0).is_empty());
+    }
+
+    #[test]
     fn the_straight_run_width_is_the_lagged_flow_over_the_path() {
         let (flow, speed) = flow_and_speed(400);
         let model = check_deposition(&deposition(&flow, &speed), 400).unwrap();
@@ -1226,7 +1347,19 @@ mod tests {
         assert!(excess[10] < -0.01, "{}", excess[10]);
         // A longer τ lags more.
         assert!(model.width_excess_mm(0.5)[10] < excess[10]);
-        assert!(line_fit([(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)].into_iter()) == Some((1.0, 2.0)));
-        assert!(line_fit([(1.0, 1.0), (1.0, 3.0)].into_iter()).is_none());
+    }
+
+    #[test]
+    fn the_contour_map_is_exact_on_a_plane_and_a_line_when_the_ages_do_not_vary() {
+        let plane = |x: f64, age: f64| 0.44 + 1.2 * x - 0.2 * age;
+        let points: Vec<(f64, f64, f64)> =
+            [(0.0, 0.05), (-0.1, 0.1), (0.05, 0.15), (-0.02, 0.07)].iter().map(|&(x, a)| (x, a, plane(x, a))).collect();
+        let map = ContourMap::fit(points.iter().copied()).unwrap();
+        assert!((map.intercept_mm - 0.44).abs() < 1e-12 && (map.gain - 1.2).abs() < 1e-12, "{map:?}");
+        assert!((map.age_mm_per_s + 0.2).abs() < 1e-12 && (map.width_mm(0.01, 0.1) - plane(0.01, 0.1)).abs() < 1e-12);
+        // One age: the line, the age's part in its intercept.
+        let line = ContourMap::fit([(0.0, 0.1, 1.0), (1.0, 0.1, 3.0), (2.0, 0.1, 5.0)].into_iter()).unwrap();
+        assert_eq!((line.intercept_mm, line.gain, line.age_mm_per_s), (1.0, 2.0, 0.0));
+        assert!(ContourMap::fit([(1.0, 0.1, 1.0), (1.0, 0.2, 3.0)].into_iter()).is_none());
     }
 }

@@ -218,6 +218,8 @@ pub(super) struct Cause {
     pub(super) p: f64,
     pub(super) p_adjusted: f64,
     pub(super) alpha: f64,
+    /// The smallest held-out gain worth naming the test asked for, %.
+    pub(super) min_gain_pct: f64,
     pub(super) named: bool,
     pub(super) verdict: String,
 }
@@ -242,7 +244,7 @@ impl Cause {
             (f64s(&df, c::gain_pct, path)?, f64s(&df, c::gain_ci_lo_pct, path)?, f64s(&df, c::gain_ci_hi_pct, path)?);
         let (p, padj, alpha) =
             (f64s(&df, c::p_value, path)?, f64s(&df, c::p_adjusted, path)?, f64s(&df, c::alpha, path)?);
-        let named = bools(&df, c::named, path)?;
+        let (min_gain_pct, named) = (f64s(&df, c::min_gain_pct, path)?, bools(&df, c::named, path)?);
         Ok((0..df.height())
             .map(|i| Self {
                 printer: printer[i].clone(),
@@ -257,6 +259,7 @@ impl Cause {
                 p: p[i],
                 p_adjusted: padj[i],
                 alpha: alpha[i],
+                min_gain_pct: min_gain_pct[i],
                 named: named[i],
                 verdict: verdict[i].clone(),
             })
@@ -812,6 +815,7 @@ mod tests {
             p: p_adjusted / 6.0,
             p_adjusted,
             alpha: 0.05,
+            min_gain_pct: 0.0,
             named,
             verdict: verdict.into(),
         }

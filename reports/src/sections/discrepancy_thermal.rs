@@ -95,7 +95,7 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 9,
+        version: 10,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -138,16 +138,27 @@ the printed effect and nothing else, wrong when it names anything else. The two 
 stays silent when its model has nothing to learn.</p>\n";
 
 fn method(causes: &[Cause]) -> String {
-    let alpha = causes.first().map_or(f64::NAN, |c| c.alpha);
+    let (alpha, min_gain_pct) = causes.first().map_or((f64::NAN, f64::NAN), |c| (c.alpha, c.min_gain_pct));
+    let worth_naming = if min_gain_pct > 0.0 {
+        format!(
+            " Each test asks for a gain worth naming: its null hypothesis is that the candidate lowers the held-out RMSE of what it moves by at most \
+{min_gain_pct} % (a minimum-effect test), because with thousands of widths in every layer all layers agree on differences far too small to matter: the \
+printer's own bead recovers from a corner slightly faster than eq. 34's lag, by far less than a pixel, and a flow τ a few per cent off matches part of that."
+        )
+    } else {
+        String::new()
+    };
     format!(
         "<p>Paper 003 localises every frame by the time it was recorded (eq. 28: the true capture time is the recorded one plus a small, zero-mean \
 fluctuation), prints and measures every layer the same way, on a substrate at the bed temperature, and models the flow that reaches the nozzle as the command \
 through a first-order lag with its identified τ (eq. 34). Three of the monitor's measurements test that: each localised frame's capture offset, its capture \
 time estimated by eq. 30 minus its recorded time (eq. 30's search window widened so that a delay is not cut off; frames at its edge and repeated images are \
 left out); each trajectory sample's centre temperature, the bead's temperature on the path at the measuring age; and the bead width on the straight runs, read \
-at the feed speed, away from every corner, in frames with a capture-time estimate. The baseline predicts a zero offset; for every layer, the centre temperatures \
-the other layers read at the same sample; and on a straight run the width of the lagged flow spread over the path, read through a contour line fitted to the \
-training layers (a thinner bead holds less heat, so its threshold contour shrinks more than its deposit). Five named mechanisms extend it — a constant camera \
+at the feed speed, away from every corner and from the seam where each layer starts on the previous one's stop, in frames with a capture-time estimate. The \
+baseline predicts a zero offset; for every layer, the centre temperatures the other layers read at the same sample; and on a straight run the width of the \
+lagged flow spread over the path, read through a contour map fitted to the training layers: a thinner bead holds less heat, so its threshold contour shrinks \
+more than its deposit, and a cooling bead's contour contracts with its age when its frame is taken, which varies along every straight run with where the \
+frames fall (the camera trails the nozzle); the map is linear in the bead's width and in that age. Five named mechanisms extend it — a constant camera \
 latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
 excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
 layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \
@@ -157,16 +168,13 @@ the capture offsets against the layer and the recorded time, the centre temperat
 the head last left a corner's slow-down and the bead's age when its frame was taken. A group is a whole \
 filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \
 squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate \
-of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named. The printer's effects at the corners (wider heat diffusion, \
+of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named.{} The printer's effects at the corners (wider heat diffusion, \
 melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge differs from the widths of eqs 5-11 by far more than they change \
-it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals; they measure how \
-the layers disagree, not how far the contour line is from the truth. For the flow's τ that difference shows: the camera trails the nozzle, so the monitor \
-reads each width shortly after the bead was laid, at an age that varies along every straight run with where the frames fall, and a cooling \
-bead's contour contracts with age; the contour line does not know the age, the run's pattern of ages passes for a longer lag, and the τ fitted to contour \
-widths runs above the printer's, its interval missing it (the power study's coverage column says how often); no candidate models the age, and the \
-residuals against it show how much of the widths' misfit it holds. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
+it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals: they measure how \
+the layers disagree, and the power study's coverage column checks them against what the printer did. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
 share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
-prints. A print's gain is over the kinds of observation its named causes move, its interval a bootstrap over layers.</p>\n"
+prints. A print's gain is over the kinds of observation its named causes move, its interval a bootstrap over layers.</p>\n",
+        worth_naming
     )
 }
 

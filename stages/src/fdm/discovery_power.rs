@@ -31,7 +31,7 @@ use polars::prelude::{IntoColumn, NamedFrom, Series};
 use tables::discrepancy::fdm::{power_draws, power_part};
 use tables::discrepancy::power;
 
-use crate::discrepancy_tables::{power_frame, study_settings, PowerOf};
+use crate::discrepancy_tables::{power_frame, FalseAlarm, PowerOf};
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, LagBaseline, StartBlob};
 use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize};
@@ -66,14 +66,12 @@ pipeline::params! {
         pub draws: i64 [1, 100_000] = 20,
         /// Draws per base with nothing injected.
         pub null_draws: i64 [0, 100_000] = 100,
-        /// The engine's family-wise false-alarm rate per round.
-        pub alpha: f64 [0.001, 0.5] = 0.05,
         /// The engine's most rounds per draw (beyond the data's own causes).
         pub max_rounds: i64 [1, 7] = 3,
         /// Bootstrap draws of each gain interval inside a draw (the power table uses none of them).
         pub bootstrap_draws: i64 [100, 100_000] = 500,
     }
-    groups { pub lag: LagBaseline, pub unit_size: UnitSize }
+    groups { pub lag: LagBaseline, pub unit_size: UnitSize, pub false_alarm: FalseAlarm }
 }
 
 impl DiscoveryPowerParams {
@@ -222,7 +220,7 @@ fn design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError
             cells.push((effect, strength));
         }
     }
-    let engine = study_settings(p.alpha, p.max_rounds, seed, p.bootstrap_draws as usize);
+    let engine = p.false_alarm.study_settings(p.max_rounds, seed, p.bootstrap_draws as usize);
     Ok(PowerDesign {
         cells,
         draws_per_cell: p.draws as usize,

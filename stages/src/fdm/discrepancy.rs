@@ -12,7 +12,7 @@
 //! `gain.parquet` (held-out RMSE before and after) and `predictions.parquet` (each
 //! line's held-out predictions before and after, for the figures).
 
-use discrepancy::{discover, Discovery};
+use discrepancy::{discover, Discovery, Settings};
 use models::fdm::discrepancy::piecewise_baseline::PiecewiseModel;
 use models::fdm::discrepancy::{FdmLine, FdmModel};
 use models::fdm::PiecewiseParams;
@@ -69,7 +69,8 @@ impl Stage for DiscrepancyStage {
     type Params = DiscrepancyParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.discrepancy",
-        version: 2,
+        // 3: causes.parquet has the test's min_gain_pct.
+        version: 3,
         summary: "What the lag model gets wrong, the cause named by grouped cross-validation among 7 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain, predictions (.parquet)",
         implements: "DESIGN §7 on paper 000's lines (the lag model of DESIGN §5.1, or paper 000's piecewise model eqs 1-3, as the baseline)",
         inputs: &[roles::FDM_WIDTHS_MANY],
@@ -87,7 +88,7 @@ impl Stage for DiscrepancyStage {
         let printers = read_printers(ctx.inputs_of(&roles::FDM_WIDTHS_MANY))?;
         let blob = StartBlob::parse(&p.lag.start_blob, &printers).map_err(|e| StageError::params(ctx, e))?;
         let settings = p.engine.settings(p.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
-        let mut tables = Tables::new(settings.alpha);
+        let mut tables = Tables::new(&settings);
         let progress = StageProgress::with_steps(ctx, printers.len() as u64);
         for (printer, lines) in &printers {
             let lag = FdmModel::new(lines, blob.has(printer), p.lag.smoothing_mm);
@@ -182,8 +183,8 @@ struct Tables {
 }
 
 impl Tables {
-    fn new(alpha: f64) -> Self {
-        Self { tables: DiscrepancyTables::new(&ENGINE, alpha), predictions: Table::new(&predictions::TABLE) }
+    fn new(settings: &Settings) -> Self {
+        Self { tables: DiscrepancyTables::new(&ENGINE, settings), predictions: Table::new(&predictions::TABLE) }
     }
 
     fn add<M: discrepancy::Model<Group = FdmLine>>(

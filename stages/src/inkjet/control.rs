@@ -23,7 +23,7 @@ use pipeline::{StageContext, StageError};
 use tables::inkjet::{control_gain, control_trials};
 
 use super::discrepancy::{LayerSearch, StrengthLists};
-use crate::discrepancy_tables::{study_settings, FalseAlarm};
+use crate::discrepancy_tables::FalseAlarm;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.control_gain` stage kind.
@@ -102,7 +102,7 @@ fn design(p: &ControlGainParams, seed: u64) -> Result<ControlDesign, ParamError>
         cells: p.cells(&STUDIED)?,
         seeds: p.printers as usize,
         seed,
-        engine: study_settings(p.false_alarm.alpha, p.search.max_rounds, seed, 100),
+        engine: p.false_alarm.study_settings(p.search.max_rounds, seed, 100),
     })
 }
 

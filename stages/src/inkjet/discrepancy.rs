@@ -33,7 +33,7 @@ use tables::discrepancy::inkjet::{causes, extension, gain, power_draws, power_pa
 use tables::discrepancy::power;
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, study_settings, DiscrepancyTables, DrawRow, EngineParams, FalseAlarm,
+    draws_frame as shared_draws_frame, DiscrepancyTables, DrawRow, EngineParams, FalseAlarm,
 };
 use crate::effects::strength_list;
 use crate::parts::{
@@ -72,7 +72,8 @@ impl Stage for DiscrepancyStage {
     type Params = DiscrepancyParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "inkjet.discrepancy",
-        version: 1,
+        // 2: causes.parquet has the test's min_gain_pct.
+        version: 2,
         summary: "What the layer-to-layer model gets wrong on a print's scans, the cause named by grouped cross-validation among 6 physical mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 002's layer-to-layer model (eqs 2-7) and the inkjet-scans format",
         inputs: &[SCANS],
@@ -103,7 +104,7 @@ impl Split for DiscrepancyStage {
         let p = DiscrepancyParams::from_params(&ctx.params);
         let settings = p.engine.settings(p.search.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
         let per_group = p.search.layers_per_group as usize;
-        let mut tables = DiscrepancyTables::new(&ENGINE, settings.alpha);
+        let mut tables = DiscrepancyTables::new(&ENGINE, &settings);
         let input = ctx.inputs_of(&SCANS)[index].clone();
         let dataset = InkjetScans::read(&input.dir).map_err(StageError::domain)?;
         let model = InkjetModel::new(print_of(&dataset).map_err(StageError::domain)?);
@@ -254,7 +255,7 @@ fn power_design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, Para
         draws_per_cell: p.draws as usize,
         null_draws: p.null_draws as usize,
         seed,
-        engine: study_settings(p.false_alarm.alpha, p.search.max_rounds, seed, p.bootstrap_draws as usize),
+        engine: p.false_alarm.study_settings(p.search.max_rounds, seed, p.bootstrap_draws as usize),
     })
 }
 

@@ -104,7 +104,9 @@ impl Stage for DiscrepancyStage {
         // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
         // 5: residuals against seven variables of one observation kind each (was three mixing them).
         // 6: gain.parquet's RMSEs are over the observations the named causes move (was all kinds).
-        version: 6,
+        // 7: the contour map knows the bead's age, the seam is no straight run, and
+        //    causes.parquet has the test's min_gain_pct.
+        version: 7,
         summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
         inputs: &[PRINTS],
@@ -146,7 +148,7 @@ impl Split for DiscrepancyStage {
             });
         }
         let settings = p.engine.settings(p.max_rounds, ctx.seed).map_err(|e| StageError::params(ctx, e))?;
-        let mut tables = DiscrepancyTables::new(&ENGINE, settings.alpha);
+        let mut tables = DiscrepancyTables::new(&ENGINE, &settings);
         let (sequence, monitor) = (prints[2 * index], prints[2 * index + 1]);
         let model = ThermalModel::new(record_of(&sequence.dir, &monitor.dir, p.width_clearance.width_clearance_mm)?);
         let blocks = model.record().layer_groups();
@@ -253,6 +255,13 @@ fn straight_run_widths(
         let width_mm = left[i] + right[i];
         let Some(captured_s) = capture_time_s(frame[i]).filter(|t| t.is_finite()) else { continue };
         if width_mm.is_finite() && straight.get(k) == Some(&true) {
+            if !t[i].is_finite() {
+                return Err(StageError::BadInput {
+                    file: file.to_path_buf(),
+                    location: Some(format!("row {i}, column `{}`", widths::t_s)),
+                    expected: format!("a finite deposition time for a measured width, found {}", t[i]),
+                });
+            }
             out.push(WidthObservation { layer: l, sample: k, width_mm, age_s: captured_s - t[i] });
         }
     }
@@ -272,4 +281,32 @@ fn centre_temperatures(df: &DataFrame, file: &Path) -> Result<Vec<TemperatureObs
             temp_c: temp[i],
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::table::{f64_col, frame, i64_col};
+
+    /// A widths table of two straight samples read in frame 0, the second with `t_s`.
+    fn two_widths(t_s: f64) -> DataFrame {
+        frame(vec![
+            i64_col(widths::layer, vec![0, 0]),
+            i64_col(widths::sample, vec![0, 1]),
+            f64_col(widths::t_s, vec![0.0, t_s]),
+            i64_col(widths::frame_index, vec![0, 0]),
+            f64_col(widths::w_left_mm, vec![0.2, 0.2]),
+            f64_col(widths::w_right_mm, vec![0.2, 0.2]),
+        ])
+        .unwrap()
+    }
+
+    #[test]
+    fn a_width_gets_its_age_from_the_frame_and_a_missing_deposition_time_is_refused_by_row() {
+        let file = Path::new("monitor/widths.parquet");
+        let ok = straight_run_widths(&two_widths(0.25), file, &[true, true], &[1.0]).unwrap();
+        assert_eq!(ok.iter().map(|w| w.age_s).collect::<Vec<_>>(), vec![1.0, 0.75]);
+        let err = straight_run_widths(&two_widths(f64::NAN), file, &[true, true], &[1.0]).unwrap_err().to_string();
+        assert!(err.contains("widths.parquet") && err.contains("row 1") && err.contains("t_s"), "{err}");
+    }
 }

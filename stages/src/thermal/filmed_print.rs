@@ -17,7 +17,7 @@ use pipeline::StageError;
 use super::common::open_sequence;
 use super::discrepancy::{record_from_tables, WidthClearance};
 use super::monitor::{self, MonitorParams, MonitorTables, StudyMonitor};
-use crate::discrepancy_tables::{study_settings, FalseAlarm};
+use crate::discrepancy_tables::FalseAlarm;
 
 pipeline::params! {
     /// What both thermal studies declare of how they film their prints and let the
@@ -73,7 +73,7 @@ impl Filming {
             layers: layers as usize,
             monitor: params.monitor.monitor_params()?,
             width_clearance_mm: params.width_clearance.width_clearance_mm,
-            engine: study_settings(params.false_alarm.alpha, max_rounds, seed, 100),
+            engine: params.false_alarm.study_settings(max_rounds, seed, 100),
         })
     }
 
