@@ -22,7 +22,7 @@ use crate::table::{bool_col, f64_col, frame, i64_col, str_col};
 
 pipeline::params! {
     /// What the engine's test asks, as every discrepancy stage and study declares it.
-    pub struct FalseAlarm {
+    pub struct NamingTest {
         /// Family-wise false-alarm rate of each round, over its candidates (Holm).
         pub alpha: f64 [0.001, 0.5] = 0.05,
         /// Smallest held-out RMSE gain worth naming (%): each candidate is tested against "its gain is at most this" (a minimum-effect test; 0 tests for any gain).
@@ -30,7 +30,7 @@ pipeline::params! {
     }
 }
 
-impl FalseAlarm {
+impl NamingTest {
     /// The engine's settings of a study stage (a power or control study) with
     /// `max_rounds` rounds, seed `seed`, `bootstrap_draws` draws of each gain interval
     /// (the studies use the fits, not those intervals) and the default bins.
@@ -54,20 +54,20 @@ pipeline::params! {
         /// Bootstrap draws over groups of every gain interval.
         pub bootstrap_draws: i64 [100, 100_000] = 2000,
     }
-    groups { pub false_alarm: FalseAlarm }
+    groups { pub naming: NamingTest }
 }
 
 impl EngineParams {
     /// The engine's settings with `max_rounds` rounds and seed `seed`, checked.
     pub(crate) fn settings(&self, max_rounds: i64, seed: u64) -> Result<Settings, ParamError> {
         let settings = Settings {
-            alpha: self.false_alarm.alpha,
+            alpha: self.naming.alpha,
             max_rounds: max_rounds as usize,
             bins: self.bins as usize,
             bootstrap_draws: self.bootstrap_draws as usize,
             level: 0.95,
             seed,
-            min_gain_pct: self.false_alarm.min_gain_pct,
+            min_gain_pct: self.naming.min_gain_pct,
         };
         settings.check().map_err(|e| ParamError::new("alpha", e.to_string()))?;
         Ok(settings)

@@ -31,7 +31,7 @@ use polars::prelude::{IntoColumn, NamedFrom, Series};
 use tables::discrepancy::fdm::{power_draws, power_part};
 use tables::discrepancy::power;
 
-use crate::discrepancy_tables::{power_frame, FalseAlarm, PowerOf};
+use crate::discrepancy_tables::{power_frame, NamingTest, PowerOf};
 use crate::effects::strength_list;
 use crate::fdm::discrepancy::{engine_failed, read_printers, LagBaseline, StartBlob};
 use crate::parts::{read_parts, study_unit_draws, study_units, without, StudySize, UnitSize};
@@ -71,7 +71,7 @@ pipeline::params! {
         /// Bootstrap draws of each gain interval inside a draw (the power table uses none of them).
         pub bootstrap_draws: i64 [100, 100_000] = 500,
     }
-    groups { pub lag: LagBaseline, pub unit_size: UnitSize, pub false_alarm: FalseAlarm }
+    groups { pub lag: LagBaseline, pub unit_size: UnitSize, pub naming: NamingTest }
 }
 
 impl DiscoveryPowerParams {
@@ -220,7 +220,7 @@ fn design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, ParamError
             cells.push((effect, strength));
         }
     }
-    let engine = p.false_alarm.study_settings(p.max_rounds, seed, p.bootstrap_draws as usize);
+    let engine = p.naming.study_settings(p.max_rounds, seed, p.bootstrap_draws as usize);
     Ok(PowerDesign {
         cells,
         draws_per_cell: p.draws as usize,

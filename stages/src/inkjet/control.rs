@@ -23,7 +23,7 @@ use pipeline::{StageContext, StageError};
 use tables::inkjet::{control_gain, control_trials};
 
 use super::discrepancy::{LayerSearch, StrengthLists};
-use crate::discrepancy_tables::FalseAlarm;
+use crate::discrepancy_tables::NamingTest;
 use crate::table::{f64_col, frame, i64_col, str_col};
 
 /// The `inkjet.control_gain` stage kind.
@@ -50,7 +50,7 @@ pipeline::params! {
         /// Largest droplet-volume shortfall p in percent (the paper's [0 20%]).
         pub variation_pct: f64 [0.0, 100.0] = 20.0,
     }
-    groups { pub search: LayerSearch, pub false_alarm: FalseAlarm }
+    groups { pub search: LayerSearch, pub naming: NamingTest }
 }
 
 impl StrengthLists for ControlGainParams {
@@ -102,7 +102,7 @@ fn design(p: &ControlGainParams, seed: u64) -> Result<ControlDesign, ParamError>
         cells: p.cells(&STUDIED)?,
         seeds: p.printers as usize,
         seed,
-        engine: p.false_alarm.study_settings(p.search.max_rounds, seed, 100),
+        engine: p.naming.study_settings(p.search.max_rounds, seed, 100),
     })
 }
 

@@ -33,7 +33,7 @@ use tables::discrepancy::inkjet::{causes, extension, gain, power_draws, power_pa
 use tables::discrepancy::power;
 
 use crate::discrepancy_tables::{
-    draws_frame as shared_draws_frame, DiscrepancyTables, DrawRow, EngineParams, FalseAlarm,
+    draws_frame as shared_draws_frame, DiscrepancyTables, DrawRow, EngineParams, NamingTest,
 };
 use crate::effects::strength_list;
 use crate::parts::{
@@ -175,7 +175,7 @@ pipeline::params! {
         /// Bootstrap draws of each gain interval inside a draw (the power table uses none of them).
         pub bootstrap_draws: i64 [100, 100_000] = 200,
     }
-    groups { pub search: LayerSearch, pub false_alarm: FalseAlarm, pub unit_size: UnitSize }
+    groups { pub search: LayerSearch, pub naming: NamingTest, pub unit_size: UnitSize }
 }
 
 impl StrengthLists for DiscoveryPowerParams {
@@ -255,7 +255,7 @@ fn power_design(p: &DiscoveryPowerParams, seed: u64) -> Result<PowerDesign, Para
         draws_per_cell: p.draws as usize,
         null_draws: p.null_draws as usize,
         seed,
-        engine: p.false_alarm.study_settings(p.search.max_rounds, seed, p.bootstrap_draws as usize),
+        engine: p.naming.study_settings(p.search.max_rounds, seed, p.bootstrap_draws as usize),
     })
 }
 

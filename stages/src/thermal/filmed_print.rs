@@ -17,15 +17,15 @@ use pipeline::StageError;
 use super::common::open_sequence;
 use super::discrepancy::{record_from_tables, WidthClearance};
 use super::monitor::{self, MonitorParams, MonitorTables, StudyMonitor};
-use crate::discrepancy_tables::FalseAlarm;
+use crate::discrepancy_tables::NamingTest;
 
 pipeline::params! {
     /// What both thermal studies declare of how they film their prints and let the
     /// engine read them (beyond `layers` and `max_rounds`, which each words itself).
     pub struct FilmingParams {}
     groups {
-        /// The engine's false-alarm rate.
-        pub false_alarm: FalseAlarm,
+        /// The engine's test: its false-alarm rate and the smallest gain worth naming.
+        pub naming: NamingTest,
         /// Which bead widths enter the engine's model.
         pub width_clearance: WidthClearance,
         /// The monitor's parameters the study sets.
@@ -66,14 +66,14 @@ pub struct FilmedPrint {
 
 impl Filming {
     /// From a study's `layers`, `max_rounds` and filming parameters (its monitor
-    /// parameters, `width_clearance_mm` and the engine's `alpha`), the engine seeded
+    /// parameters, `width_clearance_mm` and the engine's test), the engine seeded
     /// with the stage's `seed`.
     pub fn new(params: &FilmingParams, layers: i64, max_rounds: i64, seed: u64) -> Result<Self, ParamError> {
         Ok(Self {
             layers: layers as usize,
             monitor: params.monitor.monitor_params()?,
             width_clearance_mm: params.width_clearance.width_clearance_mm,
-            engine: params.false_alarm.study_settings(max_rounds, seed, 100),
+            engine: params.naming.study_settings(max_rounds, seed, 100),
         })
     }
 
