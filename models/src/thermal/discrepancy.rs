@@ -27,14 +27,21 @@
 //! thinner bead holds less heat and its contour shrinks more than its deposit, and a
 //! cooling bead's contour contracts with its age. The camera trails the nozzle, so each
 //! width is read shortly after the bead was laid, at an age that varies along every
-//! straight run with where the frames fall. The baseline reads the contour as
-//! `a + b·(w − w0) + c·age` ([`ContourMap`]), its intercept `a`, *contour gain* `b` and
-//! contraction rate `c` fitted in closed form to the training layers in every fit
+//! straight run with where the frames fall. And the camera rides on the head without
+//! turning with it, so each straight run's bead lies at its own place and direction in
+//! the image, where the optics' blur and the pixels' footprint on the plane read a
+//! straight bead a little wider or narrower; every layer repeats the run at the same
+//! place in the image. The baseline reads the contour on straight run `r` as
+//! `a_r + b·(w − w0) + c·age` ([`ContourMap`]), its levels `a_r`, *contour gain* `b`
+//! and contraction rate `c` fitted in closed form to the training layers in every fit
 //! (nuisances of the baseline, like the temperature profile). Without the gain the τ
 //! candidate would take the contour's own amplification of the thin stretch for a
 //! longer τ; without the age, the run's pattern of ages passes for a longer lag (the τ
 //! excess fitted through a map without it ran above the printer's, and its intervals
-//! missed the truth).
+//! missed the truth); without a level per run, the runs' levels pass for a τ (a short
+//! run is mostly thin stretch), and as the camera's mounting error moves them, print by
+//! print, the τ excess varied across prints by more than its jackknife over the layers,
+//! which all share them, could see.
 //!
 //! **Candidates** (each a small parametric extension with its physics):
 //! - `camera_latency`: a constant delay between the recorded and the true capture time,
@@ -79,14 +86,14 @@
 //!   instead of eq. 34's nominal τ0, so the thin stretch after every corner is longer or
 //!   shorter (the printer's effect); fitted with the contour map re-fitted at each `m`.
 //!   The printer's own straight-run deposit differs from eq. 34's lag without any
-//!   effect: its true widths recover from a corner a little faster than the lag, by far
-//!   less than a pixel (the squeeze under the nozzle face at the corners, not the
-//!   stacking of layers: leaving out layer 0, the only layer on the bed, keeps it).
-//!   Every layer shares that difference and `m` matches part of it, so a test for any
-//!   gain names a τ mismatch on many prints without one; the thermal
-//!   specs therefore ask for a gain worth naming (the engine's `min_gain_pct`, a
-//!   minimum-effect test), which that difference does not reach. A map quadratic in the
-//!   age, or quadratic or cubic in `w − w0`, changes nothing of this.
+//!   effect, by far less than a pixel (its true widths recover from a corner a little
+//!   faster than the lag: the squeeze under the nozzle face). Through a contour map
+//!   with one level for every run, that and the runs' different levels made a test for
+//!   any gain name a τ mismatch on many prints without one (a map quadratic in the age,
+//!   or quadratic or cubic in `w − w0`, changed nothing of this); with a level per run
+//!   the power study's null prints no longer do. The thermal specs still ask for a gain
+//!   worth naming (the engine's `min_gain_pct`, a minimum-effect test): thousands of
+//!   widths per layer make any departure, however small, significant.
 //!
 //! The other thermal effects that change the deposit (`heat_diffusion_widening`,
 //! `melt_squeeze_out`) have no candidate: they act at the corners, where the threshold
@@ -245,6 +252,25 @@ fn time_since_corner_s(speed_mm_s: &[f64], dt_s: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Per sample of a speed profile: its straight run, counted from 0 at the layer's start
+/// and advanced each time the head comes back up to [`STRAIGHT_RUN_SPEED_FRACTION`] of
+/// its top speed after a corner's or the seam's ramp; and the number of runs.
+fn straight_runs(speed_mm_s: &[f64]) -> (Vec<usize>, usize) {
+    let slow = STRAIGHT_RUN_SPEED_FRACTION * speed_mm_s.iter().copied().fold(0.0, f64::max);
+    let (mut run, mut was_slow) = (0, false);
+    let runs = speed_mm_s
+        .iter()
+        .map(|&v| {
+            if v >= slow && was_slow {
+                run += 1;
+            }
+            was_slow = v < slow;
+            run
+        })
+        .collect();
+    (runs, run + 1)
+}
+
 /// What one filmed print gives the model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ThermalRecord {
@@ -254,6 +280,9 @@ pub struct ThermalRecord {
     flow: FlowModel,
     /// Per trajectory sample: time since the head last ran below the straight-run speed, s.
     since_corner_s: Vec<f64>,
+    /// Per trajectory sample: its straight run ([`straight_runs`]).
+    run_of_sample: Vec<usize>,
+    runs: usize,
     layers: usize,
     samples: usize,
     layer_duration_s: f64,
@@ -348,12 +377,15 @@ impl ThermalRecord {
             width_mm: layer_pair_scale(parts.widths.iter().map(|w| (w.layer, w.sample, w.width_mm)), layers, 1e-4),
         };
         let since_corner_s = time_since_corner_s(&flow.speed_mm_s, flow.dt_s);
+        let (run_of_sample, runs) = straight_runs(&flow.speed_mm_s);
         Ok(Self {
             frames,
             temps,
             widths: parts.widths.to_vec(),
             flow,
             since_corner_s,
+            run_of_sample,
+            runs,
             layers,
             samples: parts.samples,
             layer_duration_s: parts.layer_duration_s,
@@ -559,8 +591,8 @@ static TAU: [Parameter; 1] = [linear(
 )];
 
 /// The baseline's own parameters: how the threshold contour reads a straight bead
-/// ([`ContourMap`]; its intercept is a level, not a property of the monitor, and is
-/// not listed).
+/// ([`ContourMap`]; its levels, one per straight run of this part under this mount,
+/// are not listed).
 static CONTOUR: [Parameter; 2] = [
     linear(
         "contour_gain",
@@ -785,38 +817,51 @@ struct WidthFit {
     width_excess_mm: Vec<f64>,
 }
 
-/// How the monitor's threshold contour reads a straight bead: `a + b·(w − w0) + c·age`
-/// (module doc).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How the monitor's threshold contour reads a straight bead: `a_r + b·(w − w0) + c·age`
+/// on straight run `r` (module doc).
+#[derive(Debug, Clone, PartialEq)]
 pub struct ContourMap {
-    /// Contour width of a bead of the nominal width read at age 0, mm.
-    pub intercept_mm: f64,
+    /// Per straight run: the contour width of a bead of the nominal width read at age 0,
+    /// mm (the pooled intercept on a run with no training widths).
+    pub intercepts_mm: Vec<f64>,
     /// Contour millimetres per millimetre of deposit (the contour gain).
     pub gain: f64,
     /// Contour millimetres per second of the bead's age (negative: it contracts as it cools).
     pub age_mm_per_s: f64,
 }
 
+/// One width as the contour map sees it: its straight run, the model's excess over w0
+/// (mm), its age (s) and the contour width read (mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ContourPoint {
+    run: usize,
+    excess_mm: f64,
+    age_s: f64,
+    width_mm: f64,
+}
+
 impl ContourMap {
-    /// The contour width of a bead `excess_mm` wider than w0 read at `age_s`, mm.
-    pub fn width_mm(&self, excess_mm: f64, age_s: f64) -> f64 {
-        self.intercept_mm + self.gain * excess_mm + self.age_mm_per_s * age_s
+    /// The contour width on `run` of a bead `excess_mm` wider than w0 read at `age_s`, mm.
+    pub fn width_mm(&self, run: usize, excess_mm: f64, age_s: f64) -> f64 {
+        self.intercepts_mm[run] + self.gain * excess_mm + self.age_mm_per_s * age_s
     }
 
-    /// The least-squares map through `(excess_mm, age_s, width_mm)`, solved on centred
-    /// sums. Where the ages do not vary independently of the excess (a monitor that
-    /// reads every width at one age) the map is the line `a + b·(w − w0)`; `None` when
-    /// the excess does not vary either.
-    fn fit(points: impl Iterator<Item = (f64, f64, f64)> + Clone) -> Option<Self> {
-        let (mut n, mut mean) = (0.0, [0.0; 3]);
-        for (x, age, y) in points.clone() {
-            n += 1.0;
-            mean = [mean[0] + x, mean[1] + age, mean[2] + y];
+    /// The least-squares map through the points of `runs` straight runs, one intercept
+    /// per run (the gain and the rate solved on sums centred within each run). Where the
+    /// ages do not vary independently of the excess (a monitor that reads every width at
+    /// one age) the map is `a_r + b·(w − w0)`; `None` when the excess does not vary
+    /// within the runs either.
+    fn fit(points: impl Iterator<Item = ContourPoint> + Clone, runs: usize) -> Option<Self> {
+        let mut sums = vec![[0.0; 4]; runs];
+        for p in points.clone() {
+            let s = &mut sums[p.run];
+            *s = [s[0] + 1.0, s[1] + p.excess_mm, s[2] + p.age_s, s[3] + p.width_mm];
         }
-        let mean = mean.map(|m| m / n);
+        let means: Vec<[f64; 3]> = sums.iter().map(|s| [s[1] / s[0], s[2] / s[0], s[3] / s[0]]).collect();
         let (mut sxx, mut sxa, mut saa, mut sxy, mut say) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (x, age, y) in points {
-            let (x, age, y) = (x - mean[0], age - mean[1], y - mean[2]);
+        for p in points {
+            let m = means[p.run];
+            let (x, age, y) = (p.excess_mm - m[0], p.age_s - m[1], p.width_mm - m[2]);
             sxx += x * x;
             sxa += x * age;
             saa += age * age;
@@ -831,8 +876,13 @@ impl ContourMap {
         } else {
             return None;
         };
-        let map = Self { intercept_mm: mean[2] - gain * mean[0] - age_mm_per_s * mean[1], gain, age_mm_per_s };
-        [map.intercept_mm, gain, age_mm_per_s].iter().all(|v| v.is_finite()).then_some(map)
+        let level = |m: &[f64; 3]| m[2] - gain * m[0] - age_mm_per_s * m[1];
+        let n: f64 = sums.iter().map(|s| s[0]).sum();
+        let pooled = sums.iter().zip(&means).filter(|(s, _)| s[0] > 0.0).map(|(s, m)| s[0] * level(m)).sum::<f64>() / n;
+        let intercepts_mm: Vec<f64> =
+            sums.iter().zip(&means).map(|(s, m)| if s[0] > 0.0 { level(m) } else { pooled }).collect();
+        let finite = [pooled, gain, age_mm_per_s].iter().all(|v| v.is_finite());
+        (finite && intercepts_mm.iter().all(|v| v.is_finite())).then_some(Self { intercepts_mm, gain, age_mm_per_s })
     }
 }
 
@@ -844,7 +894,14 @@ impl ThermalModel {
 
     /// The contour map through `train`'s widths against the model's `excess` and their ages.
     fn contour_map(&self, train: &[&ThermalBlock], excess: &[f64]) -> Option<ContourMap> {
-        ContourMap::fit(self.train_widths(train).map(|w| (excess[w.sample], w.age_s, w.width_mm)))
+        let run = &self.record.run_of_sample;
+        let points = self.train_widths(train).map(|w| ContourPoint {
+            run: run[w.sample],
+            excess_mm: excess[w.sample],
+            age_s: w.age_s,
+            width_mm: w.width_mm,
+        });
+        ContourMap::fit(points, self.record.runs)
     }
 
     fn width_fit(
@@ -873,12 +930,12 @@ impl ThermalModel {
     /// `m` by Levenberg-Marquardt, the contour map solved in closed form at every `m`.
     fn fit_tau_excess(&self, train: &[&ThermalBlock], warm: Option<&ThermalFit>) -> Result<f64, ModelError> {
         let widths: Vec<&WidthObservation> = self.train_widths(train).collect();
-        let scale = self.record.scales.width_mm;
+        let (scale, run) = (self.record.scales.width_mm, &self.record.run_of_sample);
         let residuals = |x: &[f64], r: &mut [f64]| -> bool {
             let excess = self.record.flow.width_excess_mm(x[0]);
             let Some(contour) = self.contour_map(train, &excess) else { return false };
             for (ri, w) in r.iter_mut().zip(&widths) {
-                *ri = (w.width_mm - contour.width_mm(excess[w.sample], w.age_s)) / scale;
+                *ri = (w.width_mm - contour.width_mm(run[w.sample], excess[w.sample], w.age_s)) / scale;
             }
             true
         };
@@ -974,10 +1031,10 @@ impl Model for ThermalModel {
             }
             out.push(r.reading(c, s[t.layer]) / r.scales.temp_c);
         }
-        if let Some(contour) = fit.contour {
+        if let Some(contour) = &fit.contour {
             out.extend(group.widths.iter().map(|&i| {
                 let w = &r.widths[i];
-                contour.width_mm(fit.width_excess_mm[w.sample], w.age_s) / r.scales.width_mm
+                contour.width_mm(r.run_of_sample[w.sample], fit.width_excess_mm[w.sample], w.age_s) / r.scales.width_mm
             }));
         } else if !group.widths.is_empty() {
             return Err(ModelError::Predict("the training layers have no bead widths".into()));
@@ -996,7 +1053,7 @@ impl Model for ThermalModel {
     }
 
     fn estimates(&self, fit: &ThermalFit) -> Vec<f64> {
-        let mut out = match fit.contour {
+        let mut out = match &fit.contour {
             Some(c) => vec![c.gain, c.age_mm_per_s],
             None => vec![f64::NAN; CONTOUR.len()],
         };
@@ -1064,12 +1121,15 @@ mod tests {
         let (nozzle, bed) = (215.0, 60.0);
         let flow_model = check_deposition(&deposition(&flow, &speed), samples).unwrap();
         let excess = flow_model.width_excess_mm(tau_excess);
+        let (run_of_sample, runs) = straight_runs(&speed);
         let probe = ThermalRecord {
             frames: vec![],
             temps: vec![],
             widths: vec![],
             flow: flow_model,
             since_corner_s: vec![],
+            run_of_sample,
+            runs,
             layers,
             samples,
             layer_duration_s: duration,
@@ -1094,14 +1154,21 @@ mod tests {
                 temps.push(TemperatureObservation { layer: n, sample: k, t_s, temp_c: probe.reading(c, s_n) });
                 if speed[k] >= 19.0 {
                     let wobble = 1e-4 * (((k * 11 + n * 7) % 5) as f64 - 2.0);
-                    // Frames of every age: the contour contracts by 0.18 mm/s as the bead cools.
+                    // Frames of every age: the contour contracts by 0.18 mm/s as the bead cools;
+                    // each straight run reads a few micrometres off the others.
                     let age_s = 0.04 + 0.02 * ((k / 25 + n * 3) % 7) as f64;
-                    let width_mm = W0_MM + 0.002 + 1.1 * excess[k] - 0.18 * age_s + wobble;
+                    let level_mm = W0_MM + run_level_mm(probe.run_of_sample[k]);
+                    let width_mm = level_mm + 1.1 * excess[k] - 0.18 * age_s + wobble;
                     widths.push(WidthObservation { layer: n, sample: k, width_mm, age_s });
                 }
             }
         }
         with_observations(&probe, &frames, &temps, &widths)
+    }
+
+    /// The synthetic print's contour level on straight run `run`, over w0, mm.
+    fn run_level_mm(run: usize) -> f64 {
+        0.002 + 0.003 * ((run % 3) as f64 - 1.0)
     }
 
     /// The record of `shape`'s print (its path, flow and temperatures) with these observations.
@@ -1165,8 +1232,12 @@ mod tests {
         assert!((fit.warming_c_per_layer - 1.5).abs() < 0.01, "{}", fit.warming_c_per_layer);
         let fit = fit_all(synthetic_with_tau(8, 0.0, 0.0, None, 0.0, 0.3), &[TAU_MISMATCH]);
         assert!((fit.tau_excess - 0.3).abs() < 0.01, "{}", fit.tau_excess);
-        let contour = fit.contour.unwrap();
-        assert!((contour.intercept_mm - W0_MM - 0.002).abs() < 1e-3, "{contour:?}");
+        let contour = fit.contour.clone().unwrap();
+        let record = synthetic(2, 0.0, 0.0, None, 0.0);
+        assert_eq!((record.runs, record.run_of_sample[10], record.run_of_sample[50]), (5, 0, 1));
+        for run in 1..record.runs {
+            assert!((contour.intercepts_mm[run] - W0_MM - run_level_mm(run)).abs() < 1e-3, "{contour:?}");
+        }
         assert!((contour.gain - 1.1).abs() < 0.01 && (contour.age_mm_per_s + 0.18).abs() < 0.002, "{contour:?}");
         // The extension lists the baseline's contour parameters first, then the mechanism's.
         let model = ThermalModel::new(synthetic(2, 0.0, 0.0, None, 0.0));
@@ -1351,15 +1422,26 @@ mod tests {
 
     #[test]
     fn the_contour_map_is_exact_on_a_plane_and_a_line_when_the_ages_do_not_vary() {
-        let plane = |x: f64, age: f64| 0.44 + 1.2 * x - 0.2 * age;
-        let points: Vec<(f64, f64, f64)> =
-            [(0.0, 0.05), (-0.1, 0.1), (0.05, 0.15), (-0.02, 0.07)].iter().map(|&(x, a)| (x, a, plane(x, a))).collect();
-        let map = ContourMap::fit(points.iter().copied()).unwrap();
-        assert!((map.intercept_mm - 0.44).abs() < 1e-12 && (map.gain - 1.2).abs() < 1e-12, "{map:?}");
-        assert!((map.age_mm_per_s + 0.2).abs() < 1e-12 && (map.width_mm(0.01, 0.1) - plane(0.01, 0.1)).abs() < 1e-12);
+        let plane = |run: usize, x: f64, age: f64| [0.44, 0.47][run] + 1.2 * x - 0.2 * age;
+        let point =
+            |run: usize, excess_mm: f64, age_s: f64, width_mm: f64| ContourPoint { run, excess_mm, age_s, width_mm };
+        let points: Vec<ContourPoint> =
+            [(0, 0.0, 0.05), (0, -0.1, 0.1), (1, 0.05, 0.15), (1, -0.02, 0.07), (1, 0.0, 0.0)]
+                .iter()
+                .map(|&(r, x, a)| point(r, x, a, plane(r, x, a)))
+                .collect();
+        let map = ContourMap::fit(points.iter().copied(), 3).unwrap();
+        assert!((map.intercepts_mm[0] - 0.44).abs() < 1e-12 && (map.intercepts_mm[1] - 0.47).abs() < 1e-12, "{map:?}");
+        assert!((map.gain - 1.2).abs() < 1e-12 && (map.age_mm_per_s + 0.2).abs() < 1e-12, "{map:?}");
+        assert!((map.width_mm(1, 0.01, 0.1) - plane(1, 0.01, 0.1)).abs() < 1e-12);
+        // A run with no points reads at the pooled level (two points at 0.44, three at 0.47).
+        assert!((map.intercepts_mm[2] - (2.0 * 0.44 + 3.0 * 0.47) / 5.0).abs() < 1e-12, "{map:?}");
         // One age: the line, the age's part in its intercept.
-        let line = ContourMap::fit([(0.0, 0.1, 1.0), (1.0, 0.1, 3.0), (2.0, 0.1, 5.0)].into_iter()).unwrap();
-        assert_eq!((line.intercept_mm, line.gain, line.age_mm_per_s), (1.0, 2.0, 0.0));
-        assert!(ContourMap::fit([(1.0, 0.1, 1.0), (1.0, 0.2, 3.0)].into_iter()).is_none());
+        let line = [(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)].map(|(x, y)| point(0, x, 0.1, y));
+        let line = ContourMap::fit(line.into_iter(), 1).unwrap();
+        assert_eq!((line.intercepts_mm[0], line.gain, line.age_mm_per_s), (1.0, 2.0, 0.0));
+        // The excess varies between the runs only: nothing within a run fixes the gain.
+        let flat = [point(0, 1.0, 0.1, 1.0), point(1, 2.0, 0.2, 3.0)];
+        assert!(ContourMap::fit(flat.into_iter(), 2).is_none());
     }
 }

@@ -95,7 +95,9 @@ impl Stage for DiscrepancyThermalSection {
     type Params = NoParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "report.discrepancy_thermal",
-        version: 10,
+        // 11: the method paragraph says the contour map has a level per straight run, and
+        //     why the test asks for a gain worth naming without the τ-like departure.
+        version: 11,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -142,8 +144,8 @@ fn method(causes: &[Cause]) -> String {
     let worth_naming = if min_gain_pct > 0.0 {
         format!(
             " Each test asks for a gain worth naming: its null hypothesis is that the candidate lowers the held-out RMSE of what it moves by at most \
-{min_gain_pct} % (a minimum-effect test), because with thousands of widths in every layer all layers agree on differences far too small to matter: the \
-printer's own bead recovers from a corner slightly faster than eq. 34's lag, by far less than a pixel, and a flow τ a few per cent off matches part of that."
+{min_gain_pct} % (a minimum-effect test), because with thousands of widths in every layer all layers agree on differences far too small to matter, \
+and a real printer always has some (the virtual printer's own bead recovers from a corner slightly faster than eq. 34's lag, by far less than a pixel)."
         )
     } else {
         String::new()
@@ -158,7 +160,9 @@ at the feed speed, away from every corner and from the seam where each layer sta
 baseline predicts a zero offset; for every layer, the centre temperatures the other layers read at the same sample; and on a straight run the width of the \
 lagged flow spread over the path, read through a contour map fitted to the training layers: a thinner bead holds less heat, so its threshold contour shrinks \
 more than its deposit, and a cooling bead's contour contracts with its age when its frame is taken, which varies along every straight run with where the \
-frames fall (the camera trails the nozzle); the map is linear in the bead's width and in that age. Five named mechanisms extend it — a constant camera \
+frames fall (the camera trails the nozzle); the map is linear in the bead's width and in that age, with a level of its own on each straight run \
+(the camera rides on the head without turning with it, so each run's bead lies at its own place and direction in the image, where the optics' blur and the \
+pixels' footprint read a straight bead a little wider or narrower, the same in every layer). Five named mechanisms extend it — a constant camera \
 latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
 excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
 layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \

@@ -108,7 +108,8 @@ impl Stage for DiscoveryPowerStage {
         // 3: the engine's noise scales use models::stats' median.
         // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
         // 5: the contour map knows the bead's age and the seam is no straight run.
-        version: 5,
+        // 6: the contour map has a level per straight run.
+        version: 6,
         summary: "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet",
         implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models",
         inputs: &[],
