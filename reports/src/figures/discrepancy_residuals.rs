@@ -93,7 +93,8 @@ impl Stage for DiscrepancyResidualsFigure {
     type Params = ResidualsParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "figure.discrepancy_residuals",
-        version: 1,
+        // 2: the legend goes to the corner of the first panel that it hides least of.
+        version: 2,
         summary: "Held-out residuals of the baseline and the extended model against every candidate variable, bin means with 95 % intervals, in any domain of the discrepancy engine → discrepancy_residuals.png/.svg",
         implements: "DESIGN §7 step 1 (show)",
         inputs: &[DISCREPANCY],
@@ -342,9 +343,33 @@ fn draw_residual_panel<DB: DrawingBackend>(
             .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
     }
     if legend {
-        draw_house_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        draw_house_legend(&mut chart, quietest_corner(panel, span, x_min - pad, x_max + pad))?;
     }
     Ok(())
+}
+
+/// The corner of a panel whose legend would hide the fewest bin means and interval
+/// ends: a legend takes about the outer half of the width and the outer quarter of the
+/// height (the upper right on a tie).
+fn quietest_corner(panel: &ResidualPanel, span: f64, x_lo: f64, x_hi: f64) -> SeriesLabelPosition {
+    let x_mid = 0.5 * (x_lo + x_hi);
+    let points = || {
+        let ends =
+            panel.models.values().flat_map(|m| m.1.iter().flat_map(|b| [(b[0], b[1]), (b[0], b[2]), (b[0], b[3])]));
+        ends.filter(|(x, y)| x.is_finite() && y.is_finite())
+    };
+    let hidden = |upper: bool, right: bool| {
+        points()
+            .filter(|&(x, y)| (x >= x_mid) == right && if upper { y >= span / 2.0 } else { y <= -span / 2.0 })
+            .count()
+    };
+    let corners = [
+        (SeriesLabelPosition::UpperRight, hidden(true, true)),
+        (SeriesLabelPosition::UpperLeft, hidden(true, false)),
+        (SeriesLabelPosition::LowerRight, hidden(false, true)),
+        (SeriesLabelPosition::LowerLeft, hidden(false, false)),
+    ];
+    corners.into_iter().min_by_key(|(_, n)| *n).map_or(SeriesLabelPosition::UpperRight, |(corner, _)| corner)
 }
 
 fn format_tick(x: f64) -> String {
@@ -452,6 +477,23 @@ mod tests {
             draw_png_and_svg(&stem, (1500, 1150), draw, draw_svg).unwrap();
             assert_drawn(&stem);
         }
+    }
+
+    #[test]
+    fn the_legend_goes_to_the_corner_it_hides_least_of() {
+        let panel = |bins: Vec<[f64; 4]>| ResidualPanel {
+            variable: "v".into(),
+            unit: String::new(),
+            models: BTreeMap::from([("baseline".to_string(), (0.0, bins))]),
+            labels: vec![],
+            binned_in_ranges: false,
+        };
+        // Quiet everywhere: the upper right.
+        let flat = panel(vec![[0.0, 0.0, -0.1, 0.1], [10.0, 0.0, -0.1, 0.1]]);
+        assert_eq!(quietest_corner(&flat, 1.0, 0.0, 10.0), SeriesLabelPosition::UpperRight);
+        // High means on both sides and a low interval end on the left: the lower right.
+        let busy = panel(vec![[1.0, 0.0, -0.8, 0.1], [2.0, 0.7, 0.6, 0.8], [8.0, 0.8, 0.7, 0.9], [9.0, 0.6, 0.5, 0.7]]);
+        assert_eq!(quietest_corner(&busy, 1.0, 0.0, 10.0), SeriesLabelPosition::LowerRight);
     }
 
     #[test]
