@@ -29,9 +29,9 @@
 //! width is read shortly after the bead was laid, at an age that varies along every
 //! straight run with where the frames fall. And the camera rides on the head without
 //! turning with it, so each straight run's bead lies at its own place and direction in
-//! the image, where the optics' blur and the pixels' footprint on the plane read a
-//! straight bead a little wider or narrower; every layer repeats the run at the same
-//! place in the image. The baseline reads the contour on straight run `r` as
+//! the image, where the image's blur, its pixels' footprint on the plane and the small
+//! errors of the monitor's fitted mount read a straight bead a little wider or
+//! narrower; every layer repeats the run at the same place in the image. The baseline reads the contour on straight run `r` as
 //! `a_r + b·(w − w0) + c·age` ([`ContourMap`]), its levels `a_r`, *contour gain* `b`
 //! and contraction rate `c` fitted in closed form to the training layers in every fit
 //! (nuisances of the baseline, like the temperature profile). Without the gain the τ

@@ -161,8 +161,8 @@ baseline predicts a zero offset; for every layer, the centre temperatures the ot
 lagged flow spread over the path, read through a contour map fitted to the training layers: a thinner bead holds less heat, so its threshold contour shrinks \
 more than its deposit, and a cooling bead's contour contracts with its age when its frame is taken, which varies along every straight run with where the \
 frames fall (the camera trails the nozzle); the map is linear in the bead's width and in that age, with a level of its own on each straight run \
-(the camera rides on the head without turning with it, so each run's bead lies at its own place and direction in the image, where the optics' blur and the \
-pixels' footprint read a straight bead a little wider or narrower, the same in every layer). Five named mechanisms extend it — a constant camera \
+(the camera rides on the head without turning with it, so each run's bead lies at its own place and direction in the image, where the image's blur, its \
+pixels' footprint and the small errors of the fitted mount read a straight bead a little wider or narrower, the same in every layer). Five named mechanisms extend it — a constant camera \
 latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
 excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
 layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \
