@@ -237,11 +237,17 @@ pub fn straight_run_samples(
 /// ramp, where the deposit is not a straight bead.
 pub const STRAIGHT_RUN_SPEED_FRACTION: f64 = 0.95;
 
+/// The speed below which a sample of a speed profile is in a corner's or the seam's
+/// ramp: [`STRAIGHT_RUN_SPEED_FRACTION`] of the profile's top speed, mm/s.
+fn ramp_speed_mm_s(speed_mm_s: &[f64]) -> f64 {
+    STRAIGHT_RUN_SPEED_FRACTION * speed_mm_s.iter().copied().fold(0.0, f64::max)
+}
+
 /// Per sample of a speed profile: the time since the head last ran below
 /// [`STRAIGHT_RUN_SPEED_FRACTION`] of its top speed (a corner's or the seam's ramp; the
 /// layer's start counts as one), s.
 fn time_since_corner_s(speed_mm_s: &[f64], dt_s: f64) -> Vec<f64> {
-    let slow = STRAIGHT_RUN_SPEED_FRACTION * speed_mm_s.iter().copied().fold(0.0, f64::max);
+    let slow = ramp_speed_mm_s(speed_mm_s);
     let mut samples_since = 0u32;
     speed_mm_s
         .iter()
@@ -256,7 +262,7 @@ fn time_since_corner_s(speed_mm_s: &[f64], dt_s: f64) -> Vec<f64> {
 /// and advanced each time the head comes back up to [`STRAIGHT_RUN_SPEED_FRACTION`] of
 /// its top speed after a corner's or the seam's ramp; and the number of runs.
 fn straight_runs(speed_mm_s: &[f64]) -> (Vec<usize>, usize) {
-    let slow = STRAIGHT_RUN_SPEED_FRACTION * speed_mm_s.iter().copied().fold(0.0, f64::max);
+    let slow = ramp_speed_mm_s(speed_mm_s);
     let (mut run, mut was_slow) = (0, false);
     let runs = speed_mm_s
         .iter()
