@@ -24,24 +24,38 @@
 //! `trajectory.csv`; eqs 5-11 reduce to it where the path does not turn), so after
 //! every corner the bead is thin while the head accelerates and the flow still lags,
 //! and recovers over a few τ. The monitor's threshold contour is not the deposit: a
-//! thinner bead holds less heat and its contour shrinks more than its deposit, and a
-//! cooling bead's contour contracts with its age. The camera trails the nozzle, so each
-//! width is read shortly after the bead was laid, at an age that varies along every
-//! straight run with where the frames fall. And the camera rides on the head without
-//! turning with it, so each straight run's bead lies at its own place and direction in
-//! the image, where the image's blur, its pixels' footprint on the plane and the small
-//! errors of the monitor's fitted mount read a straight bead a little wider or
-//! narrower; every layer repeats the run at the same place in the image. The baseline reads the contour on straight run `r` as
-//! `a_r + b·(w − w0) + c·age` ([`ContourMap`]), its levels `a_r`, *contour gain* `b`
-//! and contraction rate `c` fitted in closed form to the training layers in every fit
-//! (nuisances of the baseline, like the temperature profile). Without the gain the τ
+//! thinner bead holds less heat and its contour shrinks more than its deposit, the more
+//! so the older the bead (its heat spreads as it ages, and a thin bead's peak falls
+//! toward the threshold first), and a cooling bead's contour contracts with its age.
+//! The camera trails the nozzle, so each width is read shortly after the bead was laid,
+//! at an age that varies along every straight run with where the frames fall. And the
+//! camera rides on the head without turning with it, so each straight run's bead lies
+//! at its own place and direction in the image, where the image's blur, its pixels'
+//! footprint on the plane and the small errors of the monitor's fitted mount read a
+//! straight bead a little wider or narrower; every layer repeats the run at the same
+//! place in the image, and an older bead lies farther behind the nozzle along that
+//! run's own direction in the image, where the tilted camera's blur and footprint
+//! change across the field, so each run's reading drifts with the age along its own
+//! smooth curve. The baseline reads the contour on straight run `r` as
+//! `a_r + c_r·(age − ā) + q_r·(age − ā)² + (b + b_a·(age − ā))·(w − w0)`
+//! ([`ContourMap`]; `ā` the training widths' mean age): its levels `a_r`, age rates
+//! `c_r` and curvatures `q_r`, *contour gain* `b` and the gain's age rate `b_a` fitted
+//! in closed form to the training layers in every fit (nuisances of the baseline, like
+//! the temperature profile). Without the gain the τ
 //! candidate would take the contour's own amplification of the thin stretch for a
 //! longer τ; without the age, the run's pattern of ages passes for a longer lag (the τ
 //! excess fitted through a map without it ran above the printer's, and its intervals
 //! missed the truth); without a level per run, the runs' levels pass for a τ (a short
 //! run is mostly thin stretch), and as the camera's mounting error moves them, print by
 //! print, the τ excess varied across prints by more than its jackknife over the layers,
-//! which all share them, could see.
+//! which all share them, could see. Without each run's own curve in the age and the
+//! gain's growth with it, the τ excess still ran above the printer's on the power
+//! study's prints: fitted to the printer's true deposit widths at the same samples and
+//! ages instead of the monitor's, it did not, so that excess came from how the contour
+//! reads the thin stretch, not from the deposit. With them most of the difference
+//! between the two goes on prints with a τ error; on prints without one a part of it
+//! stays, about as large as the deposit's own departure from eq. 34 (below) and of the
+//! opposite sign.
 //!
 //! **Candidates** (each a small parametric extension with its physics):
 //! - `camera_latency`: a constant delay between the recorded and the true capture time,
@@ -89,8 +103,8 @@
 //!   effect, by far less than a pixel (its true widths recover from a corner a little
 //!   faster than the lag: the squeeze under the nozzle face). Through a contour map
 //!   with one level for every run, that and the runs' different levels made a test for
-//!   any gain name a τ mismatch on many prints without one (a map quadratic in the age,
-//!   or quadratic or cubic in `w − w0`, changed nothing of this); with a level per run
+//!   any gain name a τ mismatch on many prints without one (one quadratic in the age for
+//!   every run, or a map quadratic or cubic in `w − w0`, changed nothing of this); with a level per run
 //!   the power study's null prints no longer do. The thermal specs still ask for a gain
 //!   worth naming (the engine's `min_gain_pct`, a minimum-effect test): thousands of
 //!   widths per layer make any departure, however small, significant.
@@ -125,7 +139,7 @@
 use ::discrepancy::least_squares::{minimize, LmSettings};
 use ::discrepancy::{Candidate, Group, Mechanism, Model, ModelError, Parameter, Variable, VariableKind};
 
-use super::dynamics::first_order_lag;
+use super::dynamics::first_order_lag_into;
 use super::errors::ThermalError;
 use super::Trajectory;
 use crate::stats::finite_median;
@@ -200,13 +214,18 @@ impl FlowModel {
     /// Each sample's straight-run width under a flow time constant `τ0·(1 + tau_excess)`,
     /// minus w0 (NaN where the head stands still).
     fn width_excess_mm(&self, tau_excess: f64) -> Vec<f64> {
+        let mut excess = vec![0.0; self.commanded_flow_mm3_s.len()];
+        self.width_excess_into(tau_excess, &mut excess);
+        excess
+    }
+
+    /// [`Self::width_excess_mm`] into `excess` (one per sample), without allocating.
+    fn width_excess_into(&self, tau_excess: f64, excess: &mut [f64]) {
         let tau_s = self.tau_s * (1.0 + tau_excess);
-        let lagged = first_order_lag(&self.commanded_flow_mm3_s, self.dt_s, tau_s, 0.0);
-        lagged
-            .iter()
-            .zip(&self.speed_mm_s)
-            .map(|(q, v)| if *v > 0.0 { q / (self.layer_height_mm * v) - self.bead_width_mm } else { f64::NAN })
-            .collect()
+        first_order_lag_into(&self.commanded_flow_mm3_s, self.dt_s, tau_s, 0.0, excess);
+        for (e, v) in excess.iter_mut().zip(&self.speed_mm_s) {
+            *e = if *v > 0.0 { *e / (self.layer_height_mm * v) - self.bead_width_mm } else { f64::NAN };
+        }
     }
 }
 
@@ -597,22 +616,29 @@ static TAU: [Parameter; 1] = [linear(
 )];
 
 /// The baseline's own parameters: how the threshold contour reads a straight bead
-/// ([`ContourMap`]; its levels, one per straight run of this part under this mount,
-/// are not listed).
-static CONTOUR: [Parameter; 2] = [
+/// ([`ContourMap`]; its levels, age rates and curvatures in the age, one of each per
+/// straight run of this part under this mount, are not listed, only the rates pooled).
+static CONTOUR: [Parameter; 3] = [
     linear(
         "contour_gain",
         "1",
         f64::NEG_INFINITY,
         f64::INFINITY,
-        "contour millimetres per millimetre of deposit: above 1, a thinner bead's contour shrinks more than its deposit",
+        "contour millimetres per millimetre of deposit at the widths' mean age: above 1, a thinner bead's contour shrinks more than its deposit",
+    ),
+    linear(
+        "contour_gain_per_s",
+        "1/s",
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        "how fast the contour gain grows with the bead's age: its heat spreads as it ages, so a thinner bead's contour shrinks ever more",
     ),
     linear(
         "contour_age_mm_per_s",
         "mm/s",
         f64::NEG_INFINITY,
         f64::INFINITY,
-        "how fast the contour width changes with the bead's age when its frame is taken: negative, it contracts as the bead cools",
+        "how fast the contour width changes with the bead's age when its frame is taken, at the widths' mean age, the straight runs' rates pooled by their widths: negative, it contracts as the bead cools",
     ),
 ];
 
@@ -823,17 +849,29 @@ struct WidthFit {
     width_excess_mm: Vec<f64>,
 }
 
-/// How the monitor's threshold contour reads a straight bead: `a_r + b·(w − w0) + c·age`
-/// on straight run `r` (module doc).
+/// How the monitor's threshold contour reads a straight bead on straight run `r`:
+/// `a_r + c_r·(age − ā) + q_r·(age − ā)² + (b + b_a·(age − ā))·(w − w0)` (module doc),
+/// with `ā` the training widths' mean age.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ContourMap {
-    /// Per straight run: the contour width of a bead of the nominal width read at age 0,
-    /// mm (the pooled intercept on a run with no training widths).
-    pub intercepts_mm: Vec<f64>,
-    /// Contour millimetres per millimetre of deposit (the contour gain).
+    /// Per straight run: the contour width of a bead of the nominal width read at the
+    /// reference age, mm (the pooled level on a run with no training widths).
+    pub levels_mm: Vec<f64>,
+    /// Per straight run: contour millimetres per second of the bead's age at the
+    /// reference age (negative: it contracts as it cools; the pooled rate on a run whose
+    /// widths share one age).
+    pub age_mm_per_s: Vec<f64>,
+    /// Per straight run: the reading's curvature in the age, mm/s² (0 on a run whose
+    /// widths fall at two ages, the pooled one on a run whose widths share one).
+    pub age_curvature_mm_per_s2: Vec<f64>,
+    /// Contour millimetres per millimetre of deposit at the reference age (the contour gain).
     pub gain: f64,
-    /// Contour millimetres per second of the bead's age (negative: it contracts as it cools).
-    pub age_mm_per_s: f64,
+    /// How fast the contour gain grows with the bead's age, 1/s.
+    pub gain_per_s: f64,
+    /// The age at which the gain is `gain`: the training widths' mean age, s.
+    pub reference_age_s: f64,
+    /// The runs' age rates pooled (weighted by their widths), mm/s.
+    pub pooled_age_mm_per_s: f64,
 }
 
 /// One width as the contour map sees it: its straight run, the model's excess over w0
@@ -846,50 +884,201 @@ struct ContourPoint {
     width_mm: f64,
 }
 
+/// Index of each of the contour map's regressors in [`contour_regressors`].
+const AGE: usize = 0;
+const AGE2: usize = 1;
+const EXCESS: usize = 2;
+const EXCESS_AGE: usize = 3;
+const WIDTH: usize = 4;
+const REGRESSORS: usize = 5;
+
+/// The contour map's regressors of one width: its age from the reference age and that
+/// squared, the excess, the excess times the age from the reference age, and the contour
+/// width read.
+fn contour_regressors(p: &ContourPoint, reference_age_s: f64) -> [f64; REGRESSORS] {
+    let age = p.age_s - reference_age_s;
+    [age, age * age, p.excess_mm, p.excess_mm * age, p.width_mm]
+}
+
+/// One straight run's widths: their count, means and centred cross-products of
+/// [`contour_regressors`] (symmetric, `[i][j]`).
+#[derive(Debug, Clone, Copy, Default)]
+struct RunMoments {
+    n: f64,
+    mean: [f64; REGRESSORS],
+    cross: [[f64; REGRESSORS]; REGRESSORS],
+}
+
+/// Which of a run's own age terms its widths determine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum AgeTerms {
+    /// One age: the run's level only.
+    None,
+    /// Two ages: a level and a rate.
+    Rate,
+    /// Three or more: a level, a rate and a curvature.
+    Curved,
+}
+
+impl RunMoments {
+    /// The run's own age terms its widths determine.
+    fn age_terms(&self) -> AgeTerms {
+        let c = &self.cross;
+        let (aa, qq, aq) = (c[AGE][AGE], c[AGE2][AGE2], c[AGE][AGE2]);
+        // The squared age varies on the scale of the age's spread squared, aa²/n.
+        if self.n < 2.0 || aa <= 1e-12 * self.n {
+            AgeTerms::None
+        } else if qq > 1e-9 * aa * aa / self.n && aa * qq - aq * aq > 1e-9 * aa * qq {
+            AgeTerms::Curved
+        } else {
+            AgeTerms::Rate
+        }
+    }
+
+    /// The run's own age coefficients (rate, curvature) that fit `y(j) = C[age-term][j]`,
+    /// the cross-products of its age terms with the remaining regressors' combination.
+    fn age_fit(&self, y: impl Fn(usize) -> f64) -> Option<(f64, f64)> {
+        let c = &self.cross;
+        match self.age_terms() {
+            AgeTerms::None => None,
+            AgeTerms::Rate => Some((y(AGE) / c[AGE][AGE], 0.0)),
+            AgeTerms::Curved => {
+                let (aa, qq, aq) = (c[AGE][AGE], c[AGE2][AGE2], c[AGE][AGE2]);
+                let det = aa * qq - aq * aq;
+                Some(((qq * y(AGE) - aq * y(AGE2)) / det, (aa * y(AGE2) - aq * y(AGE)) / det))
+            }
+        }
+    }
+
+    /// The centred cross-product of regressors `i` and `j` with the run's own age terms
+    /// partialled out.
+    fn without_age(&self, i: usize, j: usize) -> f64 {
+        let c = &self.cross;
+        match self.age_fit(|k| c[k][j]) {
+            Some((rate, curvature)) => c[i][j] - rate * c[AGE][i] - curvature * c[AGE2][i],
+            None => c[i][j],
+        }
+    }
+}
+
 impl ContourMap {
     /// The contour width on `run` of a bead `excess_mm` wider than w0 read at `age_s`, mm.
     pub fn width_mm(&self, run: usize, excess_mm: f64, age_s: f64) -> f64 {
-        self.intercepts_mm[run] + self.gain * excess_mm + self.age_mm_per_s * age_s
+        let age = age_s - self.reference_age_s;
+        let reading =
+            self.levels_mm[run] + self.age_mm_per_s[run] * age + self.age_curvature_mm_per_s2[run] * age * age;
+        reading + (self.gain + self.gain_per_s * age) * excess_mm
     }
 
-    /// The least-squares map through the points of `runs` straight runs, one intercept
-    /// per run (the gain and the rate solved on sums centred within each run). Where the
-    /// ages do not vary independently of the excess (a monitor that reads every width at
-    /// one age) the map is `a_r + b·(w − w0)`; `None` when the excess does not vary
-    /// within the runs either.
+    /// The least-squares map through the points of `runs` straight runs: a level, an age
+    /// rate and curvature per run, one gain and gain rate for all (solved on each run's
+    /// centred cross-products with its own age terms partialled out). A run whose widths
+    /// fall at fewer than three ages has the terms they determine and the pooled ones
+    /// for the rest; where the gain's age rate is not determined (every width read at
+    /// one age) it is 0; `None` when the excess does not vary within the runs either.
     fn fit(points: impl Iterator<Item = ContourPoint> + Clone, runs: usize) -> Option<Self> {
-        let mut sums = vec![[0.0; 4]; runs];
-        for p in points.clone() {
-            let s = &mut sums[p.run];
-            *s = [s[0] + 1.0, s[1] + p.excess_mm, s[2] + p.age_s, s[3] + p.width_mm];
-        }
-        let means: Vec<[f64; 3]> = sums.iter().map(|s| [s[1] / s[0], s[2] / s[0], s[3] / s[0]]).collect();
-        let (mut sxx, mut sxa, mut saa, mut sxy, mut say) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for p in points {
-            let m = means[p.run];
-            let (x, age, y) = (p.excess_mm - m[0], p.age_s - m[1], p.width_mm - m[2]);
-            sxx += x * x;
-            sxa += x * age;
-            saa += age * age;
-            sxy += x * y;
-            say += age * y;
-        }
-        let det = sxx * saa - sxa * sxa;
-        let (gain, age_mm_per_s) = if det > 1e-9 * sxx * saa && det > 0.0 {
-            ((saa * sxy - sxa * say) / det, (sxx * say - sxa * sxy) / det)
+        let (count, age_sum) = points.clone().fold((0.0, 0.0), |(n, s), p| (n + 1.0, s + p.age_s));
+        let reference_age_s = age_sum / count;
+        let moments = run_moments(points, runs, reference_age_s);
+        let pooled = |i: usize, j: usize| moments.iter().map(|m| m.without_age(i, j)).sum::<f64>();
+        let (sxx, sxu, suu) = (pooled(EXCESS, EXCESS), pooled(EXCESS, EXCESS_AGE), pooled(EXCESS_AGE, EXCESS_AGE));
+        let (sxy, suy) = (pooled(EXCESS, WIDTH), pooled(EXCESS_AGE, WIDTH));
+        let det = sxx * suu - sxu * sxu;
+        let (gain, gain_per_s) = if det > 1e-9 * sxx * suu && det > 0.0 {
+            ((suu * sxy - sxu * suy) / det, (sxx * suy - sxu * sxy) / det)
         } else if sxx > 0.0 {
             (sxy / sxx, 0.0)
         } else {
             return None;
         };
-        let level = |m: &[f64; 3]| m[2] - gain * m[0] - age_mm_per_s * m[1];
-        let n: f64 = sums.iter().map(|s| s[0]).sum();
-        let pooled = sums.iter().zip(&means).filter(|(s, _)| s[0] > 0.0).map(|(s, m)| s[0] * level(m)).sum::<f64>() / n;
-        let intercepts_mm: Vec<f64> =
-            sums.iter().zip(&means).map(|(s, m)| if s[0] > 0.0 { level(m) } else { pooled }).collect();
-        let finite = [pooled, gain, age_mm_per_s].iter().all(|v| v.is_finite());
-        (finite && intercepts_mm.iter().all(|v| v.is_finite())).then_some(Self { intercepts_mm, gain, age_mm_per_s })
+        // Each run's own age terms: what its widths leave after the gain's part.
+        let own: Vec<Option<(f64, f64)>> = moments
+            .iter()
+            .map(|m| m.age_fit(|k| m.cross[k][WIDTH] - gain * m.cross[k][EXCESS] - gain_per_s * m.cross[k][EXCESS_AGE]))
+            .collect();
+        let with_own = || moments.iter().zip(&own).filter_map(|(m, o)| o.map(|o| (m, o)));
+        let pooled_rate = weighted_mean(with_own().map(|(m, o)| (m.n, o.0)));
+        let pooled_curvature =
+            weighted_mean(with_own().filter(|(m, _)| m.age_terms() == AgeTerms::Curved).map(|(m, o)| (m.n, o.1)));
+        let (rates, curvatures): (Vec<f64>, Vec<f64>) = moments
+            .iter()
+            .zip(&own)
+            .map(|(m, o)| match (m.age_terms(), o) {
+                (AgeTerms::Curved, Some(o)) => *o,
+                (AgeTerms::Rate, Some(o)) => (o.0, 0.0),
+                _ => (pooled_rate, pooled_curvature),
+            })
+            .unzip();
+        let level = |m: &RunMoments, rate: f64, curvature: f64| {
+            let reading = m.mean[WIDTH] - rate * m.mean[AGE] - curvature * m.mean[AGE2];
+            reading - gain * m.mean[EXCESS] - gain_per_s * m.mean[EXCESS_AGE]
+        };
+        let runs_levels = moments.iter().zip(rates.iter().zip(&curvatures));
+        let seen = || runs_levels.clone().filter(|(m, _)| m.n > 0.0);
+        let pooled_level = seen().map(|(m, (&r, &q))| m.n * level(m, r, q)).sum::<f64>() / count;
+        let levels_mm: Vec<f64> =
+            runs_levels.clone().map(|(m, (&r, &q))| if m.n > 0.0 { level(m, r, q) } else { pooled_level }).collect();
+        let map = Self {
+            levels_mm,
+            age_mm_per_s: rates,
+            age_curvature_mm_per_s2: curvatures,
+            gain,
+            gain_per_s,
+            reference_age_s,
+            pooled_age_mm_per_s: pooled_rate,
+        };
+        map.is_finite().then_some(map)
     }
+
+    /// Whether every level, rate and gain is finite.
+    fn is_finite(&self) -> bool {
+        [self.gain, self.gain_per_s, self.reference_age_s, self.pooled_age_mm_per_s]
+            .iter()
+            .chain(&self.levels_mm)
+            .chain(&self.age_mm_per_s)
+            .chain(&self.age_curvature_mm_per_s2)
+            .all(|v| v.is_finite())
+    }
+}
+
+/// The mean of `(weight, value)` pairs (0 when they weigh nothing).
+fn weighted_mean(pairs: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (weight, sum) = pairs.fold((0.0, 0.0), |(w, s), (n, v)| (w + n, s + n * v));
+    if weight > 0.0 {
+        sum / weight
+    } else {
+        0.0
+    }
+}
+
+/// Each run's [`RunMoments`] of `points` (two passes: means, then centred products).
+fn run_moments(
+    points: impl Iterator<Item = ContourPoint> + Clone,
+    runs: usize,
+    reference_age_s: f64,
+) -> Vec<RunMoments> {
+    let mut moments = vec![RunMoments::default(); runs];
+    for p in points.clone() {
+        let m = &mut moments[p.run];
+        m.n += 1.0;
+        for (mean, v) in m.mean.iter_mut().zip(contour_regressors(&p, reference_age_s)) {
+            *mean += v;
+        }
+    }
+    for m in moments.iter_mut().filter(|m| m.n > 0.0) {
+        m.mean = m.mean.map(|s| s / m.n);
+    }
+    for p in points {
+        let m = &mut moments[p.run];
+        let v = contour_regressors(&p, reference_age_s);
+        let d: [f64; REGRESSORS] = std::array::from_fn(|i| v[i] - m.mean[i]);
+        for i in 0..REGRESSORS {
+            for j in 0..REGRESSORS {
+                m.cross[i][j] += d[i] * d[j];
+            }
+        }
+    }
+    moments
 }
 
 impl ThermalModel {
@@ -937,8 +1126,9 @@ impl ThermalModel {
     fn fit_tau_excess(&self, train: &[&ThermalBlock], warm: Option<&ThermalFit>) -> Result<f64, ModelError> {
         let widths: Vec<&WidthObservation> = self.train_widths(train).collect();
         let (scale, run) = (self.record.scales.width_mm, &self.record.run_of_sample);
+        let mut excess = vec![0.0; self.record.flow.commanded_flow_mm3_s.len()];
         let residuals = |x: &[f64], r: &mut [f64]| -> bool {
-            let excess = self.record.flow.width_excess_mm(x[0]);
+            self.record.flow.width_excess_into(x[0], &mut excess);
             let Some(contour) = self.contour_map(train, &excess) else { return false };
             for (ri, w) in r.iter_mut().zip(&widths) {
                 *ri = (w.width_mm - contour.width_mm(run[w.sample], excess[w.sample], w.age_s)) / scale;
@@ -1060,7 +1250,7 @@ impl Model for ThermalModel {
 
     fn estimates(&self, fit: &ThermalFit) -> Vec<f64> {
         let mut out = match &fit.contour {
-            Some(c) => vec![c.gain, c.age_mm_per_s],
+            Some(c) => vec![c.gain, c.gain_per_s, c.pooled_age_mm_per_s],
             None => vec![f64::NAN; CONTOUR.len()],
         };
         for &m in &fit.active {
@@ -1160,11 +1350,14 @@ mod tests {
                 temps.push(TemperatureObservation { layer: n, sample: k, t_s, temp_c: probe.reading(c, s_n) });
                 if speed[k] >= 19.0 {
                     let wobble = 1e-4 * (((k * 11 + n * 7) % 5) as f64 - 2.0);
-                    // Frames of every age: the contour contracts by 0.18 mm/s as the bead cools;
-                    // each straight run reads a few micrometres off the others.
+                    // Frames of every age: the contour contracts as the bead cools, each
+                    // straight run at its own rate and a few micrometres off the others,
+                    // and its gain grows with the age.
                     let age_s = 0.04 + 0.02 * ((k / 25 + n * 3) % 7) as f64;
-                    let level_mm = W0_MM + run_level_mm(probe.run_of_sample[k]);
-                    let width_mm = level_mm + 1.1 * excess[k] - 0.18 * age_s + wobble;
+                    let run = probe.run_of_sample[k];
+                    let level_mm = W0_MM + run_level_mm(run) + run_age_mm_per_s(run) * age_s;
+                    let gain = 1.1 + SYNTHETIC_GAIN_PER_S * (age_s - SYNTHETIC_MEAN_AGE_S);
+                    let width_mm = level_mm + gain * excess[k] + wobble;
                     widths.push(WidthObservation { layer: n, sample: k, width_mm, age_s });
                 }
             }
@@ -1176,6 +1369,16 @@ mod tests {
     fn run_level_mm(run: usize) -> f64 {
         0.002 + 0.003 * ((run % 3) as f64 - 1.0)
     }
+
+    /// The synthetic print's contour age rate on straight run `run`, mm/s.
+    fn run_age_mm_per_s(run: usize) -> f64 {
+        -0.18 + 0.02 * ((run % 3) as f64 - 1.0)
+    }
+
+    /// How fast the synthetic print's contour gain grows with the age, 1/s, and the mean
+    /// of its ages (0.04 + 0.02·j, j = 0..6, equally often over the layers), s.
+    const SYNTHETIC_GAIN_PER_S: f64 = 0.8;
+    const SYNTHETIC_MEAN_AGE_S: f64 = 0.1;
 
     /// The record of `shape`'s print (its path, flow and temperatures) with these observations.
     fn with_observations(
@@ -1242,13 +1445,20 @@ mod tests {
         let record = synthetic(2, 0.0, 0.0, None, 0.0);
         assert_eq!((record.runs, record.run_of_sample[10], record.run_of_sample[50]), (5, 0, 1));
         for run in 1..record.runs {
-            assert!((contour.intercepts_mm[run] - W0_MM - run_level_mm(run)).abs() < 1e-3, "{contour:?}");
+            // The map's level is the run's reading at the reference age.
+            let level_mm = W0_MM + run_level_mm(run) + run_age_mm_per_s(run) * contour.reference_age_s;
+            assert!((contour.levels_mm[run] - level_mm).abs() < 1e-3, "{contour:?}");
+            assert!((contour.age_mm_per_s[run] - run_age_mm_per_s(run)).abs() < 2e-3, "{contour:?}");
+            assert!(contour.age_curvature_mm_per_s2[run].abs() < 0.05, "{contour:?}");
         }
-        assert!((contour.gain - 1.1).abs() < 0.01 && (contour.age_mm_per_s + 0.18).abs() < 0.002, "{contour:?}");
+        assert!((contour.gain - 1.1).abs() < 0.01, "{contour:?}");
+        assert!((contour.gain_per_s - SYNTHETIC_GAIN_PER_S).abs() < 0.05, "{contour:?}");
+        assert!((contour.reference_age_s - SYNTHETIC_MEAN_AGE_S).abs() < 0.005, "{contour:?}");
         // The extension lists the baseline's contour parameters first, then the mechanism's.
         let model = ThermalModel::new(synthetic(2, 0.0, 0.0, None, 0.0));
-        assert_eq!(model.estimates(&fit), vec![contour.gain, contour.age_mm_per_s, fit.tau_excess]);
-        assert_eq!(model.params().len() + TAU.len(), 3);
+        let contour_params = vec![contour.gain, contour.gain_per_s, contour.pooled_age_mm_per_s];
+        assert_eq!(model.estimates(&fit), [contour_params, vec![fit.tau_excess]].concat());
+        assert_eq!(model.params().len() + TAU.len(), 4);
     }
 
     /// Held-out squared error of `group` under `fit`, over all its observations (fits
@@ -1427,25 +1637,49 @@ mod tests {
     }
 
     #[test]
-    fn the_contour_map_is_exact_on_a_plane_and_a_line_when_the_ages_do_not_vary() {
-        let plane = |run: usize, x: f64, age: f64| [0.44, 0.47][run] + 1.2 * x - 0.2 * age;
+    fn the_contour_map_is_exact_on_its_surface_and_a_line_when_the_ages_do_not_vary() {
         let point =
             |run: usize, excess_mm: f64, age_s: f64, width_mm: f64| ContourPoint { run, excess_mm, age_s, width_mm };
-        let points: Vec<ContourPoint> =
-            [(0, 0.0, 0.05), (0, -0.1, 0.1), (1, 0.05, 0.15), (1, -0.02, 0.07), (1, 0.0, 0.0)]
-                .iter()
-                .map(|&(r, x, a)| point(r, x, a, plane(r, x, a)))
-                .collect();
+        let cells = [
+            (0, 0.0, 0.05),
+            (0, -0.1, 0.1),
+            (0, -0.04, 0.15),
+            (0, 0.02, 0.08),
+            (0, -0.07, 0.03),
+            (1, 0.05, 0.15),
+            (1, -0.02, 0.07),
+            (1, 0.0, 0.0),
+            (1, -0.06, 0.12),
+            (1, -0.03, 0.04),
+        ];
+        let mean_age = cells.iter().map(|c| c.2).sum::<f64>() / cells.len() as f64;
+        let (levels, rates, curvatures) = ([0.44, 0.47], [-0.2, -0.15], [0.5, -0.3]);
+        let surface = |run: usize, x: f64, age_s: f64| {
+            let age = age_s - mean_age;
+            levels[run] + rates[run] * age + curvatures[run] * age * age + (1.2 + 0.7 * age) * x
+        };
+        let points: Vec<ContourPoint> = cells.iter().map(|&(r, x, a)| point(r, x, a, surface(r, x, a))).collect();
         let map = ContourMap::fit(points.iter().copied(), 3).unwrap();
-        assert!((map.intercepts_mm[0] - 0.44).abs() < 1e-12 && (map.intercepts_mm[1] - 0.47).abs() < 1e-12, "{map:?}");
-        assert!((map.gain - 1.2).abs() < 1e-12 && (map.age_mm_per_s + 0.2).abs() < 1e-12, "{map:?}");
-        assert!((map.width_mm(1, 0.01, 0.1) - plane(1, 0.01, 0.1)).abs() < 1e-12);
-        // A run with no points reads at the pooled level (two points at 0.44, three at 0.47).
-        assert!((map.intercepts_mm[2] - (2.0 * 0.44 + 3.0 * 0.47) / 5.0).abs() < 1e-12, "{map:?}");
-        // One age: the line, the age's part in its intercept.
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        for run in 0..2 {
+            assert!(close(map.levels_mm[run], levels[run]) && close(map.age_mm_per_s[run], rates[run]), "{map:?}");
+            assert!(close(map.age_curvature_mm_per_s2[run], curvatures[run]), "{map:?}");
+        }
+        assert!(close(map.gain, 1.2) && close(map.gain_per_s, 0.7) && close(map.reference_age_s, mean_age), "{map:?}");
+        assert!(close(map.width_mm(1, 0.01, 0.1), surface(1, 0.01, 0.1)));
+        // A run with no points reads with the runs' rates and curvatures pooled, weighted
+        // by their widths (five each).
+        assert!(close(map.pooled_age_mm_per_s, -0.175) && close(map.age_mm_per_s[2], -0.175), "{map:?}");
+        assert!(close(map.age_curvature_mm_per_s2[2], 0.1), "{map:?}");
+        // One age: the line, the age's part in its level, no rate.
         let line = [(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)].map(|(x, y)| point(0, x, 0.1, y));
         let line = ContourMap::fit(line.into_iter(), 1).unwrap();
-        assert_eq!((line.intercepts_mm[0], line.gain, line.age_mm_per_s), (1.0, 2.0, 0.0));
+        assert_eq!((line.levels_mm[0], line.gain, line.gain_per_s, line.age_mm_per_s[0]), (1.0, 2.0, 0.0, 0.0));
+        // Two ages on a run: its level and rate, no curvature.
+        let two =
+            [(0.0, 0.1, 1.0), (1.0, 0.2, 2.9), (0.5, 0.1, 2.0), (0.0, 0.2, 0.9)].map(|(x, a, y)| point(0, x, a, y));
+        let two = ContourMap::fit(two.into_iter(), 1).unwrap();
+        assert!(close(two.age_curvature_mm_per_s2[0], 0.0) && close(two.age_mm_per_s[0], -1.0), "{two:?}");
         // The excess varies between the runs only: nothing within a run fixes the gain.
         let flat = [point(0, 1.0, 0.1, 1.0), point(1, 2.0, 0.2, 3.0)];
         assert!(ContourMap::fit(flat.into_iter(), 2).is_none());

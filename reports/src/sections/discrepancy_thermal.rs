@@ -97,7 +97,8 @@ impl Stage for DiscrepancyThermalSection {
         name: "report.discrepancy_thermal",
         // 11: the method paragraph says the contour map has a level per straight run, and
         //     why the test asks for a gain worth naming without the τ-like departure.
-        version: 11,
+        // 12: the contour map's quadratic in the age per straight run and gain growing with the age.
+        version: 12,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -159,10 +160,12 @@ left out); each trajectory sample's centre temperature, the bead's temperature o
 at the feed speed, away from every corner and from the seam where each layer starts on the previous one's stop, in frames with a capture-time estimate. The \
 baseline predicts a zero offset; for every layer, the centre temperatures the other layers read at the same sample; and on a straight run the width of the \
 lagged flow spread over the path, read through a contour map fitted to the training layers: a thinner bead holds less heat, so its threshold contour shrinks \
-more than its deposit, and a cooling bead's contour contracts with its age when its frame is taken, which varies along every straight run with where the \
-frames fall (the camera trails the nozzle); the map is linear in the bead's width and in that age, with a level of its own on each straight run \
-(the camera rides on the head without turning with it, so each run's bead lies at its own place and direction in the image, where the image's blur, its \
-pixels' footprint and the small errors of the fitted mount read a straight bead a little wider or narrower, the same in every layer). Five named mechanisms extend it — a constant camera \
+more than its deposit, the more so the older the bead (its heat spreads as it ages), and a cooling bead's contour contracts with its age when its frame is \
+taken, which varies along every straight run with where the frames fall (the camera trails the nozzle); the map is linear in the bead's width, with a gain \
+that grows linearly with that age, and has on each straight run a level of its own and a quadratic curve in the age (the camera rides on the head without \
+turning with it, so each run's bead lies at its own place and direction in the image, where the image's blur, its pixels' footprint and the small errors of \
+the fitted mount read a straight bead a little wider or narrower, the same in every layer, and an older bead lies farther behind the nozzle along the run's \
+own direction in the image, where the tilted camera's blur and footprint change across the field). Five named mechanisms extend it — a constant camera \
 latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
 excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
 layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \

@@ -104,7 +104,8 @@ impl Stage for ControlGainStage {
         // 3: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
         // 4: the contour map knows the bead's age and the seam is no straight run.
         // 5: the contour map has a level per straight run.
-        version: 5,
+        // 6: the contour map has a quadratic in the age per straight run and a gain growing with the age.
+        version: 6,
         summary: "Prints with a flow τ off the nominal, compensated (eqs 31-39) with the paper's τ and with the τ the discrepancy engine fitted, re-printed and scored (eqs 40-41) → control_gain.parquet, control_trials.parquet",
         implements: "paper 003 eqs 31-41 (Secs 2.4, 3.3) with the discrepancy engine's extended model (DESIGN §7; evaluation)",
         inputs: &[],

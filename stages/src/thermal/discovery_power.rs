@@ -109,7 +109,8 @@ impl Stage for DiscoveryPowerStage {
         // 4: layer_heat_accumulation is fitted with a weak prior on the first carried excess.
         // 5: the contour map knows the bead's age and the seam is no straight run.
         // 6: the contour map has a level per straight run.
-        version: 6,
+        // 7: the contour map has a quadratic in the age per straight run and a gain growing with the age.
+        version: 7,
         summary: "Power study of the discrepancy engine on virtual thermal sequences: each effect hidden at a grid of strengths, plus null prints, monitored and scored against the printer's truth → power.parquet, power_draws.parquet",
         implements: "DESIGN §7 (tests that hide an effect and require finding it), on paper 003's capture-time and layer models",
         inputs: &[],

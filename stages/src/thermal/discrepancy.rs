@@ -107,7 +107,8 @@ impl Stage for DiscrepancyStage {
         // 7: the contour map knows the bead's age, the seam is no straight run, and
         //    causes.parquet has the test's min_gain_pct.
         // 8: the contour map has a level per straight run.
-        version: 8,
+        // 9: the contour map has a quadratic in the age per straight run and a gain growing with the age.
+        version: 9,
         summary: "What eq. 28's capture times, the paper's layer-invariant printing and eq. 34's flow get wrong about the monitor's frames, centre temperatures and straight-run widths, the cause named among 5 mechanisms, the extended model and its held-out gain → residuals, causes, extension, gain (.parquet)",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34, over thermal.monitor's frames.parquet and widths.parquet",
         inputs: &[PRINTS],
