@@ -935,8 +935,9 @@ impl RunMoments {
         }
     }
 
-    /// The run's own age coefficients (rate, curvature) that fit `y(j) = C[age-term][j]`,
-    /// the cross-products of its age terms with the remaining regressors' combination.
+    /// The run's own age coefficients (rate, curvature) that explain `y(k)`, the centred
+    /// cross-products of its age terms `k` (`AGE`, `AGE2`) with what they should explain;
+    /// `None` when its widths share one age.
     fn age_fit(&self, y: impl Fn(usize) -> f64) -> Option<(f64, f64)> {
         let c = &self.cross;
         match self.age_terms() {
@@ -973,9 +974,10 @@ impl ContourMap {
     /// The least-squares map through the points of `runs` straight runs: a level, an age
     /// rate and curvature per run, one gain and gain rate for all (solved on each run's
     /// centred cross-products with its own age terms partialled out). A run whose widths
-    /// fall at fewer than three ages has the terms they determine and the pooled ones
-    /// for the rest; where the gain's age rate is not determined (every width read at
-    /// one age) it is 0; `None` when the excess does not vary within the runs either.
+    /// fall at two ages has a rate and no curvature, one whose widths share one age (or
+    /// that has none) the runs' pooled rate and curvature; where the gain's age rate is
+    /// not determined (every width read at one age) it is 0; `None` when the excess does
+    /// not vary within the runs either.
     fn fit(points: impl Iterator<Item = ContourPoint> + Clone, runs: usize) -> Option<Self> {
         let (count, age_sum) = points.clone().fold((0.0, 0.0), |(n, s), p| (n + 1.0, s + p.age_s));
         let reference_age_s = age_sum / count;
