@@ -1075,8 +1075,16 @@ fn run_moments(
         let v = contour_regressors(&p, reference_age_s);
         let d: [f64; REGRESSORS] = std::array::from_fn(|i| v[i] - m.mean[i]);
         for i in 0..REGRESSORS {
-            for j in 0..REGRESSORS {
+            for j in i..REGRESSORS {
                 m.cross[i][j] += d[i] * d[j];
+            }
+        }
+    }
+    // The products were summed on and above the diagonal only; mirror them below.
+    for m in moments.iter_mut() {
+        for i in 1..REGRESSORS {
+            for j in 0..i {
+                m.cross[i][j] = m.cross[j][i];
             }
         }
     }
