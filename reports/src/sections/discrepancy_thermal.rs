@@ -98,7 +98,9 @@ impl Stage for DiscrepancyThermalSection {
         // 11: the method paragraph says the contour map has a level per straight run, and
         //     why the test asks for a gain worth naming without the τ-like departure.
         // 12: the contour map's quadratic in the age per straight run and gain growing with the age.
-        version: 12,
+        // 13: the method told in paragraphs and lists (the measurements, the contour map,
+        //     the candidates, the test, what has no candidate, the intervals).
+        version: 13,
         summary: "What the capture-time, layer and flow models get wrong about the thermal monitor's measurements, the cause named, the extension, its gain and the compensation it gives → section.html, comparison.parquet",
         implements: "DESIGN §7 on paper 003's eq. 28, layer model and eq. 34; eqs 31-41 with the extended model",
         inputs: &[DISCREPANCY, STUDIES],
@@ -154,33 +156,40 @@ and a real printer always has some (the virtual printer's own bead recovers from
     format!(
         "<p>Paper 003 localises every frame by the time it was recorded (eq. 28: the true capture time is the recorded one plus a small, zero-mean \
 fluctuation), prints and measures every layer the same way, on a substrate at the bed temperature, and models the flow that reaches the nozzle as the command \
-through a first-order lag with its identified τ (eq. 34). Three of the monitor's measurements test that: each localised frame's capture offset, its capture \
-time estimated by eq. 30 minus its recorded time (eq. 30's search window widened so that a delay is not cut off; frames at its edge and repeated images are \
-left out); each trajectory sample's centre temperature, the bead's temperature on the path at the measuring age; and the bead width on the straight runs, read \
-at the feed speed, away from every corner and from the seam where each layer starts on the previous one's stop, in frames with a capture-time estimate. The \
-baseline predicts a zero offset; for every layer, the centre temperatures the other layers read at the same sample; and on a straight run the width of the \
-lagged flow spread over the path, read through a contour map fitted to the training layers: a thinner bead holds less heat, so its threshold contour shrinks \
-more than its deposit, the more so the older the bead (its heat spreads as it ages), and a cooling bead's contour contracts with its age when its frame is \
-taken, which varies along every straight run with where the frames fall (the camera trails the nozzle); the map is linear in the bead's width, with a gain \
-that grows linearly with that age, and has on each straight run a level of its own and a quadratic curve in the age (the camera rides on the head without \
-turning with it, so each run's bead lies at its own place and direction in the image, where the image's blur, its pixels' footprint and the small errors of \
-the fitted mount read a straight bead a little wider or narrower, the same in every layer, and an older bead lies farther behind the nozzle along the run's \
-own direction in the image, where the tilted camera's blur and footprint change across the field). Five named mechanisms extend it — a constant camera \
-latency, a camera clock running at another rate, a fraction of each layer's residual heat carried into the next layer's substrate (read through the bead's \
-excess over its substrate, which decays alike whatever the substrate's temperature; with a weak prior on the first carried excess, because without \
-layer 0 the other layers hardly say how much warmer than the bed they all are), a substrate warming by a fixed amount per layer, and a flow time constant \
-other than the nominal; the second and the fourth are not in the virtual printer. Residuals are in noise standard deviations: each observation is divided by \
-its kind's noise scale, estimated from differences no candidate explains, and each candidate is scored on the kind of observation it moves. The residual figures and the structure shares below show each kind against its own variables: \
-the capture offsets against the layer and the recorded time, the centre temperatures against the layer and the time, the widths against the layer, the time since \
-the head last left a corner's slow-down and the bead's age when its frame was taken. A group is a whole \
-filmed layer with its frames (a layer carries its own random state, which blocks of it would share); each held-out layer contributes the log ratio of its \
-squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down holds the family-wise false-alarm rate \
-of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named.{} The printer's effects at the corners (wider heat diffusion, \
-melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge differs from the widths of eqs 5-11 by far more than they change \
-it, even on a print without them, so they need a model of the contour first. Parameter intervals are delete-one-layer jackknife intervals: they measure how \
-the layers disagree, and the power study's coverage column checks them against what the printer did. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) \
-share no part of their error across the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across \
-prints. A print's gain is over the kinds of observation its named causes move, its interval a bootstrap over layers.</p>\n",
+through a first-order lag with its identified τ (eq. 34). Three of the monitor's measurements test that:</p>\n<ul>\n\
+<li><em>capture offsets</em>: each localised frame's capture time estimated by eq. 30 minus its recorded time (eq. 30's search window widened so that a delay \
+is not cut off; frames at its edge and repeated images are left out); the baseline predicts zero;</li>\n\
+<li><em>centre temperatures</em>: each trajectory sample's temperature on the path at the measuring age; the baseline predicts, for every layer, what the \
+other layers read at the same sample;</li>\n\
+<li><em>bead widths</em> on the straight runs, read at the feed speed, away from every corner and from the seam where each layer starts on the previous \
+one's stop, in frames with a capture-time estimate; the baseline predicts the width of the lagged flow spread over the path, read through a contour map \
+fitted to the training layers.</li>\n</ul>\n\
+<p>The contour map is linear in the bead's width, with a gain that grows linearly with the bead's age when its frame is taken: a thinner bead holds less \
+heat, so its threshold contour shrinks more than its deposit, the more so the older the bead (its heat spreads as it ages). On each straight run it has a \
+level of its own and a quadratic curve in that age. The camera rides on the head without turning with it, so each run's bead lies at its own place and \
+direction in the image, where the image's blur, its pixels' footprint and the small errors of the fitted mount read a straight bead a little wider or \
+narrower, the same in every layer; and a cooling bead's contour contracts with its age, which varies along every run with where the frames fall (the \
+camera trails the nozzle), while an older bead lies farther behind the nozzle along the run's own direction in the image, where the tilted camera's blur \
+and footprint change across the field.</p>\n\
+<p>Five named mechanisms extend the baseline (the second and the fourth are not in the virtual printer):</p>\n<ul>\n\
+<li>a constant camera latency;</li>\n<li>a camera clock running at another rate;</li>\n\
+<li>a fraction of each layer's residual heat carried into the next layer's substrate, read through the bead's excess over its substrate, which decays \
+alike whatever the substrate's temperature (with a weak prior on the first carried excess, because without layer 0 the other layers hardly say how much \
+warmer than the bed they all are);</li>\n\
+<li>a substrate warming by a fixed amount per layer;</li>\n<li>a flow time constant other than the nominal.</li>\n</ul>\n\
+<p>Residuals are in noise standard deviations: each observation is divided by its kind's noise scale, estimated from differences no candidate explains, \
+and each candidate is scored on the kind of observation it moves. The residual figures and the structure shares below show each kind against its own \
+variables: the capture offsets against the layer and the recorded time, the centre temperatures against the layer and the time, the widths against the \
+layer, the time since the head last left a corner's slow-down and the bead's age when its frame was taken.</p>\n\
+<p>A group is a whole filmed layer with its frames (a layer carries its own random state, which blocks of it would share). Each held-out layer \
+contributes the log ratio of its squared error before and after, a one-sided sign-flip test over layers gives each candidate a p-value, Holm's step-down \
+holds the family-wise false-alarm rate of a round at α = {alpha}, and the significant candidate with the largest held-out gain is named.{}</p>\n\
+<p>The printer's effects at the corners (wider heat diffusion, melt squeezed out) have no candidate: near a corner the threshold contour of the hot bulge \
+differs from the widths of eqs 5-11 by far more than they change it, even on a print without them, so they need a model of the contour first.</p>\n\
+<p>Parameter intervals are delete-one-layer jackknife intervals: they measure how the layers disagree, and the power study's coverage column checks them \
+against what the printer did. The camera delay's interval assumes that the monitor's capture-time estimates (eq. 30) share no part of their error across \
+the layers of a print, which a jackknife over the print's layers could not see; the same column checks it across prints. A print's gain is over the kinds \
+of observation its named causes move, its interval a bootstrap over layers.</p>\n",
         worth_naming
     )
 }
