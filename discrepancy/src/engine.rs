@@ -312,6 +312,15 @@ fn check_inputs<M: Model>(model: &M, groups: &[M::Group], start: &[usize]) -> Re
     if let Some(g) = groups.iter().position(|g| g.observed().len() < 4) {
         return Err(EngineError::Data(format!("group {g} has fewer than 4 samples")));
     }
+    // Squared errors are summed per group: values whose squares overflow would turn
+    // every score into inf/inf and every sign-flip test into nonsense.
+    if let Some(g) = groups.iter().position(|g| !g.observed().iter().map(|y| y * y).sum::<f64>().is_finite()) {
+        return Err(EngineError::Data(format!(
+            "group {g} (number {} of the {} in the order given) has an observed value that is not finite or too large to square and sum",
+            g + 1,
+            groups.len()
+        )));
+    }
     if let Some(&c) = start.iter().find(|&&c| c >= model.candidates().len()) {
         return Err(EngineError::Data(format!("start mechanism {c} is not a candidate")));
     }
@@ -342,6 +351,11 @@ pub fn cross_validate<M: Model>(
         .zip(groups)
         .map(|((_, p), g)| p.iter().zip(g.observed()).map(|(p, y)| (p - y).powi(2)).sum())
         .collect();
+    if let Some(k) = sse.iter().position(|e| !e.is_finite()) {
+        return Err(ModelError::Predict(format!(
+            "held-out group {k}: the sum of squared errors overflows (predictions far from the observed values)"
+        )));
+    }
     let samples = groups.iter().map(|g| g.observed().len()).collect();
     let (folds, predictions) = folds.into_iter().unzip();
     Ok(HeldOut { active: active.to_vec(), folds, predictions, sse, samples })
@@ -671,6 +685,72 @@ mod tests {
         assert_eq!(below.named, vec![TREND], "{:?}", below.rounds);
         assert!(Settings { min_gain_pct: 100.0, ..settings(6) }.check().is_err());
         assert!(Settings { min_gain_pct: -1.0, ..settings(6) }.check().is_err());
+    }
+
+    #[test]
+    fn a_value_whose_square_overflows_is_a_data_error_naming_its_group() {
+        let mut groups = draw(9, 100, 0.05, 0.5, Hidden::default(), 5);
+        groups[2].y[7] = 1e300;
+        let err = discover(&Toy, &groups, &[], &settings(5)).unwrap_err();
+        assert!(
+            matches!(err, EngineError::Data(_))
+                && err.to_string().contains("group 2 (number 3 of the 9 in the order given)"),
+            "{err}"
+        );
+    }
+
+    /// The toy, except that with the trend active it predicts far beyond the data
+    /// (finite, but with squared errors that overflow).
+    struct FarTrend;
+
+    impl Model for FarTrend {
+        type Group = <Toy as Model>::Group;
+        type Fit = <Toy as Model>::Fit;
+        fn name(&self) -> &'static str {
+            Toy.name()
+        }
+        fn params(&self) -> &'static [crate::Parameter] {
+            Toy.params()
+        }
+        fn candidates(&self) -> &[&'static dyn crate::Mechanism] {
+            Toy.candidates()
+        }
+        fn variables(&self) -> &[crate::Variable] {
+            Toy.variables()
+        }
+        fn variable_values(&self, group: &Self::Group, variable: usize) -> Vec<f64> {
+            Toy.variable_values(group, variable)
+        }
+        fn fit(
+            &self,
+            active: &[usize],
+            train: &[&Self::Group],
+            warm: Option<&Self::Fit>,
+        ) -> Result<Self::Fit, ModelError> {
+            Toy.fit(active, train, warm)
+        }
+        fn predict(
+            &self,
+            fit: &Self::Fit,
+            group: &Self::Group,
+            calibrate: Option<&[bool]>,
+        ) -> Result<Vec<f64>, ModelError> {
+            let predicted = Toy.predict(fit, group, calibrate)?;
+            Ok(if fit.has(TREND) { vec![1e200; predicted.len()] } else { predicted })
+        }
+        fn estimates(&self, fit: &Self::Fit) -> Vec<f64> {
+            Toy.estimates(fit)
+        }
+    }
+
+    #[test]
+    fn a_candidate_whose_squared_errors_overflow_fails_and_is_not_named() {
+        let groups = draw(9, 100, 0.05, 0.5, Hidden { slope: 0.3, ..Hidden::default() }, 7);
+        let d = discover(&FarTrend, &groups, &[], &settings(7)).unwrap();
+        let trend = d.rounds[0].candidates.iter().find(|c| c.mechanism == TREND).unwrap();
+        let failure = trend.failure.as_deref().unwrap_or_default();
+        assert!(failure.contains("overflows") && !trend.named && trend.p_value == 1.0, "{trend:?}");
+        assert!(d.rounds.iter().all(|r| r.candidates.iter().all(|c| c.p_value > 0.0)));
     }
 
     #[test]

@@ -103,6 +103,11 @@ fn shape(c: usize, x: f64) -> f64 {
 }
 
 impl ToyFit {
+    /// Whether candidate `c` is active in this fit.
+    pub(crate) fn has(&self, c: usize) -> bool {
+        self.active.contains(&c)
+    }
+
     fn smooth_part(&self, x: f64) -> f64 {
         self.shared[0] + self.shared[1] * shape(TREND, x) + self.shared[2] * shape(BOW, x)
     }

@@ -132,9 +132,14 @@ pub(crate) fn read_printers(inputs: Vec<&InputArtifact>) -> Result<Vec<(String, 
     Ok(printers)
 }
 
-/// An engine failure as a stage error naming the printer.
+/// An engine failure as a stage error naming the printer and what the engine's groups are.
 pub(crate) fn engine_failed(printer: &str, err: impl std::fmt::Display) -> StageError {
-    StageError::Domain(format!("discrepancy engine on printer `{printer}`: {err}").into())
+    StageError::Domain(
+        format!(
+            "discrepancy engine on printer `{printer}` (its groups are its lines, in the order of lines.csv): {err}"
+        )
+        .into(),
+    )
 }
 
 /// The `start_blob` parameter, checked against the printers present.
