@@ -14,6 +14,7 @@ use std::path::Path;
 
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
+use crate::limits::{MAX_BEAD_WIDTH_MM, MAX_LINE_LENGTH_MM};
 use crate::manifest::{DatasetManifest, MANIFEST_FILE};
 use crate::paths::{file_in, referenced_file};
 
@@ -137,6 +138,7 @@ fn read_line(
         jerk_mm_s: positive(4)?,
         length_mm: positive(5)?,
     };
+    check_length(motion.length_mm).map_err(|e| table.field_error(row.0, cols[5], e))?;
     if motion.jerk_mm_s > motion.feed_mm_s {
         return Err(table.field_error(row.0, cols[4], "expected a jerk (start) speed no larger than the feed"));
     }
@@ -170,7 +172,20 @@ pub fn check_sample(previous_mm: Option<f64>, x_mm: f64, w_mm: f64, length_mm: f
     if w_mm <= 0.0 {
         return Err(SampleProblem::Width(format!("expected a positive width, got {w_mm}")));
     }
+    if w_mm > MAX_BEAD_WIDTH_MM {
+        return Err(SampleProblem::Width(format!("expected a width of at most {MAX_BEAD_WIDTH_MM} mm, got {w_mm:e}")));
+    }
     Ok(())
+}
+
+/// Checks a line's `length_mm` against [`MAX_LINE_LENGTH_MM`] (its sign is checked
+/// where it is read).
+pub(crate) fn check_length(length_mm: f64) -> Result<(), String> {
+    if length_mm <= MAX_LINE_LENGTH_MM {
+        Ok(())
+    } else {
+        Err(format!("expected a line length of at most {MAX_LINE_LENGTH_MM} mm, got {length_mm:e}"))
+    }
 }
 
 /// Reads a `position_mm,width_mm` file and checks every measurement ([`check_sample`]).
@@ -244,6 +259,26 @@ mod tests {
         let lines = dir.path().join("lines.csv");
         std::fs::write(&lines, edit(std::fs::read_to_string(&lines).unwrap())).unwrap();
         dir
+    }
+
+    #[test]
+    fn a_line_longer_than_the_limit_or_a_bead_wider_is_refused() {
+        // 1000 km: the models would lay it on a grid of 2·10¹⁰ points.
+        let dir = edited(|text| text.replace(",8,120,", ",8,1e9,"));
+        let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("lines.csv:line 2, field length_mm: expected a line length of at most 10000 mm, got 1e9"),
+            "{err}"
+        );
+        let dir = edited(|text| text);
+        let widths = dir.path().join("widths/S400F3000.csv");
+        let text = std::fs::read_to_string(&widths).unwrap().replace(",0.8", ",1e300");
+        std::fs::write(&widths, text).unwrap();
+        let err = FdmWidthsDataset::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("S400F3000.csv:line 3, field width_mm: expected a width of at most 1000 mm, got 1e300"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -36,6 +36,17 @@ pub const THERMAL_LAYERS: RangeInclusive<usize> = 1..=10_000;
 /// keeps its scans, truth and patterns in about 250 MB.
 pub const INKJET_LAYERS: RangeInclusive<usize> = 1..=1000;
 
+/// Longest line of an `fdm-widths` or `fdm-lines` dataset (`length_mm`): 10 m, above
+/// the beds of large-format extrusion (a few metres). The models lay a line on a
+/// 0.05 mm grid, so it then has 200 000 grid points; a longer one is a unit error
+/// (a line of 1000 km would ask for terabytes).
+pub const MAX_LINE_LENGTH_MM: f64 = 10_000.0;
+
+/// Widest bead of an `fdm-widths` dataset (`width_mm`): 1 m, 20 × the beads of
+/// large-format and construction extrusion (tens of mm). A wider one is a unit or parse
+/// error, and would swamp every squared error the models sum over the line.
+pub const MAX_BEAD_WIDTH_MM: f64 = 1000.0;
+
 /// Largest distance of a `thermal-sequence` position (`path.csv`, `trajectory.csv`)
 /// from the origin along x or y (mm): a 300 mm bed with the origin at its centre or a
 /// corner (the paper's part spans 40 mm). It bounds the grids the analysis lays over

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
-use crate::fdm_widths::LineMotion;
+use crate::fdm_widths::{check_length, LineMotion};
 use crate::limits::{check_size, LINE_IMAGE_PIXELS, LINE_IMAGE_SIDE_PX};
 use crate::manifest::DatasetManifest;
 use crate::paths::{file_in, referenced_file};
@@ -167,6 +167,7 @@ fn read_line(
         jerk_mm_s: positive(6)?,
         length_mm: positive(7)?,
     };
+    check_length(motion.length_mm).map_err(|e| table.field_error(row.0, cols[7], e))?;
     if motion.jerk_mm_s > motion.feed_mm_s {
         return Err(table.field_error(row.0, cols[6], "expected a jerk (start) speed no larger than the feed"));
     }
