@@ -70,4 +70,11 @@ fn unknown_blob_printer_an_unknown_kinematics_rule_and_a_reused_printer_name_are
     std::fs::write(&spec, same).unwrap();
     let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
     assert!(err.contains("new printer") && err.contains("taz6_slow_melt"), "{err}");
+    // Two inputs that are the same printer by name: the second's dataset.toml is named.
+    let again = text
+        .replace("inputs = [\"taz6\", \"taz6_slow_melt\"]", "inputs = [\"taz6\", \"taz6_slow_melt\", \"taz6_again\"]")
+        + "\n[stage.taz6_again]\nkind = \"fdm.import\"\ninputs = [\"fsu_raw\"]\nparams = { printer = \"taz6\" }\n";
+    std::fs::write(&spec, again).unwrap();
+    let err = fails(tmp.path(), &["run", "-q", spec.to_str().unwrap()]);
+    assert!(err.contains("dataset.toml:field printer: expected a printer other than input `taz6`'s, `taz6`"), "{err}");
 }

@@ -234,7 +234,11 @@ fn source_priors<'t>(
     let mut used: Vec<usize> = tasks.flat_map(|t| t.sources.iter().copied()).collect();
     used.sort_unstable();
     used.dedup();
-    used.iter().map(|&s| Ok((s, SourcePrior::build(printers[s].lines, printers[s].params, transfer)?))).collect()
+    let prior = |s: usize| {
+        SourcePrior::build(printers[s].lines, printers[s].params, transfer)
+            .map_err(|e| FitError::Source { printer: printers[s].name.to_string(), error: Box::new(e) })
+    };
+    used.iter().map(|&s| Ok((s, prior(s)?))).collect()
 }
 
 fn check_tasks(printers: &[StudyPrinter], tasks: &[TransferTask]) -> Result<(), FitError> {

@@ -64,6 +64,14 @@ pub enum FitError {
     /// Dimensions of the inputs disagree.
     #[error("dimension mismatch: {0}")]
     Dimension(String),
+    /// A failure on the named source printer's lines (its prior could not be built).
+    #[error("source printer `{printer}`: {error}")]
+    Source {
+        /// The source printer's name.
+        printer: String,
+        /// What failed.
+        error: Box<FitError>,
+    },
     /// A failure another process met and recorded as its text (a work unit of a
     /// spread-out run, e.g. [`GridPart`](super::transfer_cv::GridPart)).
     #[error("{0}")]

@@ -40,6 +40,7 @@ use super::errors::{FitError, ParamError};
 use super::fit::{fit_on_grid, full_grid, SegmentPrior, NP};
 use super::hyperparams::PiecewiseValidParams;
 use super::line::{rmse, MeasuredLine};
+use super::piecewise::PiecewiseCoefficients;
 use super::predict::FittedPiecewise;
 
 /// Number of transferable parameters `(β, γ, c, ρ)`.
@@ -383,7 +384,15 @@ pub fn prior_precision(
     let idx: Vec<usize> = (0..TRANSFER_DIM).filter(|&i| transfer.get().prior_on[i]).collect();
     let m = idx.len();
     let sub = Mat::from_fn(m, m, |i, j| covariance.cov[idx[i]][idx[j]]);
-    let llt = sub.llt(Side::Lower).map_err(|e| FitError::Singular(format!("source covariance: {e:?}")))?;
+    let llt = sub.llt(Side::Lower).map_err(|_| {
+        let variances: Vec<String> =
+            idx.iter().map(|&i| format!("{} {:.2e}", PiecewiseCoefficients::TRANSFER_NAMES[i], covariance.cov[i][i])).collect();
+        FitError::Singular(format!(
+            "Algorithm 1's covariance of the source lines' parameters is singular, so it gives no prior: some parameter \
+             does not vary from line to line, or varies only with the others (variances across the lines: {})",
+            variances.join(", ")
+        ))
+    })?;
     let inv = llt.solve(Mat::<f64>::identity(m, m));
     let mut p = [[0.0; TRANSFER_DIM]; TRANSFER_DIM];
     for (a, &i) in idx.iter().enumerate() {
@@ -547,6 +556,20 @@ mod tests {
     fn random_spd(n: usize, rng: &mut ChaCha8Rng) -> Mat<f64> {
         let m = Mat::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
         Mat::from_fn(n, n, |i, j| (0..n).map(|k| m[(k, i)] * m[(k, j)]).sum::<f64>() + if i == j { 0.5 } else { 0.0 })
+    }
+
+    #[test]
+    fn a_source_parameter_that_does_not_vary_is_named_as_a_singular_covariance() {
+        // Lines of identical steady width c: Algorithm 1's covariance has no variance in c.
+        let per_line: Vec<[f64; TRANSFER_DIM]> =
+            (0..5).map(|k| [0.1 * k as f64, (k * k) as f64, 0.75, -0.02 * (k % 2) as f64]).collect();
+        let covariance = estimate_covariance(&per_line).unwrap();
+        let transfer = TransferParams::paper_defaults().check().unwrap();
+        let err = prior_precision(&covariance, &transfer).unwrap_err().to_string();
+        assert!(err.contains("does not vary from line to line") && err.contains("c_mm 0.00e0"), "{err}");
+        let varied: Vec<[f64; TRANSFER_DIM]> =
+            per_line.iter().enumerate().map(|(k, p)| [p[0], p[1], 0.7 + 0.01 * (k % 3) as f64, p[3]]).collect();
+        assert!(prior_precision(&estimate_covariance(&varied).unwrap(), &transfer).is_ok());
     }
 
     #[test]

@@ -146,8 +146,20 @@ struct Study {
 impl Study {
     fn read(ctx: &StageContext) -> Result<Self, StageError> {
         let p = TransferMatrixParams::from_params(&ctx.params);
-        let lines = (ctx.inputs_of(&PRINTERS).iter().map(|i| PrinterLines::read(&i.dir)))
-            .collect::<Result<Vec<PrinterLines>, _>>()?;
+        let inputs = ctx.inputs_of(&PRINTERS);
+        let lines = (inputs.iter().map(|i| PrinterLines::read(&i.dir))).collect::<Result<Vec<PrinterLines>, _>>()?;
+        for (b, later) in lines.iter().enumerate() {
+            if let Some(a) = lines[..b].iter().position(|p| p.printer == later.printer) {
+                return Err(StageError::BadInput {
+                    file: inputs[b].dir.join("dataset.toml"),
+                    location: Some("field printer".into()),
+                    expected: format!(
+                        "expected a printer other than input `{}`'s, `{}` (the matrix tells printers apart by name)",
+                        inputs[a].name, later.printer
+                    ),
+                });
+            }
+        }
         let params = model_params(&lines, &p.blob_printers)
             .map_err(|message| StageError::Params { stage: ctx.stage.clone(), message })?;
         let transfer = transfer_params(&p).map_err(|e| StageError::params(ctx, e))?;
