@@ -91,7 +91,7 @@ impl Split for TransferCvStage {
             &study.transfer,
             pairs,
         )
-        .map_err(|e| fit_failed("transfer cross-validation", e))?;
+        .map_err(|e| fit_failed(&study.what(), e))?;
         ctx.write_table(transfer_cv_part::TABLE.name, &mut winners_frame(&part)?)?;
         ctx.write_table(transfer_cv_errors::TABLE.name, &mut errors_frame(&part)?)?;
         Ok(())
@@ -108,7 +108,7 @@ impl Split for TransferCvStage {
             &study.transfer,
             parts,
         )
-        .map_err(|e| fit_failed("transfer cross-validation", e))?;
+        .map_err(|e| fit_failed(&study.what(), e))?;
         let target = &study.target;
         let mut table = frame(vec![
             i64_col(transfer_cv::n_train, rows.iter().map(|r| r.n_train as i64).collect()),
@@ -147,6 +147,15 @@ impl Study {
             target_params: Self::target_params()?,
             transfer: TransferParams::paper_defaults().check().map_err(|e| fit_failed("transfer parameters", e))?,
         })
+    }
+
+    /// What the study fits, for its errors: which printer is which, and which one the
+    /// model fits with the start blob.
+    fn what(&self) -> String {
+        format!(
+            "transfer cross-validation from source `{}` (fitted with the start blob, phase p1, as the Taz 5) to target `{}` (without it, as the Taz 6)",
+            self.source.printer, self.target.printer
+        )
     }
 
     /// The target's model settings: the paper's, without the start blob (the Taz 6).
