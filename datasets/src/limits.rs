@@ -47,6 +47,12 @@ pub const MAX_LINE_LENGTH_MM: f64 = 10_000.0;
 /// error, and would swamp every squared error the models sum over the line.
 pub const MAX_BEAD_WIDTH_MM: f64 = 1000.0;
 
+/// Largest height of an `inkjet-scans` dataset, measured or desired, in magnitude (µm):
+/// 1 m, 100 × a print of the 1000 layers [`INKJET_LAYERS`] allows at paper 002's
+/// droplet heights of about 10 µm. A larger value is a unit or parse error, and would
+/// swamp every squared error the models sum over a layer.
+pub const MAX_HEIGHT_UM: f64 = 1e6;
+
 /// Largest distance of a `thermal-sequence` position (`path.csv`, `trajectory.csv`)
 /// from the origin along x or y (mm): a 300 mm bed with the origin at its centre or a
 /// corner (the paper's part spans 40 mm). It bounds the grids the analysis lays over

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
-use crate::limits::{check_numbers, check_size, NumberRule::*, GRID_SIDE_CELLS};
+use crate::limits::{check_numbers, check_size, NumberRule::*, GRID_SIDE_CELLS, MAX_HEIGHT_UM};
 use crate::manifest::{DatasetManifest, MANIFEST_FILE};
 use crate::paths::file_in;
 use crate::text::read_toml;
@@ -194,7 +194,7 @@ fn read_grid(file: &Path) -> Result<GridToml, DatasetError> {
         file,
         &[
             ("spacing_um", grid.spacing_um, Positive),
-            ("desired_height_um", grid.desired_height_um, NonNegative),
+            ("desired_height_um", grid.desired_height_um, Within(0.0, MAX_HEIGHT_UM)),
             ("variation_pct", grid.variation_pct, Within(0.0, 100.0)),
             ("profiler.noise_um", p.noise_um, NonNegative),
             ("profiler.spot_sigma_um", p.spot_sigma_um, NonNegative),
@@ -240,9 +240,24 @@ fn read_target(file: &Path, grid: &GridToml) -> Result<Vec<Option<f64>>, Dataset
         if target[c].is_some() {
             return Err(table.field_error(row.0, cols.0, "this cell is listed twice"));
         }
-        target[c] = Some(table.number(row, hc)?);
+        target[c] = Some(height_um(&table, row, hc)?);
     }
     Ok(target)
+}
+
+/// The height in column `col` of a row, µm: a finite number of magnitude at most
+/// [`MAX_HEIGHT_UM`].
+fn height_um(table: &CsvTable, row: &(usize, Vec<String>), col: usize) -> Result<f64, DatasetError> {
+    let h = table.number(row, col)?;
+    if h.abs() <= MAX_HEIGHT_UM {
+        Ok(h)
+    } else {
+        Err(table.field_error(
+            row.0,
+            col,
+            format!("expected a height of at most {MAX_HEIGHT_UM:e} µm in magnitude, got {h:e}"),
+        ))
+    }
 }
 
 /// Reads a `layer,i,j,height_um` file: layers 0..=L, every cell of every layer once.
@@ -270,7 +285,7 @@ fn read_layers(file: &Path, grid: &GridToml) -> Result<Vec<Vec<f64>>, DatasetErr
         if !layers[k][c].is_nan() {
             return Err(table.field_error(row.0, cols.0, format!("cell listed twice in layer {k}")));
         }
-        layers[k][c] = table.number(row, hc)?;
+        layers[k][c] = height_um(&table, row, hc)?;
         filled[k] += 1;
     }
     if filled.last().is_some_and(|&n| n != cells) {
@@ -377,6 +392,19 @@ mod tests {
         assert!(err.contains("grid.toml:profiler.noise_um: expected a finite number ≥ 0, got NaN"), "{err}");
         let err = read_error("dataset.toml", "format_version = 1", "format_version = 3");
         assert!(err.contains("this build of amrepro reads `inkjet-scans` format_version 1, got 3"), "{err}");
+    }
+
+    #[test]
+    fn heights_beyond_a_metre_are_refused() {
+        let err = read_error("scans.csv", "1,1,0,5.9", "1,1,0,1e300");
+        assert!(
+            err.contains(
+                "scans.csv:line 9, field height_um: expected a height of at most 1e6 µm in magnitude, got 1e300"
+            ),
+            "{err}"
+        );
+        let err = read_error("target.csv", "1,1,7.6", "1,1,-2e7");
+        assert!(err.contains("target.csv:line 3, field desired_um: expected a height of at most 1e6 µm"), "{err}");
     }
 
     #[test]
