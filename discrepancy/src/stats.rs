@@ -25,11 +25,11 @@ pub const EXACT_SIGN_FLIP_GROUPS: usize = 20;
 /// Random sign patterns drawn when there are more groups than [`EXACT_SIGN_FLIP_GROUPS`].
 pub const MONTE_CARLO_SIGN_FLIPS: usize = 100_000;
 
-/// One-sided sign-flip p-value of the mean of `gains` (H1: mean > 0). NaN gains are
-/// not allowed (the caller maps failures to p = 1).
+/// One-sided sign-flip p-value of the mean of `gains` (H1: mean > 0). Evidence that is
+/// not finite (a score that failed) is no evidence: p = 1, as for no groups at all.
 pub fn sign_flip_p_value(gains: &[f64], seed: u64) -> f64 {
     let g = gains.len();
-    if g == 0 {
+    if g == 0 || gains.iter().any(|x| !x.is_finite()) {
         return 1.0;
     }
     let observed: f64 = gains.iter().sum();
@@ -203,6 +203,15 @@ pub fn t_interval(values: &[f64]) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn evidence_that_is_not_finite_gives_no_significance() {
+        // Every pattern's sum would be NaN and none would count: p = 0 without the guard.
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(sign_flip_p_value(&[1.0, 2.0, bad, 1.5], 1), 1.0);
+        }
+        assert_eq!(sign_flip_p_value(&[1.0, 2.0, 0.5, 1.5], 1), 1.0 / 16.0);
+    }
 
     #[test]
     fn sign_flip_exact_counts() {
