@@ -26,7 +26,7 @@ use super::camera::{Distortion, Intrinsics, Mount};
 use crate::csv_table::CsvTable;
 use crate::error::DatasetError;
 use crate::limits::{
-    check_numbers, check_size, NumberRule::*, DEPOSIT_SIDE_CELLS, IMAGE_SIDE_PX, MAX_COORDINATE_MM,
+    check_numbers, check_size, NumberRule, NumberRule::*, DEPOSIT_SIDE_CELLS, IMAGE_SIDE_PX, MAX_COORDINATE_MM,
     MAX_FILMED_AFTER_END_S, SAMPLE_PERIOD_TOLERANCE, THERMAL_LAYERS,
 };
 use crate::manifest::DatasetManifest;
@@ -389,7 +389,13 @@ fn read_camera(file: &Path) -> Result<CameraFile, DatasetError> {
     Ok(c)
 }
 
-/// `process.toml`: physical quantities positive, `layers_printed` within [`THERMAL_LAYERS`].
+/// The sizes of a bead (layer height, nozzle, bead width), mm: from 1 µm, far below any
+/// extruded bead (a layer height of 1e-300 mm left the monitor's direction allocation
+/// with NaN angles), to 100 mm, beyond the layers of construction-scale extrusion.
+const BEAD_SIZE_MM: NumberRule = Within(1e-3, 100.0);
+
+/// `process.toml`: physical quantities positive (bead sizes within [`BEAD_SIZE_MM`]),
+/// `layers_printed` within [`THERMAL_LAYERS`].
 fn read_process(file: &Path) -> Result<ProcessFile, DatasetError> {
     let p: ProcessFile = read_toml(file)?;
     check_size(file, "layers_printed", p.layers_printed, &THERMAL_LAYERS)?;
@@ -399,9 +405,9 @@ fn read_process(file: &Path) -> Result<ProcessFile, DatasetError> {
             ("feed_mm_s", p.feed_mm_s, Positive),
             ("accel_mm_s2", p.accel_mm_s2, Positive),
             ("blend_tol_mm", p.blend_tol_mm, NonNegative),
-            ("layer_height_mm", p.layer_height_mm, Positive),
-            ("nozzle_mm", p.nozzle_mm, Positive),
-            ("bead_width_mm", p.bead_width_mm, Positive),
+            ("layer_height_mm", p.layer_height_mm, BEAD_SIZE_MM),
+            ("nozzle_mm", p.nozzle_mm, BEAD_SIZE_MM),
+            ("bead_width_mm", p.bead_width_mm, BEAD_SIZE_MM),
             ("tau_s", p.tau_s, NonNegative),
             ("bed_temp_c", p.bed_temp_c, Finite),
             ("nozzle_temp_c", p.nozzle_temp_c, Within(p.bed_temp_c + 1.0, f64::MAX)),
@@ -677,6 +683,12 @@ mod tests {
                 "trajectory.csv:line 3, field t_s: expected the step of sample_period_s = 0.01 s",
             ),
             ("path.csv", "1,4,0", "1,4e6,0", "path.csv:line 3, field x_mm: expected a position within ±300 mm"),
+            (
+                "process.toml",
+                "layer_height_mm = 0.25",
+                "layer_height_mm = 1e-300",
+                "process.toml:layer_height_mm: expected a number in [0.001, 100]",
+            ),
         ];
         for (file, from, to, expected) in cases {
             let err = open_error(&[(file, from, to)]);

@@ -122,7 +122,7 @@ pub fn allocate_directions(
     while let Some((first, last)) = state.first_violating_span() {
         spans += 1;
         if spans > params.max_spans {
-            return Err(ThermalError::DirectionAllocation { t_s: trajectory.t_s[first], residual_rad: f64::NAN });
+            return Err(ThermalError::TooManySpans { t_s: trajectory.t_s[first], max_spans: params.max_spans });
         }
         state
             .resolve_span(first, last)
@@ -448,6 +448,16 @@ mod tests {
             psi_added += dirs.added_curvature_per_mm[k] * tr.speed_mm_s()[k] * tr.dt_s;
             assert!(dirs.slender_after[k] <= psi_added.cos().powi(2) * (1.0 + 1e-6), "sample {k}");
         }
+    }
+
+    #[test]
+    fn a_bead_far_wider_than_the_corners_allow_is_named_as_such() {
+        // The same flow through a layer 250 times thinner: half-widths no allocation can fit.
+        let (tr, flow, h) = corner_test_with_lagged_flow();
+        let err =
+            allocate_directions(&tr, &flow, h / 250.0, &DdaParams { max_spans: 50, ..Default::default() }).unwrap_err();
+        assert!(matches!(err, ThermalError::TooManySpans { max_spans: 50, .. }), "{err}");
+        assert!(err.to_string().contains("far wider than the path's corners allow"), "{err}");
     }
 
     #[test]

@@ -36,8 +36,21 @@ pub enum ThermalError {
     DirectionAllocation {
         /// Start time of the violating span (s).
         t_s: f64,
-        /// Rotation left over (rad); NaN when the span limit was reached.
+        /// Rotation left over (rad).
         residual_rad: f64,
+    },
+    /// The allocation met more violating spans than its limit (Sec. 2.2): the bead's
+    /// half-widths (flow over speed and layer height, eqs 5-11) leave no room at the
+    /// path's corners.
+    #[error(
+        "deposition direction allocation: more than {max_spans} spans break the bound by t = {t_s:.4} s: \
+         the bead is far wider than the path's corners allow (check the flow against the layer height and the bead width)"
+    )]
+    TooManySpans {
+        /// Start time of the span past the limit (s).
+        t_s: f64,
+        /// The limit (`DdaParams::max_spans`).
+        max_spans: usize,
     },
     /// Compensation bounds that exclude zero (the fixed end control points of eq. 39).
     #[error("compensation bounds must satisfy min <= 0 <= max, got [{min}, {max}] mm/s")]
