@@ -15,6 +15,8 @@
 //! - [`printer`]: the virtual FDM printer's physics (DESIGN §5.1): the lag model with the
 //!   mechanisms the discrepancy engine names on the real lines, wander and edge roughness,
 //!   the switchable effects, and its calibration to measured lines.
+//! - [`planner`]: the firmware's look-ahead motion planner over G-code moves (Klipper's
+//!   square-corner velocity, Marlin's jerk or junction deviation), for real prints (issue 53).
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
 //! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
 //!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
@@ -32,6 +34,7 @@ pub mod lag;
 pub mod line;
 pub mod loo;
 pub mod piecewise;
+pub mod planner;
 pub mod predict;
 pub mod printer;
 mod small_linalg;
