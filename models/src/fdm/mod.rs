@@ -17,6 +17,8 @@
 //!   the switchable effects, and its calibration to measured lines.
 //! - [`planner`]: the firmware's look-ahead motion planner over G-code moves (Klipper's
 //!   square-corner velocity, Marlin's jerk or junction deviation), for real prints (issue 53).
+//! - [`printed_lines`]: the straight printed lines of a planned print, with the commanded
+//!   speed, time and filament along each.
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
 //! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
 //!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
@@ -36,6 +38,7 @@ pub mod loo;
 pub mod piecewise;
 pub mod planner;
 pub mod predict;
+pub mod printed_lines;
 pub mod printer;
 mod small_linalg;
 pub mod synthetic;
