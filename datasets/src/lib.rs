@@ -11,6 +11,7 @@ pub mod csv_table;
 pub mod error;
 pub mod fdm_inject;
 pub mod fdm_lines;
+pub mod fdm_photos;
 pub mod fdm_widths;
 pub mod fsu;
 pub mod inkjet;

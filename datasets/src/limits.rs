@@ -147,3 +147,16 @@ pub fn check_numbers(file: &Path, checks: &[(&str, f64, NumberRule)]) -> Result<
         }),
     }
 }
+
+/// Largest `print.gcode` of an `fdm-photos` dataset (bytes): 200 MB, several times the
+/// G-code of a full-bed print with fine layers (tens of MB). The reader holds the text
+/// while it reads it; a larger file is not the G-code of a photographed test print.
+pub const MAX_GCODE_BYTES: usize = 200 * 1024 * 1024;
+
+/// Most moves of an `fdm-photos` G-code: 5 M, what 200 MB of 40-byte move lines hold.
+/// A move and its plan take about 200 bytes, so the planned print stays under 1 GB.
+pub const MAX_GCODE_MOVES: usize = 5_000_000;
+
+/// Largest distance of a G-code position from the origin along any axis (mm): 10 m,
+/// as [`MAX_LINE_LENGTH_MM`]; beyond it a coordinate is a unit or parse error.
+pub const MAX_GCODE_COORDINATE_MM: f64 = 10_000.0;

@@ -274,7 +274,7 @@ fn check_move(index: usize, m: &Move) -> Result<(), PlanError> {
     if let Some(&(name, value)) = checks.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
         return Err(PlanError::NotPositive { index, name, value });
     }
-    if !(l.max_velocity_mm_s > 0.0) {
+    if l.max_velocity_mm_s.is_nan() || l.max_velocity_mm_s <= 0.0 {
         return Err(PlanError::NotPositive { index, name: "max_velocity_mm_s", value: l.max_velocity_mm_s });
     }
     Ok(())
