@@ -239,3 +239,19 @@ fn replanning_with_a_lower_accel_lowers_the_short_fast_move() {
     // √(10² + 500·(1 − 0.5)·14) = 60 mm/s.
     assert!((slow_line.moves[1].planned.cruise_mm_s - 60.0).abs() < 1e-9);
 }
+
+#[test]
+fn the_worked_example_of_docs_datasets_reads_as_documented() {
+    let text = "G21\nG90\nM83\nSET_VELOCITY_LIMIT ACCEL=2500\nG1 Z0.2 F600\nG1 X10 Y20 F9000\nSET_PRESSURE_ADVANCE ADVANCE=0.02\nG1 X14 Y20 E0.2 F600     ; slow\nG1 X34 Y20 E1.0 F6000    ; fast\nG1 X44 Y20 E0.5 F600     ; slow\nG1 Z0.4 F600\nG1 X10 Y23 F9000\nG1 Z0.2 F600\nSET_PRESSURE_ADVANCE ADVANCE=0.04\n";
+    let p = read(text, klipper_start()).unwrap();
+    let planned = models::fdm::planner::plan(&p.moves).unwrap();
+    let lines = models::fdm::printed_lines::printed_lines(&p.moves, &planned, 1.75);
+    assert_eq!(lines.len(), 1);
+    let line = &lines[0];
+    assert_eq!((line.moves.len(), line.length_mm(), line.z_mm), (3, 34.0, 0.2));
+    let speeds: Vec<_> =
+        line.moves.iter().map(|m| (m.planned.entry_mm_s, m.planned.cruise_mm_s, m.planned.exit_mm_s)).collect();
+    assert_eq!(speeds[1], (10.0, 100.0, 10.0));
+    assert_eq!((line.moves[1].planned.accel_mm_s2, line.pressure_advance.advance_s), (2500.0, 0.02));
+    assert!((line.nominal_width_mm - 0.60).abs() < 0.005, "{}", line.nominal_width_mm);
+}
