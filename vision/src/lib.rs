@@ -21,6 +21,10 @@
 //! printed line along its length from a top-view photo, to a fraction of a pixel, by
 //! fitting a blurred-edge model to each cross-section (with an Otsu-count baseline).
 //!
+//! For real photos of printed patterns with the G-code that printed them, [`photo`] places
+//! the photo on the bed (colour contrast, coarse pose, homography and radial distortion by
+//! coarse-to-fine ECC, orientation from the print) and measures every path in bed mm.
+//!
 //! The crate takes plain slices and structs: no tables, no datasets, no I/O beyond
 //! reading a frame file.
 #![deny(missing_docs)]
@@ -34,6 +38,7 @@ pub mod localiser;
 pub mod localize;
 pub mod matching;
 pub mod mount;
+pub mod photo;
 pub mod pipeline;
 pub mod rigid;
 pub mod sequence_widths;
