@@ -19,6 +19,8 @@
 //!   square-corner velocity, Marlin's jerk or junction deviation), for real prints (issue 53).
 //! - [`printed_lines`]: the straight printed lines of a planned print, with the commanded
 //!   speed, time and filament along each.
+//! - [`pressure_advance`]: Klipper's pressure advance and Marlin's linear advance ahead of
+//!   the melt's first-order lag, and the widths a printed line deposits under them.
 //! - [`transfer`]: covariance prior and MAP transfer (Algorithm 1, eqs 4-6, Fig. 9).
 //! - [`transfer_cv`](mod@transfer_cv): the Fig. 9 cross-validation over all training
 //!   subsets of the target lines × {single, zero-mean, source-mean transfer} in one call.
@@ -38,6 +40,7 @@ pub mod loo;
 pub mod piecewise;
 pub mod planner;
 pub mod predict;
+pub mod pressure_advance;
 pub mod printed_lines;
 pub mod printer;
 mod small_linalg;
