@@ -25,6 +25,7 @@
 //! - [`gcode`]: the G-code reader.
 
 pub mod gcode;
+pub mod generate;
 
 use std::path::{Path, PathBuf};
 
