@@ -4,13 +4,16 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-/// `amrepro --version`: the release, then the code fingerprint that every stage's cache
-/// key holds and the toolchain that built it (`build.rs`), which workers of one run
-/// spread over machines must share (docs/SCALE.md).
+/// `amrepro --version`: the release, then the whole program's code fingerprint, the
+/// fingerprint of each crate's code, which the cache key of every stage kind that crate
+/// defines holds, and the toolchain that built it (`build.rs`), which workers of one
+/// run spread over machines must share (docs/SCALE.md).
 const LONG_VERSION: &str = concat!(
     env!("CARGO_PKG_VERSION"),
     "\ncode fingerprint: ",
     env!("AMREPRO_CODE_FINGERPRINT"),
+    "\ncode by crate: ",
+    env!("AMREPRO_CODE_BY_CRATE"),
     "\nbuilt by: ",
     env!("AMREPRO_TOOLCHAIN")
 );
@@ -41,6 +44,9 @@ pub enum Command {
     Datasets(DatasetsCommand),
     /// Rebuild the HTML report from the manifests under the out folder.
     Report(ReportArgs),
+    /// List the published numbers that changed between two out folders: per table, the
+    /// row's key, the column, old → new and the relative change.
+    Diff(DiffArgs),
     /// Benchmark night: run every spec from scratch, append its numbers and timings to a
     /// history, and write report/nightly.html with trends and regressions (docs/NIGHTLY.md).
     Nightly(NightlyArgs),
@@ -155,6 +161,31 @@ pub struct RunArgs {
     /// Print only errors.
     #[arg(short, long)]
     pub quiet: bool,
+    /// Set a stage's parameter in place of the spec's value (repeatable; checked as the
+    /// spec's own values are; VALUE is read as TOML, or as a string when it is none).
+    #[arg(long = "set", value_name = "STAGE.PARAM=VALUE", value_parser = parse_override)]
+    pub sets: Vec<pipeline::spec::Override>,
+}
+
+/// Parses one `--set` (clap's value parser).
+fn parse_override(text: &str) -> Result<pipeline::spec::Override, String> {
+    pipeline::spec::Override::parse(text)
+}
+
+/// `amrepro diff`.
+#[derive(Debug, Args)]
+pub struct DiffArgs {
+    /// The first out folder (the old numbers).
+    pub a: PathBuf,
+    /// The second out folder (the new numbers).
+    pub b: PathBuf,
+    /// Count numbers within this relative difference (of the larger magnitude) as
+    /// unchanged.
+    #[arg(long, default_value_t = 0.0, value_name = "REL")]
+    pub rel_tol: f64,
+    /// Changed numbers listed per table (the counts are always complete).
+    #[arg(long, default_value_t = 20, value_name = "N")]
+    pub max_rows: usize,
 }
 
 /// `amrepro graph`.

@@ -8,18 +8,28 @@ use pipeline::graph::{render, GraphFormat};
 use pipeline::plan::sources_text;
 use pipeline::schema::Reads;
 use pipeline::stage::{Count, Input};
-use pipeline::{Plan, Registry, StageKind};
+use pipeline::{Code, Plan, Registry, StageKind};
 
 use crate::cli::{
-    Cli, Command, DatasetsCommand, FdmGenerateArgs, FsuImportArgs, GenerateCommand, GraphArgs, GraphFormatArg,
-    ImportCommand, InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs, ThermalGenerateArgs,
+    Cli, Command, DatasetsCommand, DiffArgs, FdmGenerateArgs, FsuImportArgs, GenerateCommand, GraphArgs,
+    GraphFormatArg, ImportCommand, InjectArgs, InkjetGenerateArgs, ReportArgs, RunArgs, StagesArgs,
+    ThermalGenerateArgs,
 };
 
+/// Per workspace crate: its name, the fingerprint of its code and the parts that
+/// fingerprint is taken over (`build.rs`, `src/code_fingerprint.rs`).
+pub const CODE_BY_CRATE: &[(&str, &str, &[(&str, &str)])] = include!(concat!(env!("OUT_DIR"), "/code_by_crate.rs"));
+
 /// Every stage kind this binary knows: domain stages and figures (and, for the fault
-/// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`), under this build's code
-/// fingerprint (`src/code_fingerprint.rs`), which every stage's cache key holds.
+/// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`), each under the code of the
+/// crate defining it (`src/code_fingerprint.rs`), which its cache key holds.
 pub fn registry() -> Registry {
-    let mut registry = Registry::with_code_fingerprint(env!("AMREPRO_CODE_FINGERPRINT"));
+    let code = |fingerprint: &str, parts: &[(&str, &str)]| Code {
+        fingerprint: fingerprint.to_string(),
+        parts: parts.iter().map(|(p, h)| (p.to_string(), h.to_string())).collect(),
+    };
+    let by_crate = CODE_BY_CRATE.iter().map(|(name, fp, parts)| (name.to_string(), code(fp, parts))).collect();
+    let mut registry = Registry::with_code(code(env!("AMREPRO_CODE_FINGERPRINT"), &[]), by_crate);
     stages::register(&mut registry);
     reports::register(&mut registry);
     if std::env::var_os(pipeline::testing::ENV_VAR).is_some_and(|v| v == "1") {
@@ -41,6 +51,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::Datasets(DatasetsCommand::Generate(GenerateCommand::Thermal(args))) => generate_thermal(args),
         Command::Datasets(DatasetsCommand::Inject(args)) => inject(args),
         Command::Report(ReportArgs { out }) => report(&out),
+        Command::Diff(args) => diff(args),
         Command::Nightly(args) => crate::nightly_run::run(args),
         Command::Plan(args) => crate::scale::plan(args),
         Command::RunUnit(args) => crate::scale::run_unit(args),
@@ -51,7 +62,7 @@ pub fn dispatch(cli: Cli) -> Result<()> {
 
 fn run(args: RunArgs) -> Result<()> {
     let registry = registry();
-    let plan = Plan::from_file(&args.spec, &registry)?;
+    let plan = Plan::from_file_with(&args.spec, &args.sets, &registry)?;
     if args.verbose {
         print_plan(&plan);
     }
@@ -331,6 +342,19 @@ fn inject(args: InjectArgs) -> Result<()> {
         truth.strength,
         args.dest.join(datasets::fdm_inject::TRUTH_FILE).display()
     );
+    Ok(())
+}
+
+fn diff(args: DiffArgs) -> Result<()> {
+    for dir in [&args.a, &args.b] {
+        if !dir.join("runs").is_dir() {
+            bail!("{}: not an out folder (no runs/ in it)", dir.display());
+        }
+    }
+    let mut diff = pipeline::diff::diff_out_dirs(&args.a, &args.b, args.rel_tol)
+        .with_context(|| format!("comparing {} with {}", args.a.display(), args.b.display()))?;
+    diff.max_listed = args.max_rows;
+    print!("{diff}");
     Ok(())
 }
 

@@ -63,14 +63,18 @@ fn only_and_force_rerun_one_stage() {
 }
 
 #[test]
-fn version_names_the_code_fingerprint_every_stage_record_holds() {
+fn version_names_the_code_every_stage_record_holds() {
     let tmp = tempfile::tempdir().unwrap();
     let version = ok(tmp.path(), &["--version"]);
     let field = |name: &str| {
         version.lines().find_map(|l| l.strip_prefix(name)).unwrap_or_else(|| panic!("no `{name}` in:\n{version}"))
     };
-    let code = field("code fingerprint: ");
-    assert!(code.len() == 16 && code.chars().all(|c| c.is_ascii_hexdigit()), "{version}");
+    let hex = |code: &str| code.len() == 16 && code.chars().all(|c| c.is_ascii_hexdigit());
+    assert!(hex(field("code fingerprint: ")), "{version}");
+    // Each crate's code: the kinds it defines are cached on it.
+    let by_crate: std::collections::BTreeMap<&str, &str> =
+        field("code by crate: ").split(", ").filter_map(|c| c.split_once(' ')).collect();
+    assert!(by_crate.values().all(|c| hex(c)) && by_crate["stages"] != by_crate["reports"], "{version}");
     let built_by = field("built by: ");
     assert!(built_by.starts_with("rustc ") && built_by.contains("; target: "), "{version}");
     let spec = fsu_spec(tmp.path(), &data_root().join("fsu-linewidth"));
@@ -80,7 +84,11 @@ fn version_names_the_code_fingerprint_every_stage_record_holds() {
     let stages = manifest["stages"].as_array().expect("a stages list");
     assert_eq!(stages.len(), 5);
     for stage in stages {
-        assert_eq!(stage["code_fingerprint"], code, "{stage}");
+        let crate_name = if stage["kind"].as_str().unwrap().starts_with("figure.") { "reports" } else { "stages" };
+        assert_eq!(stage["code_fingerprint"], by_crate[crate_name], "{stage}");
+        let parts = stage["code_parts"].as_object().expect("the parts of its code");
+        assert!(parts.contains_key(crate_name) && parts.contains_key("Cargo.lock"), "{stage}");
+        assert_eq!(parts.contains_key("reports"), crate_name == "reports", "{stage}");
     }
 }
 

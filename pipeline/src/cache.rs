@@ -1,6 +1,6 @@
 //! The stage cache: a stage is skipped when its key hash — of (kind, kind version,
-//! tool version, the program's code fingerprint, parameters, seed, input content
-//! hashes) — equals the one recorded
+//! tool version, the fingerprint of the code the kind runs, parameters, seed, input
+//! content hashes) — equals the one recorded
 //! beside its outputs and those outputs are intact. Otherwise the decision says why
 //! it runs, in the terms `--dry-run` prints.
 
@@ -36,8 +36,12 @@ pub struct CacheKey<'a> {
     pub kind_version: u32,
     /// Tool version.
     pub tool_version: &'a str,
-    /// The program's code fingerprint ([`crate::Registry::code_fingerprint`]).
+    /// The fingerprint of the code the kind runs ([`crate::Registry::code`]).
     pub code: &'a str,
+    /// The parts that fingerprint is taken over (not hashed again: the fingerprint
+    /// holds them), for saying which changed.
+    #[serde(skip)]
+    pub code_parts: &'a BTreeMap<String, String>,
     /// Parameters.
     pub params: &'a Params,
     /// Stage seed.
@@ -82,8 +86,7 @@ fn differences(key: &CacheKey, prev: &StageRecord) -> Vec<String> {
         why.push(format!("tool version changed: {} → {}", prev.tool_version, TOOL_VERSION));
     }
     if prev.code_fingerprint != key.code {
-        let old = if prev.code_fingerprint.is_empty() { "none recorded" } else { &prev.code_fingerprint };
-        why.push(format!("the program's code changed (fingerprint {old} → {})", key.code));
+        why.push(code_change(prev, key));
     }
     why.extend(param_changes(&prev.params, key.params));
     if prev.seed != key.seed {
@@ -100,6 +103,22 @@ fn differences(key: &CacheKey, prev: &StageRecord) -> Vec<String> {
         why.push("cache key changed".into());
     }
     why
+}
+
+/// Which code changed: the parts whose hashes differ, are new or are gone, when both
+/// the record and the key name parts; the program's code otherwise.
+fn code_change(prev: &StageRecord, key: &CacheKey) -> String {
+    let old = if prev.code_fingerprint.is_empty() { "none recorded" } else { &prev.code_fingerprint };
+    let fingerprints = format!("fingerprint {old} → {}", key.code);
+    if prev.code_parts.is_empty() || key.code_parts.is_empty() {
+        return format!("the program's code changed ({fingerprints})");
+    }
+    let names = prev.code_parts.keys().chain(key.code_parts.keys());
+    let mut changed: Vec<&str> =
+        names.filter(|n| prev.code_parts.get(*n) != key.code_parts.get(*n)).map(String::as_str).collect();
+    changed.sort_unstable();
+    changed.dedup();
+    format!("code of {} changed ({fingerprints})", changed.join(", "))
 }
 
 fn param_changes(old: &Params, new: &Params) -> Vec<String> {

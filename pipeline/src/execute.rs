@@ -315,11 +315,13 @@ impl Executor<'_> {
             Ok(inputs) => inputs,
             Err(rebuilt) => return Ok(self.would_run(stage, vec![format!("input `{rebuilt}` will be rebuilt")])),
         };
+        let code = self.registry.code(stage.kind);
         let key = CacheKey {
             kind: stage.kind,
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION,
-            code: self.registry.code_fingerprint(),
+            code: &code.fingerprint,
+            code_parts: &code.parts,
             params: &stage.params,
             seed,
             inputs: &inputs,
@@ -511,6 +513,7 @@ impl Executor<'_> {
             title: self.plan.title.clone(),
             spec_file: spec_file.clone(),
             spec_sha256,
+            overrides: self.plan.overrides.clone(),
             finished_unix_s: std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(0, |d| d.as_secs()),
@@ -583,7 +586,8 @@ impl StageJob<'_> {
             kind: stage.kind.to_string(),
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION.to_string(),
-            code_fingerprint: self.registry.code_fingerprint().to_string(),
+            code_fingerprint: self.registry.code(stage.kind).fingerprint.clone(),
+            code_parts: self.registry.code(stage.kind).parts.clone(),
             key_hash: self.key_hash,
             params: stage.params.clone(),
             seed: self.seed,
@@ -705,6 +709,7 @@ fn format_line(line: &StageLine) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stage::Code;
     use crate::testing::FaultKind;
 
     /// A registry of `test.fault` under the code fingerprint `code`.
@@ -750,6 +755,40 @@ mod tests {
         let rerun = run(&spec, &out, &second);
         assert_eq!(rerun[0].0, Status::Ran);
         assert!(rerun[0].1.contains("fingerprint none recorded → fedcba9876543210"), "{}", rerun[0].1);
+    }
+
+    /// A registry of `test.fault` (defined in `pipeline`) whose crates' code is given
+    /// as (crate, [(part, hash)]).
+    fn registry_by_crate(crates: &[(&str, &[(&str, &str)])]) -> Registry {
+        let code = |parts: &[(&str, &str)]| {
+            let parts: BTreeMap<String, String> = parts.iter().map(|(p, h)| (p.to_string(), h.to_string())).collect();
+            Code { fingerprint: crate::hash::sha256_hex(format!("{parts:?}").as_bytes())[..16].into(), parts }
+        };
+        let by_crate = crates.iter().map(|(c, parts)| (c.to_string(), code(parts))).collect();
+        let mut registry = Registry::with_code(code(&[("program", "p")]), by_crate);
+        registry.register(Box::new(FaultKind));
+        registry
+    }
+
+    #[test]
+    fn a_kind_reruns_when_the_code_of_its_own_crate_changes_and_names_the_part() {
+        let dir = tempfile::tempdir().unwrap();
+        let (spec, out) = (dir.path().join("s.toml"), dir.path().join("out"));
+        std::fs::write(&spec, "[run]\nname = \"p\"\n[stage.a]\nkind = \"test.fault\"\n").unwrap();
+        let pipeline: &[(&str, &str)] = &[("pipeline", "1"), ("toolchain", "t")];
+        let first = registry_by_crate(&[("pipeline", pipeline), ("other", &[("other", "1"), ("toolchain", "t")])]);
+        assert_eq!(run(&spec, &out, &first)[0].0, Status::Ran);
+        // Another crate's code changed: still cached.
+        let other = registry_by_crate(&[("pipeline", pipeline), ("other", &[("other", "2"), ("toolchain", "t")])]);
+        assert_eq!(run(&spec, &out, &other)[0].0, Status::Cached);
+        let changed = registry_by_crate(&[("pipeline", &[("pipeline", "2"), ("toolchain", "u")])]);
+        let rerun = run(&spec, &out, &changed);
+        assert_eq!(rerun[0].0, Status::Ran);
+        let (old, new) = (&first.code("test.fault").fingerprint, &changed.code("test.fault").fingerprint);
+        let why = format!("code of pipeline, toolchain changed (fingerprint {old} → {new})");
+        assert!(rerun[0].1.contains(&why), "{}", rerun[0].1);
+        let record = read_record(&out.join("runs/p/a")).unwrap();
+        assert_eq!((&record.code_fingerprint, record.code_parts.get("pipeline").map(String::as_str)), (new, Some("2")));
     }
 
     #[test]

@@ -32,6 +32,11 @@ pub struct StageRecord {
     /// before the cache held it, and by programs without one).
     #[serde(default)]
     pub code_fingerprint: String,
+    /// The parts the code fingerprint is taken over, by name, with their hashes
+    /// ([`crate::stage::Code`]): what says which code changed (empty in records written
+    /// before the cache held them, and by programs naming none).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub code_parts: BTreeMap<String, String>,
     /// Cache key: hash of (kind, version, tool version, code fingerprint, params, seed,
     /// inputs).
     pub key_hash: String,
@@ -88,6 +93,10 @@ pub struct Manifest {
     pub spec_file: PathBuf,
     /// Hash of the spec file's text.
     pub spec_sha256: String,
+    /// Parameters set on the command line in place of the spec's (`amrepro run --set
+    /// STAGE.PARAM=VALUE`); empty when the spec's own values ran.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub overrides: Vec<String>,
     /// Unix time at which the run finished.
     pub finished_unix_s: u64,
     /// Total wall time of this invocation, in seconds.

@@ -10,7 +10,7 @@ use std::path::{Component, Path, PathBuf};
 use crate::error::SpecError;
 use crate::params::Params;
 use crate::schema::{Reads, Table};
-use crate::spec::{expand_path, read_spec, RawSpec, RawStage};
+use crate::spec::{apply_overrides, expand_path, read_spec, Override, RawSpec, RawStage};
 use crate::stage::{Count, Input, Output, Registry, Source};
 
 /// A checked, ordered plan.
@@ -30,6 +30,9 @@ pub struct Plan {
     pub stages: Vec<PlannedStage>,
     /// Groups of stage indices that can run in parallel, in dependency order.
     pub waves: Vec<Vec<usize>>,
+    /// Parameters set on the command line in place of the spec's
+    /// (`STAGE.PARAM=VALUE`, [`Plan::from_file_with`]), as the manifest records them.
+    pub overrides: Vec<String>,
 }
 
 /// A dataset folder the plan reads.
@@ -105,8 +108,23 @@ impl Plan {
     /// Reads `spec_file` and checks it against `registry`; `${VAR}` in dataset paths
     /// are read from the process environment.
     pub fn from_file(spec_file: &Path, registry: &Registry) -> Result<Self, SpecError> {
-        let raw = read_spec(spec_file)?;
-        Self::check(spec_file, raw, registry, |v| std::env::var(v).ok())
+        Self::from_file_with(spec_file, &[], registry)
+    }
+
+    /// [`Self::from_file`] with parameters set on the command line
+    /// ([`Override`], `amrepro run --set`), checked as the spec's own values are; an
+    /// error about one of them says it was set so.
+    pub fn from_file_with(spec_file: &Path, overrides: &[Override], registry: &Registry) -> Result<Self, SpecError> {
+        let mut raw = read_spec(spec_file)?;
+        apply_overrides(&mut raw, overrides).map_err(|(l, m)| SpecError::new(spec_file, l, m))?;
+        let mut plan = Self::check(spec_file, raw, registry, |v| std::env::var(v).ok()).map_err(|mut e| {
+            if let Some(o) = overrides.iter().rev().find(|o| e.location == o.location()) {
+                e.message += &format!(" (set by --set {o})");
+            }
+            e
+        })?;
+        plan.overrides = overrides.iter().map(Override::to_string).collect();
+        Ok(plan)
     }
 
     /// Checks a parsed spec.
@@ -137,6 +155,7 @@ impl Plan {
             datasets,
             stages,
             waves,
+            overrides: Vec::new(),
         })
     }
 

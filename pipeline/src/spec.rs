@@ -100,6 +100,62 @@ pub fn parse_spec(file: &Path, text: &str) -> Result<RawSpec, SpecError> {
     })
 }
 
+/// One `--set STAGE.PARAM=VALUE` of `amrepro run`: a parameter value given on the
+/// command line in place of the spec's (as `dvc exp run -S`), checked by the planner as
+/// the spec's own values are.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Override {
+    /// The stage's name in the spec.
+    pub stage: String,
+    /// The parameter's name.
+    pub param: String,
+    /// The value: the text read as a TOML value (a number, a boolean, a quoted string,
+    /// an array), or as a string when it is none (`--set s.method=paper`).
+    pub value: toml::Value,
+}
+
+impl Override {
+    /// Parses `STAGE.PARAM=VALUE`; the error says what is missing.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let expected = || format!("`{text}`: expected STAGE.PARAM=VALUE");
+        let (target, value) = text.split_once('=').ok_or_else(expected)?;
+        let (stage, param) = target.trim().split_once('.').ok_or_else(expected)?;
+        if stage.is_empty() || param.is_empty() {
+            return Err(expected());
+        }
+        let value = value.trim();
+        let parsed = toml::from_str::<toml::Table>(&format!("v = {value}")).ok().and_then(|mut t| t.remove("v"));
+        let value = parsed.unwrap_or_else(|| toml::Value::String(value.to_string()));
+        Ok(Self { stage: stage.to_string(), param: param.to_string(), value })
+    }
+
+    /// Where the planner puts an error about its value: `stage.NAME.params.PARAM`.
+    pub fn location(&self) -> String {
+        format!("stage.{}.params.{}", self.stage, self.param)
+    }
+}
+
+impl std::fmt::Display for Override {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}.{}={}", self.stage, self.param, self.value)
+    }
+}
+
+/// Sets each override's parameter in `spec`, later ones winning; a stage the spec
+/// does not have is an error naming it and the stages it has (the parameter and its
+/// value are the planner's to check).
+pub fn apply_overrides(spec: &mut RawSpec, overrides: &[Override]) -> Result<(), (String, String)> {
+    for o in overrides {
+        let known: Vec<&str> = spec.stage.keys().map(String::as_str).collect();
+        let known = known.join(", ");
+        let Some(stage) = spec.stage.get_mut(&o.stage) else {
+            return Err((format!("--set {o}"), format!("no stage `{}` in the spec; its stages: {known}", o.stage)));
+        };
+        stage.params.insert(o.param.clone(), o.value.clone());
+    }
+    Ok(())
+}
+
 /// 1-based line and column of byte `offset` in `text`.
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];

@@ -164,6 +164,22 @@ pub trait StageKind: Send + Sync {
     fn run(&self, ctx: &mut StageContext) -> Result<(), StageError>;
     /// See [`Stage::split`].
     fn split(&self) -> Option<&dyn Split>;
+    /// The kind's type's full path (`std::any::type_name`), from which the registry
+    /// finds its crate ([`StageKind::crate_name`]).
+    fn type_name(&self) -> &'static str;
+    /// The crate that defines the kind (the first segment of its type's path), whose
+    /// code the kind's cache key holds ([`Registry::code`]).
+    fn crate_name(&self) -> &'static str {
+        crates_named(self.type_name()).next().unwrap_or("")
+    }
+}
+
+/// The first segment of every path in a type's name (`a::X<b::Y>`: `a`, `b`).
+fn crates_named(type_name: &str) -> impl Iterator<Item = &str> {
+    type_name
+        .split(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
+        .filter(|path| path.contains("::"))
+        .map(|path| &path[..path.find("::").unwrap_or(path.len())])
 }
 
 impl<S: Stage> StageKind for S {
@@ -185,6 +201,9 @@ impl<S: Stage> StageKind for S {
     }
     fn split(&self) -> Option<&dyn Split> {
         Stage::split(self)
+    }
+    fn type_name(&self) -> &'static str {
+        std::any::type_name::<S>()
     }
 }
 
@@ -381,12 +400,25 @@ pub fn check_declaration(kind: &dyn StageKind) -> Result<(), String> {
     Ok(())
 }
 
-/// All registered stage kinds, by name, and the code fingerprint of the program that
-/// holds them.
+/// The code a stage kind runs, as its cache key holds it: a fingerprint and the parts it
+/// is taken over, by name (for `amrepro`: the kind's crate and every workspace crate it
+/// depends on, each with the hash of its sources, the lock file, the workspace manifest
+/// and the toolchain), so that the cache can say which part changed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Code {
+    /// The fingerprint over the parts.
+    pub fingerprint: String,
+    /// Part name → its hash (empty when the program names no parts).
+    pub parts: BTreeMap<String, String>,
+}
+
+/// All registered stage kinds, by name, and the code each runs: the code of the crate
+/// that defines it, or the whole program's.
 #[derive(Default)]
 pub struct Registry {
     kinds: BTreeMap<&'static str, Box<dyn StageKind>>,
-    code_fingerprint: String,
+    program: Code,
+    by_crate: BTreeMap<String, Code>,
 }
 
 impl Registry {
@@ -396,25 +428,53 @@ impl Registry {
         Self::default()
     }
 
-    /// An empty registry of a program whose code hashes to `fingerprint` (the `amrepro`
-    /// binary's, from its sources at build time). Every stage's cache key holds it, so
-    /// a stage cached by another build runs again: a change nobody marked with a version
-    /// bump is never served stale.
+    /// An empty registry of a program whose code hashes to `fingerprint`, which every
+    /// kind's cache key holds, so a stage cached by another build runs again: a change
+    /// nobody marked with a version bump is never served stale.
     pub fn with_code_fingerprint(fingerprint: &str) -> Self {
-        Self { code_fingerprint: fingerprint.to_string(), ..Self::default() }
+        Self { program: Code { fingerprint: fingerprint.to_string(), parts: BTreeMap::new() }, ..Self::default() }
     }
 
-    /// The code fingerprint ([`Self::with_code_fingerprint`]; empty if none).
+    /// An empty registry of a program whose code is `program` as a whole and
+    /// `by_crate` per crate (the `amrepro` binary's, from its sources at build time): a
+    /// kind's cache key holds the code of the crate defining it
+    /// ([`StageKind::crate_name`]), or `program`'s when `by_crate` lacks that crate.
+    /// A kind then reruns when the code it runs changes, and only then.
+    pub fn with_code(program: Code, by_crate: BTreeMap<String, Code>) -> Self {
+        Self { program, by_crate, ..Self::default() }
+    }
+
+    /// The whole program's code fingerprint (empty if none).
     pub fn code_fingerprint(&self) -> &str {
-        &self.code_fingerprint
+        &self.program.fingerprint
     }
 
-    /// Adds a kind. Panics on a duplicate name or a malformed declaration
-    /// ([`check_declaration`]): those are programming errors, caught by any test.
+    /// The code that kind `kind` runs ([`Self::with_code`]); the program's for a kind
+    /// not registered.
+    pub fn code(&self, kind: &str) -> &Code {
+        let by_crate = self.get(kind).and_then(|k| self.by_crate.get(k.crate_name()));
+        by_crate.unwrap_or(&self.program)
+    }
+
+    /// Adds a kind. Panics on a duplicate name, a malformed declaration
+    /// ([`check_declaration`]), or a type naming a crate of the program outside the code
+    /// of the crate defining it (a generic kind of one crate over a type of another,
+    /// whose changes its cache key would miss): those are programming errors, caught by
+    /// any test.
     pub fn register(&mut self, kind: Box<dyn StageKind>) {
         let name = kind.info().name;
         if let Err(why) = check_declaration(kind.as_ref()) {
             panic!("stage kind `{name}` is declared wrongly: {why}");
+        }
+        if let Some(code) = self.by_crate.get(kind.crate_name()) {
+            let outside =
+                crates_named(kind.type_name()).find(|c| self.by_crate.contains_key(*c) && !code.parts.contains_key(*c));
+            if let Some(other) = outside {
+                panic!(
+                    "stage kind `{name}` ({}) runs code of crate `{other}`, which its crate's code does not hold",
+                    kind.type_name()
+                );
+            }
         }
         assert!(self.kinds.insert(name, kind).is_none(), "stage kind `{name}` registered twice");
     }
@@ -462,6 +522,13 @@ mod tests {
             progress: None,
             writes,
         }
+    }
+
+    #[test]
+    fn a_kind_is_of_the_crate_its_type_is_defined_in() {
+        assert_eq!(crate::testing::FaultKind.crate_name(), "pipeline");
+        let named: Vec<&str> = crates_named("stages::fdm::Fit<models::fdm::Lag, &[tables::X; 2]>").collect();
+        assert_eq!(named, ["stages", "models", "tables"]);
     }
 
     #[test]

@@ -351,11 +351,13 @@ impl<'a> Shared<'a> {
 
     fn cache_key<'k>(&'k self, s: usize, seed: u64, inputs: &'k BTreeMap<String, String>) -> CacheKey<'k> {
         let stage = &self.plan.stages[s];
+        let code = self.registry.code(stage.kind);
         CacheKey {
             kind: stage.kind,
             kind_version: stage.kind_version,
             tool_version: TOOL_VERSION,
-            code: self.registry.code_fingerprint(),
+            code: &code.fingerprint,
+            code_parts: &code.parts,
             params: &stage.params,
             seed,
             inputs,

@@ -70,15 +70,25 @@ fn contents(manifests: &[Manifest]) -> String {
     format!("<ul>{items}</ul>\n")
 }
 
-/// The code fingerprint of the build that produced the run's outputs, as ` (code …)`,
-/// if its stages record one and agree on it (the cache reruns every stage of another
-/// build, so they do).
+/// The code fingerprints of the build that produced the run's outputs, as
+/// ` (code …)`, each once in stage order, if every stage records one (a kind's
+/// fingerprint is that of the code it runs, so kinds of different crates differ), and
+/// the parameters set on the command line (`--set`), if any.
 fn code_text(m: &Manifest) -> String {
-    let mut codes = m.stages.iter().map(|s| s.record.code_fingerprint.as_str());
-    match codes.next() {
-        Some(first) if !first.is_empty() && codes.all(|c| c == first) => format!(" (code {})", escape(first)),
-        _ => String::new(),
+    let mut codes: Vec<&str> = Vec::new();
+    for code in m.stages.iter().map(|s| s.record.code_fingerprint.as_str()) {
+        if !codes.contains(&code) {
+            codes.push(code);
+        }
     }
+    let mut text = match codes.is_empty() || codes.contains(&"") {
+        true => String::new(),
+        false => format!(" (code {})", escape(&codes.join(", "))),
+    };
+    if !m.overrides.is_empty() {
+        text += &format!(", with --set {}", escape(&m.overrides.join(" ")));
+    }
+    text
 }
 
 fn run_section(out_dir: &Path, m: &Manifest) -> Result<String, StageError> {
@@ -254,7 +264,7 @@ mod tests {
     }
 
     #[test]
-    fn the_run_line_names_the_build_when_every_stage_records_the_same_one() {
+    fn the_run_line_names_the_code_every_stage_records() {
         let stage = |code: &str| -> ManifestStage {
             let mut record: pipeline::StageRecord =
                 serde_json::from_str(RECORD).expect("a record without a code fingerprint parses");
@@ -273,12 +283,17 @@ mod tests {
             title: String::new(),
             spec_file: "s.toml".into(),
             spec_sha256: String::new(),
+            overrides: Vec::new(),
             finished_unix_s: 0,
             wall_time_s: 0.0,
             stages: codes.iter().map(|c| stage(c)).collect(),
         };
         assert_eq!(code_text(&manifest(&["d26b3398084096a6", "d26b3398084096a6"])), " (code d26b3398084096a6)");
-        assert_eq!(code_text(&manifest(&["d26b3398084096a6", "0123456789abcdef"])), "");
+        assert_eq!(
+            code_text(&manifest(&["d26b3398084096a6", "0123456789abcdef", "d26b3398084096a6"])),
+            " (code d26b3398084096a6, 0123456789abcdef)"
+        );
+        assert_eq!(code_text(&manifest(&["d26b3398084096a6", ""])), "");
         assert_eq!(code_text(&manifest(&["", ""])), "");
         assert_eq!(code_text(&manifest(&[])), "");
     }
