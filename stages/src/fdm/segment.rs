@@ -52,9 +52,22 @@ struct Measured<'a> {
     result: Result<Segmentation, String>,
 }
 
-/// Segments every photo of `data` with `method` (in parallel over photos).
+/// Segments every photo of `data` with `method` (in parallel over photos). A photo that
+/// cannot be measured, even one that makes the segmentation panic (a bug, caught here so
+/// that the other photos go on), is its line's `Err` with the reason.
 fn segment_all<'a>(data: &'a FdmLinesDataset, method: Method, step_mm: f64) -> Vec<Measured<'a>> {
-    data.lines.par_iter().map(|line| Measured { line, result: segment_one(line, method, step_mm) }).collect()
+    data.lines
+        .par_iter()
+        .map(|line| {
+            let result = pipeline::panic::catch(|| segment_one(line, method, step_mm)).unwrap_or_else(|panic| {
+                Err(format!(
+                    "{}: internal error, a bug in amrepro (please report it with this photo): {panic}",
+                    line.image.display()
+                ))
+            });
+            Measured { line, result }
+        })
+        .collect()
 }
 
 fn segment_one(line: &PhotoLine, method: Method, step_mm: f64) -> Result<Segmentation, String> {
@@ -77,6 +90,9 @@ fn segment_one(line: &PhotoLine, method: Method, step_mm: f64) -> Result<Segment
     segmented.map_err(|e| format!("{name}: {e}"))
 }
 
+/// Fewest widths inside the line for it to be written.
+const MIN_WIDTHS: usize = 10;
+
 /// The widths of a segmentation inside the line `[0, length]`, as a width line.
 fn width_line(line: &PhotoLine, s: &Segmentation) -> Option<WidthLine> {
     let length = line.motion.length_mm;
@@ -87,7 +103,7 @@ fn width_line(line: &PhotoLine, s: &Segmentation) -> Option<WidthLine> {
         .filter(|(x, w)| (0.0..=length).contains(*x) && **w > 0.0)
         .map(|(x, w)| (*x, *w))
         .unzip();
-    (positions_mm.len() >= 10).then(|| WidthLine {
+    (positions_mm.len() >= MIN_WIDTHS).then(|| WidthLine {
         line_id: line.line_id.clone(),
         condition: line.condition.clone(),
         motion: line.motion,
@@ -140,29 +156,39 @@ impl Stage for SegmentWidthsStage {
         let dir = ctx.input(&PHOTOS).dir.clone();
         let data = read_lines(&dir)?;
         let method = p.method.name();
-        let measured = segment_all(&data, p.method, p.step.step_mm);
-        let mut diagnostics = Diagnostics::default();
-        let mut lines = Vec::new();
-        for m in &measured {
-            let line = m.result.as_ref().ok().and_then(|s| width_line(m.line, s));
-            diagnostics.push(m, line.is_some());
-            lines.extend(line);
-        }
-        if lines.is_empty() {
-            return Err(StageError::BadInput {
-                file: dir.join("lines.csv"),
-                location: None,
-                expected: format!(
-                    "expected at least one photo with a measurable line; none had one: {}",
-                    diagnostics.first_problem()
-                ),
-            });
-        }
+        let (lines, diagnostics) = measure_lines(&data, p.method, p.step.step_mm)
+            .map_err(|expected| StageError::BadInput { file: dir.join("lines.csv"), location: None, expected })?;
         let widths = FdmWidthsDataset { manifest: segmented_manifest(&data.manifest, method), lines };
         widths.write(ctx.output_dir()).map_err(StageError::domain)?;
         ctx.write_table(segment_diagnostics::TABLE.name, &mut diagnostics.frame(&data.manifest.printer, method)?)?;
         Ok(())
     }
+}
+
+/// The lines of `data` that could be measured, and a diagnostic row per line (measured,
+/// or skipped and why); an error listing every line's reason when none could.
+fn measure_lines(
+    data: &FdmLinesDataset,
+    method: Method,
+    step_mm: f64,
+) -> Result<(Vec<WidthLine>, Diagnostics), String> {
+    let measured = segment_all(data, method, step_mm);
+    let mut diagnostics = Diagnostics::default();
+    let mut lines = Vec::new();
+    for m in &measured {
+        let line = m.result.as_ref().ok().and_then(|s| width_line(m.line, s));
+        diagnostics.push(m, line.is_some());
+        lines.extend(line);
+    }
+    if lines.is_empty() {
+        return Err(format!(
+            "expected at least one photo with a measurable line ({}); none of the {} had one: {}",
+            method.name(),
+            measured.len(),
+            diagnostics.problems()
+        ));
+    }
+    Ok((lines, diagnostics))
 }
 
 fn segmented_manifest(photos: &DatasetManifest, method: &str) -> DatasetManifest {
@@ -201,7 +227,15 @@ impl Diagnostics {
         self.image.push(m.line.image.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default());
         let (status, problem, used, skipped) = match &m.result {
             Ok(s) if written => ("measured", skip_summary(s), s.widths_mm.len(), s.skipped.len()),
-            Ok(s) => ("skipped", "fewer than 10 widths inside the line".into(), s.widths_mm.len(), s.skipped.len()),
+            Ok(s) => {
+                let why = format!(
+                    "fewer than {MIN_WIDTHS} widths inside the line's {} mm ({} measured; skipped: {})",
+                    m.line.motion.length_mm,
+                    s.widths_mm.len(),
+                    skip_summary(s)
+                );
+                ("skipped", why, s.widths_mm.len(), s.skipped.len())
+            }
             Err(e) => ("skipped", e.clone(), 0, 0),
         };
         self.status.push(status.into());
@@ -210,8 +244,13 @@ impl Diagnostics {
         self.skipped.push(skipped as i64);
     }
 
-    fn first_problem(&self) -> String {
-        self.problem.first().cloned().unwrap_or_default()
+    /// Every skipped line with its reason: "line `a`: …; line `b`: …".
+    fn problems(&self) -> String {
+        if self.line_id.is_empty() {
+            return "lines.csv lists no line".into();
+        }
+        let skipped = self.line_id.iter().zip(&self.status).zip(&self.problem).filter(|((_, s), _)| *s == "skipped");
+        skipped.map(|((id, _), problem)| format!("line `{id}`: {problem}")).collect::<Vec<_>>().join("; ")
     }
 
     fn frame(&self, printer: &str, method: &str) -> Result<polars::prelude::DataFrame, StageError> {
@@ -485,6 +524,41 @@ mod tests {
             s.positions_mm.iter().zip(&s.widths_mm).map(|(x, w)| w - true_width_at(truth, *x)).collect();
         let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
         assert!(rmse < 0.02, "rmse {rmse}");
+    }
+
+    /// Three lines of the virtual Taz 6 photographed at 10 px/mm, seed 9.
+    fn three_photos(dir: &Path) -> FdmLinesDataset {
+        let camera = CameraSettings { px_per_mm: 10.0, ..CameraSettings::default() };
+        let conditions = vec![(400.0, 50.0), (600.0, 100.0), (800.0, 150.0)];
+        generate_into(&GenerateConfig { conditions, camera, ..GenerateConfig::new("taz6", 9) }, dir).unwrap();
+        FdmLinesDataset::read(dir).unwrap()
+    }
+
+    #[test]
+    fn a_line_that_cannot_be_measured_is_a_row_and_only_none_measured_fails() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mut data = three_photos(tmp.path());
+        let ids: Vec<String> = data.lines.iter().map(|l| l.line_id.clone()).collect();
+        // One truncated photo: a row with its reason, the other two are measured.
+        let bytes = std::fs::read(&data.lines[0].image).unwrap();
+        std::fs::write(&data.lines[0].image, &bytes[..bytes.len() / 2]).unwrap();
+        let (lines, diagnostics) = measure_lines(&data, Method::EdgeFit, 0.05).unwrap();
+        assert_eq!(lines.iter().map(|l| &l.line_id).collect::<Vec<_>>(), [&ids[1], &ids[2]]);
+        assert_eq!(diagnostics.status, ["skipped", "measured", "measured"]);
+        assert!(diagnostics.problem[0].contains("PNG"), "{}", diagnostics.problem[0]);
+        // The two others with a scale twice the camera's: nothing to write, and the error
+        // gives every line's reason, not only the first.
+        for line in &mut data.lines[1..] {
+            line.placement.px_per_mm *= 2.0;
+        }
+        for method in [Method::EdgeFit, Method::Threshold] {
+            let err = measure_lines(&data, method, 0.05).err().unwrap();
+            assert!(err.contains("none of the 3") && err.contains(method.name()), "{err}");
+            for id in &ids {
+                assert!(err.contains(&format!("line `{id}`: ")), "{id}: {err}");
+            }
+            assert!(err.contains("PNG") && err.matches("px_per_mm").count() >= 2, "{err}");
+        }
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! along the axis gives both ends (derivative extrema of the right sign near the nominal
 //! ends), and the start becomes the origin of the positions.
 
-use super::errors::LineError;
+use super::errors::{EndSearch, LineError};
 use super::image::GrayImage;
 use super::profile::{band_offsets, gaussian_derivative, mean, median, peak, sample_across, sample_along};
 use super::profile::{AxisFrame, SampleGrid};
@@ -322,24 +322,30 @@ fn find_end(
     let count = if s1_px > s0_px { ((s1_px - s0_px) / DS_PX) as usize + 1 } else { 0 };
     let (mut values, mut derivative) = (vec![0.0; count], vec![0.0; count]);
     let window_mm = END_WINDOW_PX / geom.px_per_mm;
-    let mismatch = |found_step| LineError::LengthMismatch {
-        which,
-        window_mm,
-        found_step,
-        contrast: contrast.abs(),
-        length_mm: geom.length_px / geom.px_per_mm,
-    };
+    let mismatch =
+        |found| LineError::LengthMismatch { which, window_mm, found, length_mm: geom.length_px / geom.px_per_mm };
+    let contrast = contrast.abs();
     let flank = (6.0 / DS_PX) as usize;
-    if (count as f64) * DS_PX < MIN_END_WINDOW_PX || !sample_along(img, axis, s0_px, DS_PX, &band, &mut values) {
-        return Err(mismatch(f64::NAN));
+    let inside_px = count as f64 * DS_PX;
+    if inside_px < MIN_END_WINDOW_PX || !sample_along(img, axis, s0_px, DS_PX, &band, &mut values) {
+        return Err(mismatch(EndSearch::WindowClipped { inside_px, needed_px: MIN_END_WINDOW_PX }));
     }
     gaussian_derivative(&values, 2.0, &mut derivative);
-    let (index, x) = peak(&derivative, flank..count - flank, derivative_sign).ok_or(mismatch(f64::NAN))?;
+    let at_border = EndSearch::AtWindowBorder { contrast };
+    let (index, x) = peak(&derivative, flank..count - flank, derivative_sign).ok_or(mismatch(at_border))?;
+    // A peak on the searched range's first sample has no flank before it inside the
+    // window: the change goes on beyond the window, no end is inside it.
+    if index == flank {
+        return Err(mismatch(at_border));
+    }
     let after = mean(&values, index + flank, index + 2 * flank);
     let before = mean(&values, index.saturating_sub(2 * flank), index - flank);
     let step = (after - before) * derivative_sign;
-    if step.is_nan() || step < END_STEP_FRACTION * contrast.abs() {
-        return Err(mismatch(step.abs()));
+    if !step.is_finite() {
+        return Err(mismatch(at_border));
+    }
+    if step < END_STEP_FRACTION * contrast {
+        return Err(mismatch(EndSearch::WeakStep { step, contrast }));
     }
     Ok(s0_px + x * DS_PX)
 }
@@ -358,6 +364,43 @@ mod tests {
         let ([c0, c1], inliers) = fit_line_robust(&s, &t).unwrap();
         assert!((c0 - 3.0).abs() < 1e-9 && (c1 - 0.02).abs() < 1e-12);
         assert_eq!(inliers, 28);
+    }
+
+    /// A bright bar 200 px long and 10 px wide on a dark bed, from (40, 20) along +x.
+    fn bar() -> GrayImage {
+        let (w, h) = (300, 40);
+        let lit = |i: usize, j: usize| (40..240).contains(&i) && (15..25).contains(&j);
+        GrayImage::new(w, h, (0..w * h).map(|k| if lit(k % w, k / w) { 0.8 } else { 0.2 }).collect()).unwrap()
+    }
+
+    fn bar_geometry(length_mm: f64) -> super::super::LineGeometry {
+        super::super::LineGeometry {
+            start_px: [40.0, 20.0],
+            direction_rad: 0.0,
+            length_mm,
+            px_per_mm: 10.0,
+            nominal_width_mm: 1.0,
+        }
+    }
+
+    #[test]
+    fn an_end_found_at_the_window_border_says_so_instead_of_a_nan_step() {
+        // The stated length puts the end 19 px past the bar's: the end's window (±24 px)
+        // starts 5 px before the real end, whose edge is strongest on the first sample
+        // searched (6 px in), with no flank before it. The step was NaN in the message.
+        let img = bar();
+        let geom = CheckedGeometry::new(&img, &bar_geometry(21.9), 0.05).unwrap();
+        let err = find_line(&img, &geom).unwrap_err();
+        let LineError::LengthMismatch { which: "end", found: EndSearch::AtWindowBorder { contrast }, .. } = err else {
+            panic!("{err:?}")
+        };
+        assert!((contrast - 0.6).abs() < 1e-6, "{contrast}");
+        let text = err.to_string();
+        assert!(!text.contains("NaN") && text.contains("half the line's contrast (0.300)"), "{text}");
+        // The right length finds both ends.
+        let geom = CheckedGeometry::new(&img, &bar_geometry(20.0), 0.05).unwrap();
+        let line = find_line(&img, &geom).unwrap();
+        assert!((line.length_px - 200.0).abs() < 0.5, "{}", line.length_px);
     }
 
     #[test]

@@ -73,19 +73,16 @@ pub enum LineError {
     },
     /// A line end was not found where the nominal length puts it.
     #[error(
-        "the line's {which} was not found within ±{window_mm:.2} mm of its nominal place \
-         (step {found_step:.3} against a line contrast of {contrast:.3}); the found length does not \
-         match length_mm = {length_mm} mm: check length_mm and px_per_mm"
+        "the line's {which} was not found within ±{window_mm:.2} mm of its nominal place: {found}; \
+         the found length does not match length_mm = {length_mm} mm: check length_mm and px_per_mm"
     )]
     LengthMismatch {
         /// "start" or "end".
         which: &'static str,
         /// Half-width of the search window (mm).
         window_mm: f64,
-        /// Intensity step found across the best candidate end (same units as the image).
-        found_step: f64,
-        /// Line contrast measured across the line (same units as the image).
-        contrast: f64,
+        /// What the search found instead of an end.
+        found: EndSearch,
         /// The nominal length (mm).
         length_mm: f64,
     },
@@ -105,13 +102,66 @@ pub enum LineError {
         max_ratio: f64,
     },
     /// Every sample position was skipped.
-    #[error("no sample position could be measured ({skipped} skipped, first reason: {first_reason})")]
+    #[error("no sample position could be measured: {skipped} skipped ({})", reason_counts(.by_reason))]
     NothingMeasured {
         /// Number of skipped positions.
         skipped: usize,
-        /// The reason of the first one.
-        first_reason: SkipReason,
+        /// How many positions were skipped for each reason, the most frequent first.
+        by_reason: Vec<(SkipReason, usize)>,
     },
+}
+
+/// What the search for a line end found in its window along the axis, when it found no
+/// end: the reason of a [`LineError::LengthMismatch`], in words that say what was
+/// expected (an intensity step across the end of at least half the line's contrast).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EndSearch {
+    /// The strongest change of the right sign is too small to be the line's end.
+    WeakStep {
+        /// The intensity step across the best candidate (units of the image).
+        step: f64,
+        /// The line's contrast measured across it (units of the image).
+        contrast: f64,
+    },
+    /// The intensity changes most at the window's border: there is no end inside it, the
+    /// line (or the bed's shading) goes on beyond the window.
+    AtWindowBorder {
+        /// The line's contrast measured across it (units of the image).
+        contrast: f64,
+    },
+    /// The window holds too little of the photo to show an end (the photo ends there).
+    WindowClipped {
+        /// The length of the window inside the photo (px).
+        inside_px: f64,
+        /// The length an end needs (px).
+        needed_px: f64,
+    },
+}
+
+impl fmt::Display for EndSearch {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::WeakStep { step, contrast } => write!(
+                f,
+                "the strongest intensity step there, {step:.3}, is under half the line's contrast of {contrast:.3}"
+            ),
+            Self::AtWindowBorder { contrast } => write!(
+                f,
+                "no intensity step of half the line's contrast ({:.3}) inside the window: the intensity \
+                 changes most at the window's border, so the line goes on beyond it or ends before it",
+                0.5 * contrast
+            ),
+            Self::WindowClipped { inside_px, needed_px } => write!(
+                f,
+                "only {inside_px:.1} px of the window lie inside the photo, {needed_px:.0} px are needed to see an end"
+            ),
+        }
+    }
+}
+
+/// "2380 × profile leaves the image, 21 × within the end blur of the line".
+fn reason_counts(by_reason: &[(SkipReason, usize)]) -> String {
+    by_reason.iter().map(|(r, n)| format!("{n} × {r}")).collect::<Vec<_>>().join(", ")
 }
 
 /// One sample position without a width, and why.

@@ -69,7 +69,7 @@ pub mod threshold;
 
 use rayon::prelude::*;
 
-pub use errors::{LineError, SkipReason, SkippedColumn};
+pub use errors::{EndSearch, LineError, SkipReason, SkippedColumn};
 pub use image::GrayImage;
 pub use threshold::segment_threshold_columns;
 
@@ -96,6 +96,10 @@ const CONTRAST_FRACTION: f64 = 0.25;
 const WIDTH_RATIO_RANGE: (f64, f64) = (0.3, 3.0);
 /// Most sample positions per image (a 10 m line at 0.01 mm); more is a unit mix-up.
 const MAX_POSITIONS: usize = 1_000_000;
+/// Positions are reported on a grid of this many points per mm (a picometre apart):
+/// far below any pixel or step, coarse enough that k · step comes out as its decimal
+/// ([`CheckedGeometry::position_mm`]).
+pub const POSITION_GRID_PER_MM: f64 = 1e9;
 /// Smallest nominal width that can be measured (px).
 const MIN_WIDTH_PX: f64 = 2.0;
 
@@ -174,6 +178,8 @@ pub struct CheckedGeometry {
     pub nominal_width_px: f64,
     /// Half-width T of the profile window (px).
     pub half_window_px: f64,
+    /// Spacing of the positions (mm).
+    pub step_mm: f64,
     /// Spacing of the positions (px).
     pub step_px: f64,
     /// Number of positions k·step ≤ length.
@@ -222,6 +228,7 @@ impl CheckedGeometry {
             length_px: length_mm * px_per_mm,
             nominal_width_px,
             half_window_px,
+            step_mm,
             step_px: step_mm * px_per_mm,
             position_count: position_count as usize,
         })
@@ -230,6 +237,16 @@ impl CheckedGeometry {
     /// Path coordinate of position `k` (px).
     pub fn position_px(&self, k: usize) -> f64 {
         k as f64 * self.step_px
+    }
+
+    /// Path coordinate of position `k` as it is reported (mm): k · `step_mm` rounded to
+    /// the nearest 10⁻⁹ mm ([`POSITION_GRID_PER_MM`]), so that the sixth position at
+    /// 0.05 mm is written 0.3, the decimal a reader expects, and not 0.30000000000000004
+    /// (the binary rounding of the product). Dividing the whole number of grid points,
+    /// rather than multiplying by 10⁻⁹, gives the double nearest that decimal. It differs
+    /// from the measured place, [`Self::position_px`], by at most 5·10⁻¹⁰ mm.
+    pub fn position_mm(&self, k: usize) -> f64 {
+        (k as f64 * self.step_mm * POSITION_GRID_PER_MM).round() / POSITION_GRID_PER_MM
     }
 
     /// Whether position `s_px` lies within the end blur of a line of `length_px`.
@@ -272,7 +289,7 @@ pub(crate) fn assemble(
         axis: refined_axis(geom, line),
     };
     for (k, sample) in samples.into_iter().enumerate() {
-        let position_mm = geom.position_px(k) / geom.px_per_mm;
+        let position_mm = geom.position_mm(k);
         match sample {
             Ok(width_mm) => {
                 segmentation.positions_mm.push(position_mm);
@@ -299,8 +316,10 @@ fn refined_axis(geom: &CheckedGeometry, line: &FoundLine) -> RefinedAxis {
 /// Errors when nothing was measured or the median width is far from the nominal width.
 fn check_widths(geom: &CheckedGeometry, segmentation: &Segmentation) -> Result<(), LineError> {
     if segmentation.widths_mm.is_empty() {
-        let first_reason = segmentation.skipped.first().map_or(SkipReason::OutsideFrame, |s| s.reason);
-        return Err(LineError::NothingMeasured { skipped: segmentation.skipped.len(), first_reason });
+        return Err(LineError::NothingMeasured {
+            skipped: segmentation.skipped.len(),
+            by_reason: skip_counts(&segmentation.skipped),
+        });
     }
     let median_width_mm = median(&mut segmentation.widths_mm.clone());
     let nominal_width_mm = geom.nominal_width_px / geom.px_per_mm;
@@ -310,6 +329,20 @@ fn check_widths(geom: &CheckedGeometry, segmentation: &Segmentation) -> Result<(
         return Err(LineError::WidthMismatch { median_width_mm, nominal_width_mm, min_ratio, max_ratio });
     }
     Ok(())
+}
+
+/// How many positions were skipped for each reason, the most frequent first (then in
+/// the order the reasons first occur along the line).
+pub fn skip_counts(skipped: &[SkippedColumn]) -> Vec<(SkipReason, usize)> {
+    let mut counts: Vec<(SkipReason, usize)> = Vec::new();
+    for s in skipped {
+        match counts.iter_mut().find(|(r, _)| *r == s.reason) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((s.reason, 1)),
+        }
+    }
+    counts.sort_by(|a, b| b.1.cmp(&a.1));
+    counts
 }
 
 /// Per-position edge fitting with shared settings.
@@ -435,5 +468,60 @@ impl EdgeFitter {
             return Err(SkipReason::LowContrast);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checked(step_mm: f64, length_mm: f64) -> CheckedGeometry {
+        let img = GrayImage { width: 6000, height: 100, pixels: vec![0.5; 600_000] };
+        let geom = LineGeometry {
+            start_px: [50.0, 50.0],
+            direction_rad: 0.0,
+            length_mm,
+            px_per_mm: 40.0,
+            nominal_width_mm: 0.8,
+        };
+        CheckedGeometry::new(&img, &geom, step_mm).unwrap()
+    }
+
+    #[test]
+    fn positions_are_the_decimals_k_times_the_step() {
+        // 6 × 0.05 is 0.30000000000000004 in binary floating point; the positions are
+        // written as the decimal (here 5·k hundredths, 48·k thousandths of a mm).
+        assert_eq!(6.0 * 0.05, 0.30000000000000004);
+        for (step_mm, per_mm) in [(0.05, 100), (0.048, 1000), (0.01, 100)] {
+            let geom = checked(step_mm, 120.0);
+            for k in 0..geom.position_count {
+                let expected = format!("{}", (k as f64 * step_mm * per_mm as f64).round() / per_mm as f64);
+                assert_eq!(format!("{}", geom.position_mm(k)), expected, "step {step_mm}, k {k}");
+                // Never more than half the grid away from the measured place.
+                assert!((geom.position_mm(k) - geom.position_px(k) / geom.px_per_mm).abs() <= 5e-10);
+            }
+        }
+        assert_eq!(checked(0.05, 120.0).position_mm(6), 0.3);
+    }
+
+    #[test]
+    fn skipped_positions_are_counted_by_reason_most_frequent_first() {
+        let at = |reason| SkippedColumn { position_mm: 0.0, reason };
+        let skipped = [
+            at(SkipReason::NearLineEnd),
+            at(SkipReason::OutsideFrame),
+            at(SkipReason::OutsideFrame),
+            at(SkipReason::NearLineEnd),
+            at(SkipReason::OutsideFrame),
+            at(SkipReason::LowContrast),
+        ];
+        let counts = skip_counts(&skipped);
+        assert_eq!(counts, [(SkipReason::OutsideFrame, 3), (SkipReason::NearLineEnd, 2), (SkipReason::LowContrast, 1)]);
+        let err = LineError::NothingMeasured { skipped: 6, by_reason: counts };
+        assert_eq!(
+            err.to_string(),
+            "no sample position could be measured: 6 skipped (3 × profile leaves the image, 2 × within the \
+             end blur of the line, 1 × edge contrast too low against the noise)"
+        );
     }
 }
