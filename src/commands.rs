@@ -16,9 +16,12 @@ use crate::cli::{
     ThermalGenerateArgs,
 };
 
-/// Per workspace crate: its name, the fingerprint of its code and the parts that
-/// fingerprint is taken over (`build.rs`, `src/code_fingerprint.rs`).
-pub const CODE_BY_CRATE: &[(&str, &str, &[(&str, &str)])] = include!(concat!(env!("OUT_DIR"), "/code_by_crate.rs"));
+/// A crate's name, the fingerprint of its code and the parts (name, hash) that
+/// fingerprint is taken over.
+pub type CrateCode = (&'static str, &'static str, &'static [(&'static str, &'static str)]);
+
+/// Every workspace crate's code (`build.rs`, `src/code_fingerprint.rs`).
+pub const CODE_BY_CRATE: &[CrateCode] = include!(concat!(env!("OUT_DIR"), "/code_by_crate.rs"));
 
 /// Every stage kind this binary knows: domain stages and figures (and, for the fault
 /// tests only, `test.fault` when `AMREPRO_TEST_KINDS=1`), each under the code of the

@@ -96,14 +96,17 @@ pub struct OutDiff {
     /// Tables published only in the second folder.
     pub only_b: Vec<(PathBuf, Published)>,
     /// Manifests that could not be read (file, why), in either folder.
-    pub unreadable: Vec<(PathBuf, String)>,
+    pub unreadable: Unreadable,
     /// Changes listed per table by [`fmt::Display`] (the counts are always complete).
     pub max_listed: usize,
 }
 
+/// Manifests that could not be read: (file, why).
+pub type Unreadable = Vec<(PathBuf, String)>;
+
 /// The Parquet tables an out folder's manifests publish: path relative to the folder →
 /// what published it. Unreadable manifests are returned beside them.
-pub fn published_tables(out: &Path) -> std::io::Result<(BTreeMap<PathBuf, Published>, Vec<(PathBuf, String)>)> {
+pub fn published_tables(out: &Path) -> std::io::Result<(BTreeMap<PathBuf, Published>, Unreadable)> {
     let manifests = Manifest::read_all(out)?;
     let mut tables = BTreeMap::new();
     for m in &manifests.runs {
@@ -209,8 +212,8 @@ fn row_keys(df: &DataFrame, keys: &[String], path: &Path) -> Result<Vec<String>,
             .map_err(|source| StageError::Table { path: path.to_path_buf(), source })?;
         let shown: Vec<String> = match dtype {
             DataType::String => opt_strs(df, key, path)?.into_iter().map(|v| v.unwrap_or("null".into())).collect(),
-            DataType::Boolean => opt_bools(df, key, path)?.into_iter().map(|v| shown(v)).collect(),
-            _ => opt_ints(df, key, path)?.into_iter().map(|v| shown(v)).collect(),
+            DataType::Boolean => opt_bools(df, key, path)?.into_iter().map(shown).collect(),
+            _ => opt_ints(df, key, path)?.into_iter().map(shown).collect(),
         };
         for (text, value) in texts.iter_mut().zip(shown) {
             text.push(format!("{key}={value}"));
