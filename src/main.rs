@@ -1,7 +1,12 @@
 //! `amrepro`: the command line. Thin glue over the library crates: it parses
 //! arguments, assembles the stage registry, and turns typed library errors into
 //! messages with context and a non-zero exit code. A panic anywhere becomes such a
-//! message too (`pipeline::panic`), never a Rust panic report.
+//! message too (`pipeline::panic`), never a Rust panic report. Output goes through
+//! `outln!`/`out!` (`out`): a reader that closes standard output early
+//! (`amrepro stages | head`) ends the command quietly with status 0.
+
+#[macro_use]
+mod out;
 
 mod cli;
 #[cfg(test)]
@@ -19,6 +24,7 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     match pipeline::panic::catch(|| commands::dispatch(args)) {
         Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(err)) if out::is_closed(&err) => ExitCode::SUCCESS,
         Ok(Err(err)) => {
             eprintln!("error: {}", chain(&err));
             match err.is::<nightly_run::Regressed>() {

@@ -59,20 +59,23 @@ pub fn run(args: NightlyArgs) -> Result<()> {
     write_report(&args.out)?;
     drop(lock);
     let regressions = found.iter().filter(|f| f.regression).count();
-    println!("night {} of {} in {}", night.info.night, history.nights.len(), marker.display());
-    println!(
-        "{} spec(s), {} failed; {} stages, {} compared numbers; {regressions} regression(s), {} improvement(s)",
-        night.runs.len(),
-        night.runs.iter().filter(|r| !r.ok).count(),
-        night.stages.len(),
-        night.numbers.len(),
-        found.len() - regressions
-    );
-    println!("nightly report: {}", page.display());
+    // A closed standard output ends the printing, not the verdict: a regression still fails.
+    let printed = (|| -> Result<()> {
+        outln!("night {} of {} in {}", night.info.night, history.nights.len(), marker.display())?;
+        outln!(
+            "{} spec(s), {} failed; {} stages, {} compared numbers; {regressions} regression(s), {} improvement(s)",
+            night.runs.len(),
+            night.runs.iter().filter(|r| !r.ok).count(),
+            night.stages.len(),
+            night.numbers.len(),
+            found.len() - regressions
+        )?;
+        outln!("nightly report: {}", page.display())
+    })();
     if args.fail_on_regression && regressions > 0 {
         return Err(Regressed { count: regressions, page }.into());
     }
-    Ok(())
+    printed
 }
 
 /// Runs one spec with every stage forced and adds what it gave to the night; a spec

@@ -26,9 +26,9 @@ struct Publisher {
 pub fn list(args: OutputsArgs) -> Result<()> {
     let by_path = published(&args.specs)?;
     if args.markdown {
-        print!("{}", markdown(&by_path));
+        out!("{}", markdown(&by_path))?;
     } else {
-        print!("{}", text(&by_path));
+        out!("{}", text(&by_path))?;
     }
     Ok(())
 }

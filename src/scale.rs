@@ -24,11 +24,11 @@ pub fn plan(args: PlanArgs) -> Result<()> {
     let units = UnitPlan::new(&plan, &registry);
     if let Some(level) = args.array_of_level {
         let indices: Vec<usize> = units.units.iter().filter(|u| u.level == level).map(|u| u.index).collect();
-        println!("{}", index_ranges(&indices));
+        outln!("{}", index_ranges(&indices))?;
         return Ok(());
     }
     for unit in &units.units {
-        println!("{}", serde_json::to_string(unit).expect("serialisable"));
+        outln!("{}", serde_json::to_string(unit).expect("serialisable"))?;
     }
     let tail: Vec<&str> =
         plan.stages.iter().zip(&units.tail).filter(|(_, t)| **t).map(|(s, _)| s.name.as_str()).collect();
@@ -111,11 +111,11 @@ pub fn collect(args: CollectArgs) -> Result<()> {
         .with_context(|| format!("collect of {} failed; nothing in the run folder changed", args.spec.display()))?;
     let report = write_report(&args.out)?;
     if !quiet {
-        println!("collected {} stages ({} run here)", summary.stages.len(), summary.executed());
+        outln!("collected {} stages ({} run here)", summary.stages.len(), summary.executed())?;
         if let Some(manifest) = summary.manifest_path {
-            println!("manifest: {}", manifest.display());
+            outln!("manifest: {}", manifest.display())?;
         }
-        println!("report:   {}", report.display());
+        outln!("report:   {}", report.display())?;
     }
     Ok(())
 }
@@ -129,7 +129,7 @@ pub fn snakefile(args: SnakefileArgs) -> Result<()> {
     let (spec, out) = (absolute(&args.spec)?, absolute(&args.out)?);
     let text = snakefile_text(&plan, &units, &SnakefileTarget { amrepro: &amrepro, spec: &spec, out: &out });
     match args.output {
-        None => print!("{text}"),
+        None => out!("{text}")?,
         Some(path) => pipeline::artifact::write_atomic(&path, text.as_bytes())
             .with_context(|| format!("writing the Snakefile {}", path.display()))?,
     }
