@@ -187,6 +187,116 @@ pipeline::table! {
 }
 
 pipeline::table! {
+    /// `fdm.measure_photos`: one row per (photo, printed line of the G-code).
+    pub mod photo_lines = "photo_lines" {
+        /// The photo (`photos.csv`).
+        photo_id: Str "",
+        /// The printed line: 0-based, in G-code order, every straight extrusion path.
+        line: Int64 "1",
+        /// The line's G-code start on the bed, x.
+        x0_mm: Float64 "mm",
+        /// The line's G-code start on the bed, y.
+        y0_mm: Float64 "mm",
+        /// The line's G-code end on the bed, x.
+        x1_mm: Float64 "mm",
+        /// The line's G-code end on the bed, y.
+        y1_mm: Float64 "mm",
+        /// The pressure (linear) advance in force while it was printed.
+        pressure_advance_s: Float64 "s",
+        /// `measured` (at least one position measured) or `skipped`.
+        status: Str "",
+        /// For a skipped line why; for a measured one the skipped positions by reason.
+        reason: Str "",
+        /// Median edge-fit width over its measured bead positions (gaps left out); NaN if none.
+        median_width_mm: Float64 "mm",
+        /// Positions measured as bead.
+        widths: Int64 "1",
+        /// Positions measured as a gap (width 0).
+        gaps: Int64 "1",
+        /// Positions skipped.
+        positions_skipped: Int64 "1",
+        /// Where the line's G-code start lies in the photo, x (px, right).
+        start_x_px: Float64 "px",
+        /// Where the line's G-code start lies in the photo, y (px, down).
+        start_y_px: Float64 "px",
+        /// Where the line's G-code end lies in the photo, x.
+        end_x_px: Float64 "px",
+        /// Where the line's G-code end lies in the photo, y.
+        end_y_px: Float64 "px",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.measure_photos`: one row per measured position of a line in a photo.
+    pub mod photo_widths = "photo_widths" {
+        /// The photo.
+        photo_id: Str "",
+        /// The printed line (as `photo_lines`).
+        line: Int64 "1",
+        /// Position along the line from its G-code start.
+        position_mm: Float64 "mm",
+        /// Edge-fit width (blurred two-edge model, sub-pixel); 0 in a gap.
+        width_mm: Float64 "mm",
+        /// The left edge's distance to the left of the G-code axis; NaN in a gap.
+        left_mm: Float64 "mm",
+        /// The right edge's distance to the right of the G-code axis; NaN in a gap.
+        right_mm: Float64 "mm",
+        /// Width of the run above half contrast (the plain threshold baseline); 0 in a gap.
+        threshold_width_mm: Float64 "mm",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.measure_photos`: one row per photo, where it sits on the bed.
+    pub mod photo_calibration = "photo_calibration" {
+        /// The photo.
+        photo_id: Str "",
+        /// `calibrated` or `failed`.
+        status: Str "",
+        /// Why a photo failed; empty otherwise.
+        reason: Str "",
+        /// Image width.
+        width_px: Int64 "px",
+        /// Image height.
+        height_px: Int64 "px",
+        /// Homography bed mm → undistorted px, row 1 (h11, h12, h13).
+        h11: Float64 "px/mm",
+        /// h12.
+        h12: Float64 "px/mm",
+        /// h13.
+        h13: Float64 "px",
+        /// Row 2: h21.
+        h21: Float64 "px/mm",
+        /// h22.
+        h22: Float64 "px/mm",
+        /// h23.
+        h23: Float64 "px",
+        /// Row 3: h31 (h33 = 1).
+        h31: Float64 "1/mm",
+        /// h32.
+        h32: Float64 "1/mm",
+        /// Radial distortion about the image centre, coefficient of (r/R)², R the half-diagonal.
+        k1: Float64 "1",
+        /// Coefficient of (r/R)⁴.
+        k2: Float64 "1",
+        /// Mean image scale at the photo's centre (the square root of the camera's Jacobian determinant).
+        scale_px_per_mm: Float64 "px/mm",
+        /// Enhanced correlation coefficient of the G-code's material with the photo at the finest blur (0.1 mm).
+        correlation: Float64 "1",
+        /// `only` (one pose fitted best), `by_print` (poses alike by geometry told apart by where the widths change) or `ambiguous`.
+        orientation: Str "",
+        /// Sign-test p-value of the orientation's choice over lines; NaN for `only`.
+        orientation_p_value: Float64 "1",
+        /// Fisher separation of print and plate in the learnt colour contrast (pooled sd).
+        contrast_separation: Float64 "1",
+        /// RMS over measured bead positions of the bead's centre (mid-edges) from the G-code axis.
+        reprojection_error_mm: Float64 "mm",
+        /// Bead positions the reprojection error is over.
+        reprojection_positions: Int64 "1",
+    }
+}
+
+pipeline::table! {
     /// `fdm.segment_accuracy`: one row per (photo, method), the segmented widths against
     /// the virtual printer's truth.
     pub mod segment_accuracy = "segment_accuracy" {
@@ -417,6 +527,9 @@ pub const ALL: &[&pipeline::schema::Table] = &[
     &segment_diagnostics::TABLE,
     &segment_accuracy::TABLE,
     &photo_sets::TABLE,
+    &photo_lines::TABLE,
+    &photo_widths::TABLE,
+    &photo_calibration::TABLE,
     &agreement::TABLE,
     &agreement_profiles::TABLE,
     &transfer_cv::TABLE,

@@ -16,8 +16,9 @@
 //! photos/…       JPEG or PNG, colour or grey
 //! ```
 //!
-//! The printer's settings are a table of their own because `printer` is every kind's
-//! printer name. A setting left out is assumed ([`ASSUMED_DEFAULTS`]: the firmware's
+//! The printer's settings are a table: `[printer]` with the printer's `name` among them
+//! (the folder's name when left out), or `[printer_settings]` beside the `printer = "name"`
+//! every other kind has (TOML cannot hold both a `printer` string and a `[printer]` table). A setting left out is assumed ([`ASSUMED_DEFAULTS`]: the firmware's
 //! default, or a typical value for the acceleration, which neither firmware defaults)
 //! and listed in [`FdmPhotos::assumed`] unless the G-code sets it; a stage may fit it
 //! instead and re-plan with [`FdmPhotos::replan`].
@@ -26,6 +27,7 @@
 
 pub mod gcode;
 pub mod generate;
+pub mod import;
 
 use std::path::{Path, PathBuf};
 
@@ -52,8 +54,10 @@ pub const READABLE_VERSIONS: &[u32] = &[FORMAT_VERSION];
 pub const GCODE_FILE: &str = "print.gcode";
 /// The photo table's file name.
 pub const PHOTOS_FILE: &str = "photos.csv";
-/// The `dataset.toml` table of the printer's settings.
+/// The `dataset.toml` table of the printer's settings beside `printer = "name"`.
 pub const SETTINGS_TABLE: &str = "printer_settings";
+/// The `dataset.toml` table of the printer's settings with its `name` (the other form).
+pub const PRINTER_TABLE: &str = "printer";
 /// Image file extensions read (any case).
 pub const IMAGE_EXTENSIONS: [&str; 3] = ["jpg", "jpeg", "png"];
 
@@ -220,10 +224,10 @@ fn read_manifest(dir: &Path) -> Result<(DatasetManifest, PrinterSettings), Datas
     if kind != KIND {
         return Err(bad("kind", format!("expected kind `{KIND}`, got `{kind}`")));
     }
-    let settings = table.remove(SETTINGS_TABLE).ok_or_else(|| {
+    let settings = printer_settings(dir, &mut table).ok_or_else(|| {
         bad(
             SETTINGS_TABLE,
-            "expected a [printer_settings] table with firmware, filament_diameter_mm, nozzle_diameter_mm".into(),
+            "expected a [printer] (or [printer_settings]) table with firmware, filament_diameter_mm, nozzle_diameter_mm".into(),
         )
     })?;
     let manifest: DatasetManifest =
@@ -239,6 +243,21 @@ fn read_manifest(dir: &Path) -> Result<(DatasetManifest, PrinterSettings), Datas
         settings.try_into().map_err(|e: toml::de::Error| bad(SETTINGS_TABLE, one_line(&e)))?;
     check_settings(&file, &printer)?;
     Ok((manifest, printer))
+}
+
+/// The printer's settings: a `[printer]` table (its `name`, or else the folder's name,
+/// becomes the manifest's `printer`), or `[printer_settings]` beside `printer = "name"`.
+fn printer_settings(dir: &Path, table: &mut toml::Table) -> Option<toml::Value> {
+    if let Some(toml::Value::Table(mut settings)) = table.get(PRINTER_TABLE).filter(|v| v.is_table()).cloned() {
+        let folder = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = match settings.remove("name") {
+            Some(toml::Value::String(name)) => name,
+            _ => folder,
+        };
+        table.insert(PRINTER_TABLE.into(), toml::Value::String(name));
+        return Some(toml::Value::Table(settings));
+    }
+    table.remove(SETTINGS_TABLE)
 }
 
 fn one_line(e: &toml::de::Error) -> String {

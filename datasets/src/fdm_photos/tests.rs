@@ -106,6 +106,24 @@ fn the_fixture_reads_as_a_frame_and_three_slow_fast_slow_lines() {
 }
 
 #[test]
+fn a_printer_table_with_its_name_reads_as_printer_settings_beside_the_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_dataset(tmp.path(), &fixture_gcode(false));
+    let as_printer_table = TOML
+        .replace("printer = \"our_printer\"\n", "")
+        .replace("[printer_settings]", "[printer]\nname = \"lab_printer\"");
+    std::fs::write(tmp.path().join("dataset.toml"), &as_printer_table).unwrap();
+    let data = FdmPhotos::read(tmp.path()).unwrap();
+    assert_eq!(data.manifest.printer, "lab_printer");
+    assert_eq!(data.printer.filament_diameter_mm, 1.75);
+    assert_eq!(data.lines.len(), 7);
+    // without a name the folder names the printer
+    std::fs::write(tmp.path().join("dataset.toml"), as_printer_table.replace("name = \"lab_printer\"\n", "")).unwrap();
+    let folder = tmp.path().file_name().unwrap().to_string_lossy().into_owned();
+    assert_eq!(FdmPhotos::read(tmp.path()).unwrap().manifest.printer, folder);
+}
+
+#[test]
 fn relative_and_absolute_e_give_the_same_lines() {
     let absolute = read(&fixture_gcode(false), klipper_start()).unwrap();
     let relative = read(&fixture_gcode(true), klipper_start()).unwrap();
@@ -214,7 +232,7 @@ fn dataset_errors_name_the_file_and_the_field() {
         ("firmware = \"klipper\"", "firmware = \"reprap\"", "printer_settings"),
         ("nozzle_diameter_mm = 0.4", "nozzle_diameter_mm = 0.4\naccel_mm_s2 = -5", "printer_settings.accel_mm_s2"),
         ("nozzle_diameter_mm = 0.4", "nozzle_diameter_mm = 0.4\nspeed = 5", "unknown field `speed`"),
-        ("[printer_settings]", "[other]", "expected a [printer_settings] table"),
+        ("[printer_settings]", "[other]", "expected a [printer] (or [printer_settings]) table"),
         ("fdm-photos", "fdm-lines", "dataset.toml:kind: expected kind `fdm-photos`"),
     ];
     for (from, to, message) in settings {

@@ -12,6 +12,7 @@ mod line_summary;
 mod lines;
 mod loo;
 mod other_family;
+mod photos;
 mod segment;
 mod transfer;
 mod transfer_matrix;
@@ -25,6 +26,7 @@ pub use kinematics::KinematicsStage;
 pub use line_summary::{summarize_line, LineSummary, LineSummaryStage, SummaryWindows};
 pub use loo::{LagLooStage, PiecewiseLooStage};
 pub use other_family::OtherFamilyStage;
+pub use photos::{ImportPhotosStage, MeasurePhotosStage};
 pub use segment::{SegmentAccuracyStage, SegmentWidthsStage};
 pub use transfer::TransferCvStage;
 pub use transfer_matrix::TransferMatrixStage;
@@ -49,4 +51,6 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(VirtualAgreementStage));
     registry.register(Box::new(SegmentWidthsStage));
     registry.register(Box::new(SegmentAccuracyStage));
+    registry.register(Box::new(ImportPhotosStage));
+    registry.register(Box::new(MeasurePhotosStage));
 }
