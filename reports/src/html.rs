@@ -156,11 +156,19 @@ fn figures(m: &Manifest, stage: &ManifestStage) -> String {
     }
     for out in stage.record.outputs.iter().filter(|o| o.path.extension().is_some_and(|e| e == "png")) {
         let rel = format!("../runs/{}/{}/{}", m.run, stage.record.stage, out.path.display());
-        let svg = rel.trim_end_matches(".png").to_string() + ".svg";
+        // an SVG twin is linked only where the stage drew one (a photo overlay has none)
+        let svg_path = out.path.with_extension("svg");
+        let svg = stage
+            .record
+            .outputs
+            .iter()
+            .any(|o| o.path == svg_path)
+            .then(|| rel.trim_end_matches(".png").to_string() + ".svg");
+        let svg_link = svg.map(|svg| format!(" · <a href=\"{}\">SVG</a>", escape(&svg))).unwrap_or_default();
         let _ = writeln!(
             s,
-            "<figure><img src=\"{0}\" alt=\"{1}\"><figcaption>Figure from stage <code>{2}</code> ({3}), run {4}. <a href=\"{0}\">PNG</a> · <a href=\"{5}\">SVG</a></figcaption></figure>",
-            escape(&rel), escape(&out.path.display().to_string()), escape(&stage.record.stage), escape(&stage.record.kind), escape(&m.run), escape(&svg)
+            "<figure><img src=\"{0}\" alt=\"{1}\"><figcaption>Figure from stage <code>{2}</code> ({3}), run {4}. <a href=\"{0}\">PNG</a>{5}</figcaption></figure>",
+            escape(&rel), escape(&out.path.display().to_string()), escape(&stage.record.stage), escape(&stage.record.kind), escape(&m.run), svg_link
         );
     }
     s

@@ -243,6 +243,18 @@ pipeline::table! {
         right_mm: Float64 "mm",
         /// Width of the run above half contrast (the plain threshold baseline); 0 in a gap.
         threshold_width_mm: Float64 "mm",
+        /// The G-code axis at this position in the photo, x (px, right).
+        axis_x_px: Float64 "px",
+        /// The G-code axis at this position in the photo, y (px, down).
+        axis_y_px: Float64 "px",
+        /// The left edge in the photo, x; NaN in a gap.
+        left_x_px: Float64 "px",
+        /// The left edge in the photo, y; NaN in a gap.
+        left_y_px: Float64 "px",
+        /// The right edge in the photo, x; NaN in a gap.
+        right_x_px: Float64 "px",
+        /// The right edge in the photo, y; NaN in a gap.
+        right_y_px: Float64 "px",
     }
 }
 
@@ -251,6 +263,8 @@ pipeline::table! {
     pub mod photo_calibration = "photo_calibration" {
         /// The photo.
         photo_id: Str "",
+        /// The photo's file, relative to the dataset folder (`photos.csv`).
+        image: Str "",
         /// `calibrated` or `failed`.
         status: Str "",
         /// Why a photo failed; empty otherwise.

@@ -15,8 +15,9 @@ pub(crate) mod thermal;
 
 pub use discrepancy_residuals::DiscrepancyResidualsFigure;
 pub use fdm::{
-    DiscoveryPowerFigure, DiscrepancyLinesFigure, InfillFigure, LooPredictionsFigure, RSurfaceFigure,
-    SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure, VirtualAgreementFigure, WidthProfilesFigure,
+    DiscoveryPowerFigure, DiscrepancyLinesFigure, InfillFigure, LooPredictionsFigure, PhotoOverlayFigure,
+    RSurfaceFigure, SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure, VirtualAgreementFigure,
+    WidthProfilesFigure,
 };
 pub use inkjet::{InkjetHeightMapsFigure, InkjetModelVsScanFigure, InkjetPipeJunctionFigure};
 pub use power_by_effect::DiscoveryPowerByEffectFigure;
@@ -49,4 +50,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(DiscoveryPowerFigure));
     registry.register(Box::new(VirtualAgreementFigure));
     registry.register(Box::new(SegmentAccuracyFigure));
+    registry.register(Box::new(PhotoOverlayFigure));
 }

@@ -15,7 +15,7 @@ use polars::prelude::DataFrame;
 use tables::fdm::{photo_calibration as cal_t, photo_lines as lines_t, photo_widths as widths_t};
 use vision::photo::measure::{measure_paths, PathMeasurement};
 use vision::photo::orient::Choice;
-use vision::photo::{calibrate, Calibration, ColourImage, PrintedPath};
+use vision::photo::{calibrate, Calibration, ColourImage, PhotoCamera, PrintedPath};
 
 use super::segment::Step;
 use crate::table::{f64_col, frame, i64_col, str_col};
@@ -52,7 +52,7 @@ impl Stage for MeasurePhotosStage {
             let result = pipeline::panic::catch(|| measure_photo(photo, &paths, p.step_mm)).unwrap_or_else(|panic| {
                 Err(format!("internal error, a bug in amrepro (please report it with this photo): {panic}"))
             });
-            rows.push(photo, &data.lines, result);
+            rows.push(photo, &data.lines, &paths, &dir, result);
             bar.inc(1);
         }
         bar.finish_and_clear();
@@ -121,21 +121,29 @@ struct Rows {
 }
 
 impl Rows {
-    fn push(&mut self, photo: &Photo, lines: &[PrintedLine], result: Result<Measured, String>) {
+    fn push(
+        &mut self,
+        photo: &Photo,
+        lines: &[PrintedLine],
+        paths: &[PrintedPath],
+        dir: &std::path::Path,
+        result: Result<Measured, String>,
+    ) {
+        let image = photo.image.strip_prefix(dir).unwrap_or(&photo.image).to_string_lossy().into_owned();
         match result {
             Ok(m) => {
                 for (index, (line, pm)) in lines.iter().zip(&m.paths).enumerate() {
                     let measured = self.lines.push_measured(&photo.photo_id, index, line, pm);
                     self.measured_lines += usize::from(measured);
-                    self.widths.push(&photo.photo_id, index, pm);
+                    self.widths.push(&photo.photo_id, index, pm, &paths[index], &m.calibration.camera);
                 }
-                self.calibration.push_calibrated(&photo.photo_id, &m);
+                self.calibration.push_calibrated(&photo.photo_id, &image, &m);
             }
             Err(reason) => {
                 for (index, line) in lines.iter().enumerate() {
                     self.lines.push_skipped(&photo.photo_id, index, line, &format!("photo not measured: {reason}"));
                 }
-                self.calibration.push_failed(&photo.photo_id, &reason);
+                self.calibration.push_failed(&photo.photo_id, &image, &reason);
                 self.failures.push(format!("photo `{}`: {reason}", photo.photo_id));
             }
         }
@@ -249,10 +257,15 @@ struct WidthRows {
     photo_id: Vec<String>,
     line: Vec<i64>,
     values: [Vec<f64>; 5],
+    pixels: [Vec<f64>; 6],
 }
 
 impl WidthRows {
-    fn push(&mut self, photo_id: &str, index: usize, pm: &PathMeasurement) {
+    /// The measured positions of one path, with the axis and both edges in the photo.
+    fn push(&mut self, photo_id: &str, index: usize, pm: &PathMeasurement, path: &PrintedPath, camera: &PhotoCamera) {
+        let in_photo = |s: f64, t: f64| {
+            if t.is_finite() { camera.project(path.point(s, t)) } else { None }.unwrap_or([f64::NAN; 2])
+        };
         for s in &pm.samples {
             self.photo_id.push(photo_id.into());
             self.line.push(index as i64);
@@ -261,10 +274,19 @@ impl WidthRows {
             {
                 self.values[k].push(v);
             }
+            let points = [
+                in_photo(s.position_mm, 0.0),
+                in_photo(s.position_mm, s.left_mm),
+                in_photo(s.position_mm, -s.right_mm),
+            ];
+            for (k, v) in points.iter().flatten().enumerate() {
+                self.pixels[k].push(*v);
+            }
         }
     }
 
     fn frame(&self) -> Result<DataFrame, StageError> {
+        let [ax, ay, lx, ly, rx, ry] = self.pixels.clone();
         let [position, width, left, right, threshold] = self.values.clone();
         frame(vec![
             str_col(widths_t::photo_id, self.photo_id.clone()),
@@ -274,6 +296,12 @@ impl WidthRows {
             f64_col(widths_t::left_mm, left),
             f64_col(widths_t::right_mm, right),
             f64_col(widths_t::threshold_width_mm, threshold),
+            f64_col(widths_t::axis_x_px, ax),
+            f64_col(widths_t::axis_y_px, ay),
+            f64_col(widths_t::left_x_px, lx),
+            f64_col(widths_t::left_y_px, ly),
+            f64_col(widths_t::right_x_px, rx),
+            f64_col(widths_t::right_y_px, ry),
         ])
     }
 }
@@ -284,6 +312,7 @@ impl WidthRows {
 #[derive(Default)]
 struct CalibrationRows {
     photo_id: Vec<String>,
+    image: Vec<String>,
     status: Vec<String>,
     reason: Vec<String>,
     size: [Vec<i64>; 2],
@@ -298,9 +327,10 @@ struct CalibrationRows {
 }
 
 impl CalibrationRows {
-    fn push_calibrated(&mut self, photo_id: &str, m: &Measured) {
+    fn push_calibrated(&mut self, photo_id: &str, image: &str, m: &Measured) {
         let c = &m.calibration;
         self.photo_id.push(photo_id.into());
+        self.image.push(image.into());
         self.status.push("calibrated".into());
         self.reason.push(String::new());
         self.size[0].push(m.size_px.0 as i64);
@@ -323,8 +353,9 @@ impl CalibrationRows {
         self.reprojection_n.push(n as i64);
     }
 
-    fn push_failed(&mut self, photo_id: &str, reason: &str) {
+    fn push_failed(&mut self, photo_id: &str, image: &str, reason: &str) {
         self.photo_id.push(photo_id.into());
+        self.image.push(image.into());
         self.status.push("failed".into());
         self.reason.push(reason.into());
         self.size.iter_mut().for_each(|c| c.push(0));
@@ -357,6 +388,7 @@ impl CalibrationRows {
         ];
         let mut columns = vec![
             str_col(cal_t::photo_id, self.photo_id.clone()),
+            str_col(cal_t::image, self.image.clone()),
             str_col(cal_t::status, self.status.clone()),
             str_col(cal_t::reason, self.reason.clone()),
             i64_col(cal_t::width_px, self.size[0].clone()),
@@ -378,7 +410,7 @@ impl CalibrationRows {
 
 /// The bed point seen at the photo's centre (mm): the homography's inverse there, where
 /// the radial distortion is the identity.
-fn bed_under_centre(camera: &vision::photo::PhotoCamera) -> [f64; 2] {
+fn bed_under_centre(camera: &PhotoCamera) -> [f64; 2] {
     let h = &camera.homography;
     let [u, v] = camera.centre_px;
     let a = [[h[0] - u * h[6], h[1] - u * h[7]], [h[3] - v * h[6], h[4] - v * h[7]]];

@@ -144,7 +144,8 @@ impl Stage for SegmentWidthsStage {
     type Params = SegmentParams;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.segment_widths",
-        version: 1,
+        // 2: the threshold window is cut at the photo's edge; positions are the exact decimals k·step
+        version: 2,
         summary: "Photos of lines (fdm-lines) → widths along each line (an fdm-widths dataset, the output folder) + segment_diagnostics.parquet",
         implements: "paper 000 Sec. III (widths measured from camera images); DESIGN §4",
         inputs: &[PHOTOS],

@@ -2,7 +2,10 @@
 //! crate (8- or 16-bit, grey, grey+alpha, RGB or RGBA; grey becomes three equal channels,
 //! alpha is ignored). The header is read first and the size checked against the caller's
 //! pixel limit before any pixel buffer is allocated; a truncated or corrupt file is
-//! [`PhotoError::Unreadable`], never a panic.
+//! [`PhotoError::Unreadable`], never a panic. The JPEG decoder fills a truncated file's
+//! missing rows without a word (measured: a photo cut to a third decoded as a whole), so a
+//! JPEG must hold an end-of-image marker (FF D9) after its last start-of-scan (FF DA);
+//! an EXIF thumbnail's markers come before the main image's scans.
 
 use std::io::Cursor;
 
@@ -37,7 +40,11 @@ impl ColourImage {
         let reader = image::ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
             .map_err(|e| PhotoError::Unreadable(e.to_string()))?;
+        let is_jpeg = reader.format() == Some(image::ImageFormat::Jpeg);
         let (width, height) = reader.into_dimensions().map_err(unreadable)?;
+        if is_jpeg && !jpeg_is_complete(bytes) {
+            return Err(PhotoError::Unreadable("truncated JPEG: no end-of-image marker after the last scan".into()));
+        }
         let (width, height) = (width as usize, height as usize);
         if width.checked_mul(height).is_none_or(|n| n > max_pixels) {
             return Err(PhotoError::TooLarge { width, height, max_pixels });
@@ -57,6 +64,15 @@ impl ColourImage {
     #[inline]
     pub fn at(&self, i: usize, j: usize) -> [f32; 3] {
         self.pixels[j * self.width + i]
+    }
+}
+
+/// Whether a JPEG's last scan (FF DA) is followed by an end-of-image marker (FF D9).
+fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let last = |marker: u8| bytes.windows(2).rposition(|w| w[0] == 0xFF && w[1] == marker);
+    match (last(0xDA), last(0xD9)) {
+        (Some(scan), Some(end)) => end > scan,
+        _ => false,
     }
 }
 
@@ -89,6 +105,10 @@ mod tests {
         assert!(matches!(ColourImage::decode(&png, 100), Err(PhotoError::TooLarge { width: 16, height: 12, .. })));
         let jpeg = encoded(image::ImageFormat::Jpeg);
         assert!(matches!(ColourImage::decode(&jpeg[..jpeg.len() / 2], 1000), Err(PhotoError::Unreadable(_))));
+        // cut just before its end-of-image marker, the decoder alone would accept it
+        assert!(
+            matches!(ColourImage::decode(&jpeg[..jpeg.len() - 2], 1000), Err(PhotoError::Unreadable(e)) if e.contains("truncated JPEG"))
+        );
         assert!(matches!(ColourImage::decode(b"not an image", 1000), Err(PhotoError::Unreadable(_))));
     }
 }

@@ -4,6 +4,7 @@
 mod discrepancy;
 mod infill;
 pub(crate) mod loo_predictions;
+mod photo_overlay;
 mod r_surface;
 mod segment_accuracy;
 mod transfer_cv;
@@ -14,6 +15,7 @@ mod width_profiles;
 pub use discrepancy::{DiscoveryPowerFigure, DiscrepancyLinesFigure};
 pub use infill::InfillFigure;
 pub use loo_predictions::LooPredictionsFigure;
+pub use photo_overlay::PhotoOverlayFigure;
 pub use r_surface::RSurfaceFigure;
 pub use segment_accuracy::SegmentAccuracyFigure;
 pub use transfer_cv::TransferCvFigure;
