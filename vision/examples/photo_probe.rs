@@ -13,16 +13,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::Path::new(args.get(1).ok_or("usage: photo_probe DATASET_DIR [OUT_DIR]")?);
     let out = std::path::PathBuf::from(args.get(2).map_or("/tmp", |s| s.as_str()));
     let data = datasets::fdm_photos::FdmPhotos::read(dir)?;
-    let paths: Vec<PrintedPath> = data
-        .lines
-        .iter()
-        .map(|l| PrintedPath {
-            start_mm: l.start_mm,
-            end_mm: l.end_mm,
-            width_mm: l.nominal_width_mm,
-            speed_changes_mm: l.moves.iter().skip(1).map(|m| m.start_along_mm).collect(),
-        })
-        .collect();
+    let paths: Vec<PrintedPath> = data.lines.iter().map(PrintedPath::from_line).collect();
     for photo in &data.photos {
         let t0 = Instant::now();
         let img = ColourImage::decode(&std::fs::read(&photo.image)?, 64 << 20)?;

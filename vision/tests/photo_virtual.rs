@@ -47,15 +47,7 @@ struct LineScore {
 }
 
 fn paths(data: &FdmPhotos) -> Vec<PrintedPath> {
-    data.lines
-        .iter()
-        .map(|l| PrintedPath {
-            start_mm: l.start_mm,
-            end_mm: l.end_mm,
-            width_mm: l.nominal_width_mm,
-            speed_changes_mm: l.moves.iter().skip(1).map(|m| m.start_along_mm).collect(),
-        })
-        .collect()
+    data.lines.iter().map(PrintedPath::from_line).collect()
 }
 
 fn score(line: usize, m: &PathMeasurement, truth: &[(f64, f64)]) -> LineScore {

@@ -45,7 +45,7 @@ impl Stage for MeasurePhotosStage {
     fn run(&self, ctx: &mut StageContext, p: &Step) -> Result<(), StageError> {
         let dir = ctx.input(&PHOTOS).dir.clone();
         let data = FdmPhotos::read(&dir).map_err(StageError::domain)?;
-        let paths: Vec<PrintedPath> = data.lines.iter().map(printed_path).collect();
+        let paths: Vec<PrintedPath> = data.lines.iter().map(PrintedPath::from_line).collect();
         let bar = ctx.progress(data.photos.len() as u64);
         let mut rows = Rows::default();
         for photo in &data.photos {
@@ -67,16 +67,6 @@ impl Stage for MeasurePhotosStage {
         ctx.write_table(widths_t::TABLE.name, &mut rows.widths.frame()?)?;
         ctx.write_table(cal_t::TABLE.name, &mut rows.calibration.frame()?)?;
         Ok(())
-    }
-}
-
-/// A G-code line as the vision code sees it: axis, commanded width, where speed changes.
-fn printed_path(line: &PrintedLine) -> PrintedPath {
-    PrintedPath {
-        start_mm: line.start_mm,
-        end_mm: line.end_mm,
-        width_mm: line.nominal_width_mm,
-        speed_changes_mm: line.moves.iter().skip(1).map(|m| m.start_along_mm).collect(),
     }
 }
 

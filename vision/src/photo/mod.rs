@@ -60,6 +60,17 @@ pub struct PrintedPath {
 }
 
 impl PrintedPath {
+    /// A G-code line as the photo sees it: its axis, the width its commanded flow gives,
+    /// and where along it the commanded speed changes (each move's start after the first).
+    pub fn from_line(line: &models::fdm::printed_lines::PrintedLine) -> Self {
+        Self {
+            start_mm: line.start_mm,
+            end_mm: line.end_mm,
+            width_mm: line.nominal_width_mm,
+            speed_changes_mm: line.moves.iter().skip(1).map(|m| m.start_along_mm).collect(),
+        }
+    }
+
     /// Length (mm).
     pub fn length_mm(&self) -> f64 {
         (self.end_mm[0] - self.start_mm[0]).hypot(self.end_mm[1] - self.start_mm[1])
