@@ -161,7 +161,7 @@ fn accumulate<const N: usize>(
 }
 
 /// Solves M x = y for a symmetric positive definite N × N M (Cholesky, in place).
-fn cholesky_solve<const N: usize>(mut m: [[f64; N]; N], mut y: [f64; N]) -> Option<[f64; N]> {
+pub(crate) fn cholesky_solve<const N: usize>(mut m: [[f64; N]; N], mut y: [f64; N]) -> Option<[f64; N]> {
     for j in 0..N {
         let diag = m[j][j] - (0..j).map(|k| m[j][k] * m[j][k]).sum::<f64>();
         if diag <= 0.0 || !diag.is_finite() {

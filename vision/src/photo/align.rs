@@ -21,6 +21,7 @@ use rayon::prelude::*;
 use super::camera::{PhotoCamera, N_CAMERA_PARAMS};
 use super::raster::{BedRaster, Raster};
 use super::PrintedPath;
+use crate::lines::fit::cholesky_solve;
 use crate::lines::GrayImage;
 
 /// Parameters fitted: the camera's.
@@ -322,41 +323,4 @@ fn damped_solve(jtj: &[[f64; N]; N], jtr: &[f64; N], lambda: f64, active: &[bool
         b[r] = jtr[r];
     }
     cholesky_solve(a, b)
-}
-
-/// Solves a symmetric positive definite system by Cholesky.
-pub(crate) fn cholesky_solve<const M: usize>(mut a: [[f64; M]; M], mut b: [f64; M]) -> Option<[f64; M]> {
-    for c in 0..M {
-        let mut d = a[c][c];
-        for k in 0..c {
-            d -= a[c][k] * a[c][k];
-        }
-        if d.is_nan() || d <= 0.0 {
-            return None;
-        }
-        let d = d.sqrt();
-        a[c][c] = d;
-        for r in c + 1..M {
-            let mut s = a[r][c];
-            for k in 0..c {
-                s -= a[r][k] * a[c][k];
-            }
-            a[r][c] = s / d;
-        }
-    }
-    for r in 0..M {
-        let mut s = b[r];
-        for k in 0..r {
-            s -= a[r][k] * b[k];
-        }
-        b[r] = s / a[r][r];
-    }
-    for r in (0..M).rev() {
-        let mut s = b[r];
-        for k in r + 1..M {
-            s -= a[k][r] * b[k];
-        }
-        b[r] = s / a[r][r];
-    }
-    Some(b)
 }

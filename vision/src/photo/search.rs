@@ -15,8 +15,10 @@
 //! alike turned by 180°) leave several candidates with close scores: all of them are
 //! returned and told apart later by the fine fit and the print itself ([`super::orient`]).
 
+use std::sync::Arc;
+
 use rustfft::num_complex::Complex32;
-use rustfft::FftPlanner;
+use rustfft::{Fft, FftPlanner};
 
 use super::camera::PhotoCamera;
 use super::raster::{bounds, BedRaster, Raster};
@@ -204,6 +206,7 @@ fn smooth_circular(h: &[f64]) -> Vec<f64> {
 struct Correlator {
     image: Raster,
     size: [usize; 2],
+    plans: Plans,
     spectrum: Vec<Complex32>,
     sum: Vec<f64>,
     sum_sq: Vec<f64>,
@@ -212,15 +215,16 @@ struct Correlator {
 impl Correlator {
     fn new(image: &Raster) -> Self {
         let size = [2 * image.width, 2 * image.height];
+        let plans = Plans::new(size);
         let mut spectrum = vec![Complex32::new(0.0, 0.0); size[0] * size[1]];
         for j in 0..image.height {
             for i in 0..image.width {
                 spectrum[j * size[0] + i].re = image.values[j * image.width + i];
             }
         }
-        fft2(&mut spectrum, size, false);
+        plans.forward(&mut spectrum);
         let (sum, sum_sq) = integral_images(image);
-        Self { image: image.clone(), size, spectrum, sum, sum_sq }
+        Self { image: image.clone(), size, plans, spectrum, sum, sum_sq }
     }
 
     /// The normalised correlation of largest magnitude (either polarity) of `template`
@@ -244,11 +248,11 @@ impl Correlator {
                 buf[b * self.size[0] + a].re = template.raster.values[b * tw + a] - mean as f32;
             }
         }
-        fft2(&mut buf, self.size, false);
+        self.plans.forward(&mut buf);
         for (x, s) in buf.iter_mut().zip(&self.spectrum) {
             *x = s * x.conj();
         }
-        fft2(&mut buf, self.size, true);
+        self.plans.inverse(&mut buf);
         let scale = 1.0 / (self.size[0] * self.size[1]) as f64;
         let mut best: Option<(f64, [f64; 2])> = None;
         for y in 0..=h - th {
@@ -289,21 +293,42 @@ fn integral_images(image: &Raster) -> (Vec<f64>, Vec<f64>) {
     (sum, sum_sq)
 }
 
-/// In-place 2-D FFT of a row-major `size[0]` × `size[1]` buffer (unnormalised inverse).
-fn fft2(buf: &mut [Complex32], size: [usize; 2], inverse: bool) {
-    let mut planner = FftPlanner::new();
-    let (row_fft, col_fft) = if inverse {
-        (planner.plan_fft_inverse(size[0]), planner.plan_fft_inverse(size[1]))
-    } else {
-        (planner.plan_fft_forward(size[0]), planner.plan_fft_forward(size[1]))
-    };
-    row_fft.process(buf);
+/// The row and column FFTs of one padded size, planned once per photo and reused by every
+/// template's correlation.
+struct Plans {
+    size: [usize; 2],
+    forward: [Arc<dyn Fft<f32>>; 2],
+    inverse: [Arc<dyn Fft<f32>>; 2],
+}
+
+impl Plans {
+    fn new(size: [usize; 2]) -> Self {
+        let mut planner = FftPlanner::new();
+        let forward = [planner.plan_fft_forward(size[0]), planner.plan_fft_forward(size[1])];
+        let inverse = [planner.plan_fft_inverse(size[0]), planner.plan_fft_inverse(size[1])];
+        Self { size, forward, inverse }
+    }
+
+    fn forward(&self, buf: &mut [Complex32]) {
+        fft2(buf, self.size, &self.forward);
+    }
+
+    /// Unnormalised inverse.
+    fn inverse(&self, buf: &mut [Complex32]) {
+        fft2(buf, self.size, &self.inverse);
+    }
+}
+
+/// In-place 2-D FFT of a row-major `size[0]` × `size[1]` buffer with the row and column
+/// plans `fft`.
+fn fft2(buf: &mut [Complex32], size: [usize; 2], fft: &[Arc<dyn Fft<f32>>; 2]) {
+    fft[0].process(buf);
     let mut column = vec![Complex32::new(0.0, 0.0); size[1]];
     for i in 0..size[0] {
         for j in 0..size[1] {
             column[j] = buf[j * size[0] + i];
         }
-        col_fft.process(&mut column);
+        fft[1].process(&mut column);
         for j in 0..size[1] {
             buf[j * size[0] + i] = column[j];
         }
