@@ -60,6 +60,39 @@ pub enum Command {
     Collect(CollectArgs),
     /// Write a Snakemake workflow that runs a spec's work units and collects them.
     Snakefile(SnakefileArgs),
+    /// Photos of a printed pressure-advance pattern and its G-code → the pressure advance
+    /// to set, with its 95 % interval, the melt's lag and the figures (README: pressure advance).
+    PressureAdvance(PressureAdvanceArgs),
+}
+
+/// `amrepro pressure-advance`.
+#[derive(Debug, Args)]
+pub struct PressureAdvanceArgs {
+    /// The G-code that printed the pattern (straight lines, each under its own
+    /// SET_PRESSURE_ADVANCE or M900, with speed changes along them).
+    #[arg(long)]
+    pub gcode: PathBuf,
+    /// Top-view photos of the printed pattern (JPEG or PNG), the whole pattern in view.
+    #[arg(required = true)]
+    pub photos: Vec<PathBuf>,
+    /// The firmware that ran the G-code: klipper or marlin.
+    #[arg(long, default_value = "klipper")]
+    pub firmware: String,
+    /// Filament diameter (mm).
+    #[arg(long, default_value_t = 1.75)]
+    pub filament_diameter_mm: f64,
+    /// Nozzle diameter (mm).
+    #[arg(long, default_value_t = 0.4)]
+    pub nozzle_diameter_mm: f64,
+    /// The printer's name (in the tables).
+    #[arg(long, default_value = "printer")]
+    pub printer: String,
+    /// Out folder: the inputs' copies, the spec, the tables, figures and report.
+    #[arg(long, default_value = "out/pressure-advance")]
+    pub out: PathBuf,
+    /// Print only errors and the result.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 /// `amrepro plan`.

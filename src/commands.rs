@@ -60,10 +60,11 @@ pub fn dispatch(cli: Cli) -> Result<()> {
         Command::RunUnit(args) => crate::scale::run_unit(args),
         Command::Collect(args) => crate::scale::collect(args),
         Command::Snakefile(args) => crate::scale::snakefile(args),
+        Command::PressureAdvance(args) => crate::pressure_advance::pressure_advance(args),
     }
 }
 
-fn run(args: RunArgs) -> Result<()> {
+pub(crate) fn run(args: RunArgs) -> Result<()> {
     let registry = registry();
     let plan = Plan::from_file_with(&args.spec, &args.sets, &registry)?;
     if args.verbose {

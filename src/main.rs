@@ -14,6 +14,7 @@ mod code_fingerprint;
 mod commands;
 mod nightly_run;
 mod outputs;
+mod pressure_advance;
 mod scale;
 
 use std::process::ExitCode;

@@ -7,13 +7,14 @@
 //! printer from the three others, 5 methods, all nine lines per printer, every subset,
 //! each target as the stage's work unit, and the summary's 2000 bootstrap draws; with
 //! the fits under a prior at the target's own kinematic pair, as the shipped spec, and
-//! with the grid search repeated under every prior). Inputs are built outside the
-//! timed closures.
+//! with the grid search repeated under every prior); and the lag and pressure advance
+//! fitted to a photographed pattern's 21 lines. Inputs are built outside the timed closures.
 
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
-use models::fdm::synthetic::perturbed_lines;
+use models::fdm::pa_tuning::{tune, TuningSettings};
+use models::fdm::synthetic::{perturbed_lines, pressure_advance_pattern, pressure_advance_widths};
 use models::fdm::{
     default_tasks, fit, leave_one_out, summarise, transfer_cv, transfer_matrix_for_target, transfer_source_mean,
     MeasuredLine, PiecewiseParams, PriorKinematics, SourcePrior, StudyPrinter, TransferParams,
@@ -109,5 +110,20 @@ fn bench_transfer_matrix(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_fit, bench_transfer, bench_transfer_cv, bench_transfer_matrix);
+/// The lag and pressure advance of one photographed pattern (issue 55's speed target is
+/// photo to recommendation in 3 s on 2 cores; this is the fit's part): 21 slow–fast–slow
+/// lines, K from 0 to 0.1 s, about 700 widths each, τ with its jackknife over the lines.
+fn bench_pressure_advance(c: &mut Criterion) {
+    let advances: Vec<f64> = (0..21).map(|i| 0.005 * i as f64).collect();
+    let lines = pressure_advance_pattern(&advances, 0.04);
+    let measured = pressure_advance_widths(&lines, 0.04, 0.01, 1);
+    let mut g = c.benchmark_group("fdm_pressure_advance");
+    g.sample_size(10);
+    g.bench_function("tune_21lines_one_photo", |b| {
+        b.iter(|| tune(&lines, &measured, &TuningSettings::default()).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_fit, bench_transfer, bench_transfer_cv, bench_transfer_matrix, bench_pressure_advance);
 criterion_main!(benches);

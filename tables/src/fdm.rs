@@ -528,6 +528,96 @@ pipeline::table! {
     }
 }
 
+pipeline::table! {
+    /// `fdm.pressure_advance`: one row per fit of a print's lag: all its photos together
+    /// (`subset` = `all`), then each photo alone.
+    pub mod pressure_advance = "pressure_advance" {
+        /// The print (the dataset's printer).
+        print: Str "",
+        /// `all` (every photo of the print) or the one photo fitted.
+        subset: Str "",
+        /// Photos fitted.
+        photos: Int64 "1",
+        /// Lines fitted (measured lines; a line's photos are one group).
+        lines: Int64 "1",
+        /// `fitted`, `at_bound` (the best τ is an end of the searched range) or `failed`.
+        status: Str "",
+        /// Why a fit failed; empty otherwise.
+        reason: Str "",
+        /// The melt's first-order lag τ.
+        tau_s: Float64 "s",
+        /// Lower end of τ's 95 % delete-one-line jackknife interval (log scale).
+        tau_ci_lo_s: Float64 "s",
+        /// Upper end of τ's interval.
+        tau_ci_hi_s: Float64 "s",
+        /// The pressure advance that makes the modelled width flattest under τ.
+        recommended_pa_s: Float64 "s",
+        /// Lower end of the recommendation's 95 % jackknife interval.
+        pa_ci_lo_s: Float64 "s",
+        /// Upper end of the recommendation's interval.
+        pa_ci_hi_s: Float64 "s",
+        /// RMSE of each line predicted under the τ fitted without it (its level fitted on itself).
+        heldout_rmse_mm: Float64 "mm",
+        /// RMSE at τ over every measured position.
+        rmse_mm: Float64 "mm",
+        /// Sample-to-sample noise of the widths (1.4826·median|Δw|/√2, median over lines).
+        noise_mm: Float64 "mm",
+        /// The pressure advance of the measured line whose width is flattest (least `width_spread`): the line a person would pick by eye.
+        flattest_line_pa_s: Float64 "s",
+        /// Acceleration the lines were planned with.
+        accel_mm_s2: Float64 "mm/s²",
+        /// Printer settings the dataset left out and the G-code does not set, with the value assumed.
+        assumed: Str "",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.pressure_advance`: one row per (fit, line).
+    pub mod pressure_advance_lines = "pressure_advance_lines" {
+        /// The fit (as `pressure_advance.subset`).
+        subset: Str "",
+        /// The printed line (as `photo_lines`).
+        line: Int64 "1",
+        /// The pressure advance it was printed with.
+        pressure_advance_s: Float64 "s",
+        /// Measured over modelled width (the line's squish), fitted on the line.
+        level: Float64 "1",
+        /// RMSE at the fit's τ.
+        rmse_mm: Float64 "mm",
+        /// τ fitted without this line.
+        tau_without_s: Float64 "s",
+        /// RMSE of this line under the τ fitted without it.
+        heldout_rmse_mm: Float64 "mm",
+        /// Positions measured (all photos of the fit).
+        positions: Int64 "1",
+        /// Sample-to-sample noise of its widths.
+        noise_mm: Float64 "mm",
+        /// RMS of its measured width over its median − 1 (a gap counts as 0): how uneven it is.
+        width_spread: Float64 "1",
+    }
+}
+
+pipeline::table! {
+    /// `fdm.pressure_advance`: per measured position, the width against the model's under
+    /// the print's τ (the `all` fit).
+    pub mod pressure_advance_widths = "pressure_advance_widths" {
+        /// The photo.
+        photo_id: Str "",
+        /// The printed line.
+        line: Int64 "1",
+        /// The pressure advance it was printed with.
+        pressure_advance_s: Float64 "s",
+        /// Position along the line from its G-code start.
+        position_mm: Float64 "mm",
+        /// Measured width (0 in a gap).
+        width_mm: Float64 "mm",
+        /// The model's width under the print's τ and the line's advance (0 in a gap).
+        predicted_mm: Float64 "mm",
+        /// The commanded speed at this position.
+        speed_mm_s: Float64 "mm/s",
+    }
+}
+
 /// Every table of this module.
 pub const ALL: &[&pipeline::schema::Table] = &[
     &line_summary::TABLE,
@@ -544,6 +634,9 @@ pub const ALL: &[&pipeline::schema::Table] = &[
     &photo_lines::TABLE,
     &photo_widths::TABLE,
     &photo_calibration::TABLE,
+    &pressure_advance::TABLE,
+    &pressure_advance_lines::TABLE,
+    &pressure_advance_widths::TABLE,
     &agreement::TABLE,
     &agreement_profiles::TABLE,
     &transfer_cv::TABLE,

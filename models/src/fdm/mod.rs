@@ -37,6 +37,7 @@ pub mod kinematics;
 pub mod lag;
 pub mod line;
 pub mod loo;
+pub mod pa_tuning;
 pub mod piecewise;
 pub mod planner;
 pub mod predict;

@@ -24,8 +24,9 @@
 //! ```
 //!
 //! exact for the planner's trapezoids: `q` is linear in time between the moves' ramp
-//! ends, so `E` and `u` are exact at any time (first-order hold from the last
-//! breakpoint), and only the triangle's integral is numerical (Simpson). K = τ without
+//! ends, so `E`, `u` and their second time integrals are closed forms at any time, and
+//! the triangle (two boxes of width h) is the second difference of the second integral.
+//! `D` is linear in K (`S[E] + (K − τ)·S[u]`, [`DepositParts`]). K = τ without
 //! smoothing gives `D = E`: the deposited width is the commanded width whatever the speed
 //! does. K = 0 gives `Q = u`, the plain lag. `D(∞) = E(∞)`: what the extruder pushed is
 //! deposited (mass conservation).
@@ -44,8 +45,6 @@ use super::fit::moving_average;
 use super::planner::PressureAdvance;
 use super::printed_lines::PrintedLine;
 
-/// Simpson intervals over the smoothing triangle (even).
-const SMOOTHING_INTERVALS: usize = 64;
 /// The lag's tail is followed for this many τ after the line ends (e^-40: nothing left).
 const TAIL_TAUS: f64 = 40.0;
 
@@ -131,19 +130,156 @@ pub fn deposit_line(line: &PrintedLine, settings: &DepositSettings) -> LineDepos
     }
 }
 
-/// The commanded flow of a line as exact piecewise-linear nodes, with `E` and the lag `u`
-/// at each node.
+/// A line's deposit split by its dependence on K (`D = S[E] + (K − τ)·S[u]`, linear in K):
+/// per position the cell widths of each part, box-smoothed as [`deposit_line`] smooths
+/// them, so that the unclipped width under any advance K is `pushed + (K − τ)·lagged`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepositParts {
+    /// Positions from the line's start, `0, step, …` (mm).
+    pub positions_mm: Vec<f64>,
+    /// Smoothed cell widths of `S[E]` (mm): the commanded flow under the smoothing alone.
+    pub pushed_mm: Vec<f64>,
+    /// Smoothed cell widths of `S[u]` per second of `K − τ` (mm/s).
+    pub lagged_mm_per_s: Vec<f64>,
+    /// Smoothed commanded cell widths (mm).
+    pub commanded_mm: Vec<f64>,
+    /// The three parts' cell widths before smoothing (pushed, lagged, commanded), which
+    /// decide the gaps as [`deposit_line`] does.
+    pub cells: [Vec<f64>; 3],
+    /// A deposit below this fraction of the commanded width is a gap.
+    pub gap_fraction: f64,
+}
+
+impl DepositParts {
+    /// Smoothed width under advance `k_s` at position `j` (unclipped: negative where melt
+    /// is pulled back).
+    pub fn width_mm(&self, j: usize, k_s: f64, tau_s: f64) -> f64 {
+        self.pushed_mm[j] + (k_s - tau_s) * self.lagged_mm_per_s[j]
+    }
+
+    /// The bead's width under advance `k_s` at position `j`: the smoothed width times the
+    /// part of the cell `j ± step/2` that is bead, never negative. Where a gap begins or
+    /// ends, the deposit's margin over the gap threshold is taken linear between
+    /// neighbouring positions, so the width falls to 0 continuously as the gap's edge
+    /// moves through the cell (a fit over τ sees no steps); a whole gap cell is 0 as in
+    /// [`deposit_line`].
+    pub fn bead_width_mm(&self, j: usize, k_s: f64, tau_s: f64) -> f64 {
+        let margin = |i: usize| {
+            let [pushed, lagged, commanded] = &self.cells;
+            let m = pushed[i] + (k_s - tau_s) * lagged[i] - self.gap_fraction * commanded[i];
+            if m.is_nan() {
+                -1.0
+            } else {
+                m
+            }
+        };
+        let here = margin(j);
+        let half_bead = |other: Option<f64>| match other {
+            None => f64::from(u8::from(here >= 0.0)) * 0.5,
+            Some(o) => bead_part_of_half_cell(here, o),
+        };
+        let last = self.positions_mm.len() - 1;
+        let before = half_bead((j > 0).then(|| margin(j - 1)));
+        let after = half_bead((j < last).then(|| margin(j + 1)));
+        (before + after) * self.width_mm(j, k_s, tau_s).max(0.0)
+    }
+}
+
+/// The part of the half cell from a position (margin `here`) toward its neighbour (margin
+/// `other`, a step away) where the margin, linear between them, is ≥ 0: from 0 to ½.
+fn bead_part_of_half_cell(here: f64, other: f64) -> f64 {
+    match (here >= 0.0, other >= 0.0) {
+        (true, true) => 0.5,
+        (false, false) => 0.0,
+        // the margin crosses 0 at t = here / (here − other) steps from here
+        (true, false) => (here / (here - other)).min(0.5),
+        (false, true) => (0.5 - here / (here - other)).max(0.0),
+    }
+}
+
+/// The parts of `line`'s deposit under lag `settings.tau_s` and the smoothing of
+/// `settings.pressure_advance` (its K is not used: the parts hold every K).
+pub fn deposit_parts(line: &PrintedLine, settings: &DepositSettings) -> DepositParts {
+    let flow = CommandedFlow::new(line, settings.tau_s);
+    let half = settings.pressure_advance.smooth_time_s / 2.0;
+    let length = line.length_mm();
+    let step = settings.step_mm;
+    let n = (length / step + 1e-9).floor() as usize + 1;
+    let positions_mm: Vec<f64> = (0..n).map(|j| j as f64 * step).collect();
+    // cell edges: (j ± ½)·step clamped to the line, evaluated once each
+    let edges: Vec<f64> = (0..=n).map(|j| ((j as f64 - 0.5) * step).clamp(0.0, length)).collect();
+    let at_edges: Vec<[f64; 3]> = edges
+        .iter()
+        .map(|&x| {
+            let t = line.time_at_mm(x);
+            let (pushed, lagged) = flow.smoothed_parts(t, half);
+            [pushed, lagged, flow.commanded_mm2(t)]
+        })
+        .collect();
+    let mut cells = [Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n)];
+    for j in 0..n {
+        let width = (edges[j + 1] - edges[j]).max(1e-12);
+        for (k, cell) in cells.iter_mut().enumerate() {
+            cell.push((at_edges[j + 1][k] - at_edges[j][k]) / width);
+        }
+    }
+    let [pushed, lagged, commanded] = cells.each_ref().map(|c| moving_average(&positions_mm, c, settings.smoothing_mm));
+    DepositParts {
+        positions_mm,
+        pushed_mm: pushed,
+        lagged_mm_per_s: lagged,
+        commanded_mm: commanded,
+        cells,
+        gap_fraction: settings.gap_fraction,
+    }
+}
+
+/// The commanded flow of a line as exact piecewise-linear nodes, with at each node `E`,
+/// the lag `u` and their first and second time integrals (for the smoothing triangle).
 #[derive(Debug, Clone)]
 pub struct CommandedFlow {
     tau_s: f64,
     /// Node times (s); a jump in q is two nodes at one time.
     times_s: Vec<f64>,
-    /// q at each node (mm²/s).
-    flows: Vec<f64>,
-    /// E at each node (mm²).
-    pushed: Vec<f64>,
-    /// u at each node (mm²/s).
-    lagged: Vec<f64>,
+    /// The state at each node.
+    nodes: Vec<NodeState>,
+}
+
+/// `q` and, from the line's start, `E = ∫q`, `E1 = ∫E`, `E2 = ∫E1`, `u` (the lag of q),
+/// `U1 = ∫u`, `U2 = ∫U1` at one time.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct NodeState {
+    q: f64,
+    e: [f64; 3],
+    u: [f64; 3],
+}
+
+impl NodeState {
+    /// The state `d` seconds after this one while q runs linearly at `slope` (exact: q is
+    /// a polynomial, u is `q − slope·τ` plus a decaying exponential).
+    fn advance(&self, d: f64, slope: f64, tau: f64) -> Self {
+        if d <= 0.0 {
+            return *self;
+        }
+        let (q0, m) = (self.q, slope);
+        let [e0, e1, e2] = self.e;
+        let [u0, u1, u2] = self.u;
+        let (d2, d3, d4) = (d * d, d * d * d, d * d * d * d);
+        let e = [
+            e0 + q0 * d + m * d2 / 2.0,
+            e1 + e0 * d + q0 * d2 / 2.0 + m * d3 / 6.0,
+            e2 + e1 * d + e0 * d2 / 2.0 + q0 * d3 / 6.0 + m * d4 / 24.0,
+        ];
+        // u(s) = p(s) + c·e^(−s/τ) with p(s) = q0 − m·τ + m·s
+        let (p0, c, x) = (q0 - m * tau, u0 - q0 + m * tau, d / tau);
+        let one_minus = -(-x).exp_m1();
+        let u = [
+            p0 + m * d + c * (1.0 - one_minus),
+            u1 + p0 * d + m * d2 / 2.0 + c * tau * one_minus,
+            u2 + u1 * d + p0 * d2 / 2.0 + m * d3 / 6.0 + c * tau * tau * (x + (-x).exp_m1()),
+        ];
+        Self { q: q0 + m * d, e, u }
+    }
 }
 
 impl CommandedFlow {
@@ -152,78 +288,76 @@ impl CommandedFlow {
     pub fn new(line: &PrintedLine, tau_s: f64) -> Self {
         let mean_filament = line.moves.iter().map(|m| m.filament_per_mm * m.planned.length_mm).sum::<f64>()
             / line.length_mm().max(1e-12);
-        let mut nodes: Vec<(f64, f64)> = vec![(0.0, 0.0)];
+        let mut points: Vec<(f64, f64)> = vec![(0.0, 0.0)];
         for m in &line.moves {
             let w = line.nominal_width_mm * m.filament_per_mm / mean_filament;
             let p = &m.planned;
             let t_acc = (p.speed_at_mm(p.accel_length_mm()) - p.entry_mm_s) / p.accel_mm_s2;
             let t_dec_start = p.time_at_mm(p.length_mm - p.decel_length_mm());
             for t in [0.0, t_acc, t_dec_start, p.duration_s] {
-                nodes.push((m.start_time_s + t, w * speed_at_time(p, t)));
+                points.push((m.start_time_s + t, w * speed_at_time(p, t)));
             }
         }
-        nodes.push((line.duration_s(), 0.0));
-        let mut flow = Self { tau_s, times_s: Vec::new(), flows: Vec::new(), pushed: Vec::new(), lagged: Vec::new() };
-        let (mut e, mut u) = (0.0, 0.0);
-        let (mut t_prev, mut q_prev) = (0.0, 0.0);
-        for (t, q) in nodes {
-            e += 0.5 * (q_prev + q) * (t - t_prev);
-            u = hold_step(u, q_prev, q, t - t_prev, tau_s);
-            flow.times_s.push(t);
-            flow.flows.push(q);
-            flow.pushed.push(e);
-            flow.lagged.push(u);
-            (t_prev, q_prev) = (t, q);
+        points.push((line.duration_s(), 0.0));
+        let mut times_s = Vec::with_capacity(points.len());
+        let mut nodes = Vec::with_capacity(points.len());
+        let mut state = NodeState::default();
+        for (i, &(t, q)) in points.iter().enumerate() {
+            if i > 0 {
+                let (t_prev, q_prev) = points[i - 1];
+                let dt = t - t_prev;
+                let slope = if dt > 0.0 { (q - q_prev) / dt } else { 0.0 };
+                state = state.advance(dt, slope, tau_s);
+            }
+            state.q = q;
+            times_s.push(t);
+            nodes.push(state);
         }
-        flow
+        Self { tau_s, times_s, nodes }
+    }
+
+    /// The full state at `t_s` (before the line all 0; after it q = 0, E its total, u decaying).
+    fn full_state(&self, t_s: f64) -> NodeState {
+        if t_s <= 0.0 {
+            return NodeState::default();
+        }
+        let k = self.times_s.partition_point(|&t| t <= t_s) - 1;
+        let slope = match self.times_s.get(k + 1) {
+            Some(&t1) if t1 > self.times_s[k] => (self.nodes[k + 1].q - self.nodes[k].q) / (t1 - self.times_s[k]),
+            _ => 0.0,
+        };
+        self.nodes[k].advance(t_s - self.times_s[k], slope, self.tau_s)
     }
 
     /// `(q, E, u)` at time `t_s` (before the line all 0; after it q = 0, E its total, u decaying).
     pub fn state(&self, t_s: f64) -> (f64, f64, f64) {
-        if t_s <= 0.0 {
-            return (0.0, 0.0, 0.0);
-        }
-        let k = self.times_s.partition_point(|&t| t <= t_s) - 1;
-        let (t0, q0) = (self.times_s[k], self.flows[k]);
-        let q = match self.times_s.get(k + 1) {
-            Some(&t1) if t1 > t0 => q0 + (self.flows[k + 1] - q0) * (t_s - t0) / (t1 - t0),
-            _ => q0,
-        };
-        let dt = t_s - t0;
-        (q, self.pushed[k] + 0.5 * (q0 + q) * dt, hold_step(self.lagged[k], q0, q, dt, self.tau_s))
+        let s = self.full_state(t_s);
+        (s.q, s.e[0], s.u[0])
     }
 
     /// Commanded area pushed by `t_s` (mm²).
     pub fn commanded_mm2(&self, t_s: f64) -> f64 {
-        self.state(t_s).1
+        self.full_state(t_s).e[0]
     }
 
     /// Deposited area by `t_s` (mm²) under advance `k_s` and the smoothing triangle's half
     /// width `half_s`: `S[E + (K − τ)u]`.
     pub fn deposited_mm2(&self, t_s: f64, k_s: f64, half_s: f64) -> f64 {
-        let f = |t: f64| {
-            let (_, e, u) = self.state(t);
-            e + (k_s - self.tau_s) * u
-        };
+        let (pushed, lagged) = self.smoothed_parts(t_s, half_s);
+        pushed + (k_s - self.tau_s) * lagged
+    }
+
+    /// `(S[E](t), S[u](t))`: the two parts of [`Self::deposited_mm2`], which is
+    /// `S[E] + (K − τ)·S[u]`. The triangle `(h − |s|)/h²` is two boxes of width h, so
+    /// `S[f](t) = (F₂(t+h) − 2F₂(t) + F₂(t−h))/h²` with `F₂` f's second integral: exact.
+    pub fn smoothed_parts(&self, t_s: f64, half_s: f64) -> (f64, f64) {
         if half_s <= 0.0 {
-            return f(t_s);
+            let s = self.full_state(t_s);
+            return (s.e[0], s.u[0]);
         }
-        // Composite Simpson over [−h, h] against (h − |s|)/h²; s = 0 is a node.
-        let m = SMOOTHING_INTERVALS;
-        let ds = 2.0 * half_s / m as f64;
-        let mut sum = 0.0;
-        for i in 0..=m {
-            let s = -half_s + i as f64 * ds;
-            let simpson = if i == 0 || i == m {
-                1.0
-            } else if i % 2 == 1 {
-                4.0
-            } else {
-                2.0
-            };
-            sum += simpson * (half_s - s.abs()) / (half_s * half_s) * f(t_s + s);
-        }
-        sum * ds / 3.0
+        let [before, at, after] = [t_s - half_s, t_s, t_s + half_s].map(|t| self.full_state(t));
+        let h2 = half_s * half_s;
+        ((after.e[2] - 2.0 * at.e[2] + before.e[2]) / h2, (after.u[2] - 2.0 * at.u[2] + before.u[2]) / h2)
     }
 
     /// A time by which the lag's tail has died out (s).
@@ -244,17 +378,6 @@ pub fn speed_at_time(p: &super::planner::PlannedMove, t_s: f64) -> f64 {
     } else {
         (p.speed_at_mm(p.length_mm - p.decel_length_mm()) - p.accel_mm_s2 * (t - t_dec)).max(p.exit_mm_s)
     }
-}
-
-/// Exact first-order-hold step of `τu' = q − u` over `dt` with q linear from `q0` to `q1`
-/// (the step of [`super::lag::first_order_response`]).
-fn hold_step(u: f64, q0: f64, q1: f64, dt: f64, tau_s: f64) -> f64 {
-    if dt <= 0.0 {
-        return u;
-    }
-    let phi = (-dt / tau_s).exp();
-    let one_minus = -(-dt / tau_s).exp_m1();
-    phi * u + one_minus * q0 + (q1 - q0) * (1.0 - tau_s * one_minus / dt)
 }
 
 #[cfg(test)]

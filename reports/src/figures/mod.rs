@@ -16,8 +16,8 @@ pub(crate) mod thermal;
 pub use discrepancy_residuals::DiscrepancyResidualsFigure;
 pub use fdm::{
     DiscoveryPowerFigure, DiscrepancyLinesFigure, InfillFigure, LooPredictionsFigure, PhotoOverlayFigure,
-    RSurfaceFigure, SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure, VirtualAgreementFigure,
-    WidthProfilesFigure,
+    PressureAdvanceFigure, RSurfaceFigure, SegmentAccuracyFigure, TransferCvFigure, TransferMatrixFigure,
+    VirtualAgreementFigure, WidthProfilesFigure,
 };
 pub use inkjet::{InkjetHeightMapsFigure, InkjetModelVsScanFigure, InkjetPipeJunctionFigure};
 pub use power_by_effect::DiscoveryPowerByEffectFigure;
@@ -51,4 +51,5 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(VirtualAgreementFigure));
     registry.register(Box::new(SegmentAccuracyFigure));
     registry.register(Box::new(PhotoOverlayFigure));
+    registry.register(Box::new(PressureAdvanceFigure));
 }

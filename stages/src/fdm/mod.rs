@@ -13,6 +13,7 @@ mod lines;
 mod loo;
 mod other_family;
 mod photos;
+mod pressure_advance;
 mod segment;
 mod transfer;
 mod transfer_matrix;
@@ -27,6 +28,7 @@ pub use line_summary::{summarize_line, LineSummary, LineSummaryStage, SummaryWin
 pub use loo::{LagLooStage, PiecewiseLooStage};
 pub use other_family::OtherFamilyStage;
 pub use photos::{ImportPhotosStage, MeasurePhotosStage};
+pub use pressure_advance::PressureAdvanceStage;
 pub use segment::{SegmentAccuracyStage, SegmentWidthsStage};
 pub use transfer::TransferCvStage;
 pub use transfer_matrix::TransferMatrixStage;
@@ -52,5 +54,6 @@ pub fn register(registry: &mut Registry) {
     registry.register(Box::new(SegmentWidthsStage));
     registry.register(Box::new(SegmentAccuracyStage));
     registry.register(Box::new(ImportPhotosStage));
+    registry.register(Box::new(PressureAdvanceStage));
     registry.register(Box::new(MeasurePhotosStage));
 }
