@@ -348,9 +348,8 @@ impl Profile {
 
     /// The summed error of every line but `skip` at each grid point.
     fn totals(&self, skip: Option<usize>) -> Vec<f64> {
-        let others = |per: &Vec<f64>| -> f64 {
-            per.iter().enumerate().filter(|(l, _)| Some(*l) != skip).map(|(_, e)| e).sum()
-        };
+        let others =
+            |per: &Vec<f64>| -> f64 { per.iter().enumerate().filter(|(l, _)| Some(*l) != skip).map(|(_, e)| e).sum() };
         self.sse.iter().map(others).collect()
     }
 

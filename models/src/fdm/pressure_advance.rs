@@ -383,36 +383,13 @@ pub fn speed_at_time(p: &super::planner::PlannedMove, t_s: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::super::lag::first_order_response;
-    use super::super::planner::{plan, Cornering, MotionLimits, Move};
-    use super::super::printed_lines::printed_lines;
+    use super::super::synthetic::pressure_advance_pattern;
     use super::*;
 
     /// A slow–fast–slow line (10, 100, 10 mm/s at 2500 mm/s², 0.08 mm filament per mm:
     /// nominal width 0.962 mm at 0.2 mm layers) entered and left at 5 mm/s corners.
     fn slow_fast_slow() -> PrintedLine {
-        let limits = MotionLimits {
-            accel_mm_s2: 2500.0,
-            accel_to_decel_mm_s2: 2500.0,
-            max_velocity_mm_s: f64::INFINITY,
-            cornering: Cornering::SquareCorner { velocity_mm_s: 5.0, extruder_corner_mm_s: 1.0 },
-        };
-        let pa = PressureAdvance::default();
-        let mv = |a: [f64; 3], b: [f64; 3], feed: f64, e: f64| Move {
-            start_mm: a,
-            end_mm: b,
-            filament_mm: e * (b[0] - a[0]).hypot(b[1] - a[1]),
-            feed_mm_s: feed,
-            limits,
-            pressure_advance: pa,
-        };
-        let moves = [
-            mv([2.0, 8.0, 0.3], [2.0, 8.0, 0.2], 16.0, 0.0),
-            mv([2.0, 8.0, 0.2], [5.88, 8.0, 0.2], 10.0, 0.08),
-            mv([5.88, 8.0, 0.2], [29.16, 8.0, 0.2], 100.0, 0.08),
-            mv([29.16, 8.0, 0.2], [40.8, 8.0, 0.2], 10.0, 0.08),
-            mv([40.8, 8.0, 0.2], [40.8, 8.0, 0.3], 16.0, 0.0),
-        ];
-        printed_lines(&moves, &plan(&moves).unwrap(), 1.75).remove(0)
+        pressure_advance_pattern(&[0.0], 0.0).remove(0)
     }
 
     fn settings(tau_s: f64, advance_s: f64, smooth_time_s: f64) -> DepositSettings {
