@@ -13,7 +13,7 @@ use pipeline::stage::{Input, Output, Source, Stage, StageInfo};
 use pipeline::{StageContext, StageError};
 use polars::prelude::DataFrame;
 use tables::fdm::{photo_calibration as cal_t, photo_lines as lines_t, photo_widths as widths_t};
-use vision::photo::measure::{measure_paths, PathMeasurement};
+use vision::photo::measure::{measure_paths, reprojection_error, PathMeasurement};
 use vision::photo::orient::Choice;
 use vision::photo::{calibrate, Calibration, ColourImage, PhotoCamera, PrintedPath};
 
@@ -34,7 +34,7 @@ impl Stage for MeasurePhotosStage {
     type Params = Step;
     const INFO: &'static StageInfo = &StageInfo {
         name: "fdm.measure_photos",
-        version: 1,
+        version: 2,
         summary: "Photos of a print and its G-code (fdm-photos) → per photo its place on the bed (lens and pose), per printed line its widths in bed mm → photo_lines, photo_widths, photo_calibration.parquet",
         implements: "paper 000 Sec. III (widths from camera images) on photos as labs take them",
         inputs: &[PHOTOS],
@@ -407,21 +407,6 @@ fn bed_under_centre(camera: &PhotoCamera) -> [f64; 2] {
     let b = [u - h[2], v - h[5]];
     let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
     [(b[0] * a[1][1] - a[0][1] * b[1]) / det, (a[0][0] * b[1] - b[0] * a[1][0]) / det]
-}
-
-/// RMS over measured bead positions of the bead's centre ((left − right)/2 from the
-/// G-code axis), and the number of positions.
-fn reprojection_error(paths: &[PathMeasurement]) -> (f64, usize) {
-    let offsets: Vec<f64> = paths
-        .iter()
-        .flat_map(|p| &p.samples)
-        .filter(|s| s.width_mm > 0.0)
-        .map(|s| (s.left_mm - s.right_mm) / 2.0)
-        .collect();
-    if offsets.is_empty() {
-        return (f64::NAN, 0);
-    }
-    ((offsets.iter().map(|o| o * o).sum::<f64>() / offsets.len() as f64).sqrt(), offsets.len())
 }
 
 /// The `fdm.import_photos` stage kind.

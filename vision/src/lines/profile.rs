@@ -62,7 +62,8 @@ pub fn bilinear(img: &GrayImage, u: f64, v: f64) -> Option<f64> {
     if !(x >= 0.0 && y >= 0.0 && x <= max_x && y <= max_y) {
         return None;
     }
-    let (i0, j0) = (x.floor() as usize, y.floor() as usize);
+    // x, y ≥ 0: truncation is the floor, without a call to libm's floor
+    let (i0, j0) = (x as usize, y as usize);
     let (fx, fy) = (x - i0 as f64, y - j0 as f64);
     let (i1, j1) = ((i0 + 1).min(img.width - 1), (j0 + 1).min(img.height - 1));
     let top = f64::from(img.at(i0, j0)) * (1.0 - fx) + f64::from(img.at(i1, j0)) * fx;

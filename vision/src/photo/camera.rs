@@ -69,25 +69,9 @@ impl PhotoCamera {
 
     /// [`Self::project`] with its derivatives.
     pub fn project_with_derivatives(&self, xy_mm: [f64; 2]) -> Option<Projection> {
-        let [x, y] = xy_mm;
+        let j = self.param_jacobian(xy_mm)?;
         let h = &self.homography;
-        let (u, w) = self.undistorted(xy_mm)?;
-        let (p, f, fp_r2, r2, d) = self.distort_terms(u);
-        // dp/du = f·I + 2 f'(r²) d dᵀ
-        let dp_du = [
-            [f + 2.0 * fp_r2 * d[0] * d[0], 2.0 * fp_r2 * d[0] * d[1]],
-            [2.0 * fp_r2 * d[1] * d[0], f + 2.0 * fp_r2 * d[1] * d[1]],
-        ];
-        let du_dh = homography_jacobian(x, y, w, u);
-        let mut d_params = [[0.0; N_CAMERA_PARAMS]; 2];
-        for row in 0..2 {
-            for k in 0..8 {
-                d_params[row][k] = dp_du[row][0] * du_dh[0][k] + dp_du[row][1] * du_dh[1][k];
-            }
-            let offset = u[row] - self.centre_px[row];
-            d_params[row][8] = offset * r2;
-            d_params[row][9] = offset * r2 * r2;
-        }
+        let (u, w, dp_du) = (j.u, j.w, j.dp_du);
         // du/d(x, y) of the homography
         let du_dbed = [
             [(h[0] - u[0] * h[6]) / w, (h[1] - u[0] * h[7]) / w],
@@ -99,7 +83,25 @@ impl PhotoCamera {
                 d_bed[row][col] = dp_du[row][0] * du_dbed[0][col] + dp_du[row][1] * du_dbed[1][col];
             }
         }
-        Some(Projection { point_px: p, d_params, d_bed })
+        let d_params = [j.gradient([1.0, 0.0]), j.gradient([0.0, 1.0])];
+        Some(Projection { point_px: j.point_px, d_params, d_bed })
+    }
+
+    /// [`Self::project`] with what its derivatives in the parameters are made of (see
+    /// [`ParamJacobian`]); `None` where [`Self::project`] has none.
+    #[inline]
+    pub fn param_jacobian(&self, xy_mm: [f64; 2]) -> Option<ParamJacobian> {
+        let [x, y] = xy_mm;
+        let (u, w) = self.undistorted(xy_mm)?;
+        let (p, f, fp_r2, r2, d) = self.distort_terms(u);
+        // dp/du = f·I + 2 f'(r²) d dᵀ
+        let dp_du = [
+            [f + 2.0 * fp_r2 * d[0] * d[0], 2.0 * fp_r2 * d[0] * d[1]],
+            [2.0 * fp_r2 * d[1] * d[0], f + 2.0 * fp_r2 * d[1] * d[1]],
+        ];
+        let radial = [(u[0] - self.centre_px[0]) * r2, (u[1] - self.centre_px[1]) * r2];
+        let iw = 1.0 / w;
+        Some(ParamJacobian { point_px: p, dp_du, xyw: [x * iw, y * iw, iw], u, w, radial, r2 })
     }
 
     /// The image scale along the bed direction `dir` (unit vector) at `xy_mm` (px/mm).
@@ -120,7 +122,9 @@ impl PhotoCamera {
         if w.is_nan() || w <= 1e-9 {
             return None;
         }
-        Some(([(h[0] * x + h[1] * y + h[2]) / w, (h[3] * x + h[4] * y + h[5]) / w], w))
+        // one division per point: the fit projects every point at every iteration
+        let iw = 1.0 / w;
+        Some(([(h[0] * x + h[1] * y + h[2]) * iw, (h[3] * x + h[4] * y + h[5]) * iw], w))
     }
 
     fn distort(&self, u: [f64; 2]) -> ([f64; 2], f64) {
@@ -131,7 +135,8 @@ impl PhotoCamera {
     /// The distorted point, f, f'(r²) divided by R² folded into d, r² and d = (u − c)/R.
     #[inline]
     fn distort_terms(&self, u: [f64; 2]) -> ([f64; 2], f64, f64, f64, [f64; 2]) {
-        let d = [(u[0] - self.centre_px[0]) / self.radius_px, (u[1] - self.centre_px[1]) / self.radius_px];
+        let inv_radius = 1.0 / self.radius_px;
+        let d = [(u[0] - self.centre_px[0]) * inv_radius, (u[1] - self.centre_px[1]) * inv_radius];
         let r2 = d[0] * d[0] + d[1] * d[1];
         let f = 1.0 + self.k1 * r2 + self.k2 * r2 * r2;
         let fp = self.k1 + 2.0 * self.k2 * r2;
@@ -141,11 +146,48 @@ impl PhotoCamera {
     }
 }
 
-/// d(u, v)/d(h11 … h32) of u = (h11 x + h12 y + h13)/w, v = (h21 x + h22 y + h23)/w,
-/// w = h31 x + h32 y + 1.
-fn homography_jacobian(x: f64, y: f64, w: f64, u: [f64; 2]) -> [[f64; 8]; 2] {
-    let (xw, yw, iw) = (x / w, y / w, 1.0 / w);
-    [[xw, yw, iw, 0.0, 0.0, 0.0, -u[0] * xw, -u[0] * yw], [0.0, 0.0, 0.0, xw, yw, iw, -u[1] * xw, -u[1] * yw]]
+/// A projected point and the parts of its derivatives in the camera's parameters. The
+/// homography's part is sparse: with a = (dp/du)ᵀ·∇ (the image gradient ∇ pulled back to
+/// the undistorted point), d/dh1· = a_u·(x, y, 1)/w, d/dh2· = a_v·(x, y, 1)/w and
+/// d/dh3· = −(a·u)·(x, y)/w; the radial terms' are ∇·(u − c)·r² and that times r². So the
+/// gradient of an image value in the ten parameters costs a dozen products, not a 2 × 10
+/// matrix and its product: the dense camera fit ([`mod@super::align`]) needs it at every point
+/// of every iteration.
+#[derive(Debug, Clone, Copy)]
+pub struct ParamJacobian {
+    /// The image point (px).
+    pub point_px: [f64; 2],
+    dp_du: [[f64; 2]; 2],
+    xyw: [f64; 3],
+    u: [f64; 2],
+    w: f64,
+    radial: [f64; 2],
+    r2: f64,
+}
+
+impl ParamJacobian {
+    /// d(value)/d(parameters), in [`N_CAMERA_PARAMS`] order, of an image value whose
+    /// gradient at the point is `grad_px` (per px).
+    #[inline]
+    pub fn gradient(&self, grad_px: [f64; 2]) -> [f64; N_CAMERA_PARAMS] {
+        let [gx, gy] = grad_px;
+        let a = [gx * self.dp_du[0][0] + gy * self.dp_du[1][0], gx * self.dp_du[0][1] + gy * self.dp_du[1][1]];
+        let [xw, yw, iw] = self.xyw;
+        let perspective = -(a[0] * self.u[0] + a[1] * self.u[1]);
+        let radial = gx * self.radial[0] + gy * self.radial[1];
+        [
+            a[0] * xw,
+            a[0] * yw,
+            a[0] * iw,
+            a[1] * xw,
+            a[1] * yw,
+            a[1] * iw,
+            perspective * xw,
+            perspective * yw,
+            radial,
+            radial * self.r2,
+        ]
+    }
 }
 
 #[cfg(test)]

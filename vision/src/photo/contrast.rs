@@ -9,6 +9,8 @@
 //! component ([`ColourAxis::from_clusters`]); once it is placed, from the pixels the G-code
 //! says are print and plate ([`ColourAxis::from_labels`]), which also fixes the polarity.
 
+use rayon::prelude::*;
+
 use super::image::ColourImage;
 use crate::lines::GrayImage;
 
@@ -38,6 +40,35 @@ struct ClassSums {
     n: f64,
     sum: [f64; 3],
     outer: [[f64; 3]; 3],
+}
+
+/// Running sums of labelled colours, plate and print, from which
+/// [`ColourAxis::from_label_sums`] learns the axis. Sums over parts of an image merged in a
+/// fixed order give the same axis whatever the threads that summed the parts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LabelSums {
+    classes: [ClassSums; 2],
+}
+
+impl LabelSums {
+    /// Adds one colour, `is_print` its label.
+    #[inline]
+    pub fn add(&mut self, colour: [f32; 3], is_print: bool) {
+        self.classes[usize::from(is_print)].add(colour);
+    }
+
+    /// Adds the colours `other` holds.
+    pub fn merge(&mut self, other: &LabelSums) {
+        for (mine, theirs) in self.classes.iter_mut().zip(&other.classes) {
+            mine.n += theirs.n;
+            for a in 0..3 {
+                mine.sum[a] += theirs.sum[a];
+                for b in 0..3 {
+                    mine.outer[a][b] += theirs.outer[a][b];
+                }
+            }
+        }
+    }
 }
 
 impl ClassSums {
@@ -85,23 +116,33 @@ impl ColourAxis {
             if classes.iter().any(|k| k.n == 0.0) {
                 return None;
             }
-            centres = [classes[0].mean(), classes[1].mean()];
+            let moved = [classes[0].mean(), classes[1].mean()];
+            if moved == centres {
+                // settled: every further iteration would give the same classes
+                break;
+            }
+            centres = moved;
         }
         Self::fisher(&classes[0], &classes[1])
     }
 
     /// The axis from labelled colours (`true` for print): plate reads 0 and print 1.
     pub fn from_labels(labelled: impl IntoIterator<Item = ([f32; 3], bool)>) -> Option<Self> {
-        let mut classes = [ClassSums::default(); 2];
+        let mut sums = LabelSums::default();
         for (colour, is_print) in labelled {
-            classes[usize::from(is_print)].add(colour);
+            sums.add(colour, is_print);
         }
-        Self::fisher(&classes[0], &classes[1])
+        Self::from_label_sums(&sums)
+    }
+
+    /// [`Self::from_labels`] from the labelled colours' sums.
+    pub fn from_label_sums(sums: &LabelSums) -> Option<Self> {
+        Self::fisher(&sums.classes[0], &sums.classes[1])
     }
 
     /// The photo projected on the axis.
     pub fn apply(&self, img: &ColourImage) -> GrayImage {
-        let pixels = img.pixels.iter().map(|&c| self.value(c) as f32).collect();
+        let pixels = img.pixels.par_iter().map(|&c| self.value(c) as f32).collect();
         GrayImage { width: img.width, height: img.height, pixels }
     }
 

@@ -90,6 +90,22 @@ pub struct PathMeasurement {
     pub end_px: Option<[f64; 2]>,
 }
 
+/// The reprojection error of a placed photo: the RMS over measured bead positions of the
+/// bead's centre ((left − right)/2 from the G-code axis, mm), and the number of positions
+/// (NaN and 0 without any).
+pub fn reprojection_error(paths: &[PathMeasurement]) -> (f64, usize) {
+    let offsets: Vec<f64> = paths
+        .iter()
+        .flat_map(|p| &p.samples)
+        .filter(|s| s.width_mm > 0.0)
+        .map(|s| (s.left_mm - s.right_mm) / 2.0)
+        .collect();
+    if offsets.is_empty() {
+        return (f64::NAN, 0);
+    }
+    ((offsets.iter().map(|o| o * o).sum::<f64>() / offsets.len() as f64).sqrt(), offsets.len())
+}
+
 /// Measures every path, in parallel over paths (each path's result does not depend on
 /// the thread count).
 pub fn measure_paths(
@@ -182,7 +198,8 @@ fn measure_position(
         let d = path.direction();
         [-d[1], d[0]]
     };
-    let scale = camera.scale_along(path.point(s_mm, 0.0), normal).ok_or(Skip::OutsidePhoto)?;
+    let axis = path.axis();
+    let scale = camera.scale_along(axis.point(s_mm, 0.0), normal).ok_or(Skip::OutsidePhoto)?;
     let dt_mm = SAMPLE_PX / scale;
     let n = ((t_hi - t_lo) / dt_mm).floor() as usize + 1;
     let values = &mut buffers.values;
@@ -192,7 +209,7 @@ fn measure_position(
         let mut sum = 0.0;
         for b in 0..BAND_SAMPLES {
             let ds = (b as f64 / (BAND_SAMPLES - 1) as f64 - 0.5) * step_mm;
-            let p = camera.project(path.point(s_mm + ds, t)).ok_or(Skip::OutsidePhoto)?;
+            let p = camera.project(axis.point(s_mm + ds, t)).ok_or(Skip::OutsidePhoto)?;
             sum += bilinear(contrast, p[0], p[1]).ok_or(Skip::OutsidePhoto)?;
         }
         values.push(sum / BAND_SAMPLES as f64);
@@ -242,10 +259,11 @@ fn clear_window(
     let half = window_half_mm(path);
     let (mut t_lo, mut t_hi) = (-half, half);
     let needed = own_half + MIN_MARGIN_MM;
+    let axis = path.axis();
     for &j in neighbours {
         let other = &paths[j];
         let reach = SPREAD * other.width_mm / 2.0;
-        let centre = distance_to_segment(path.point(s_mm, 0.0), other.start_mm, other.end_mm);
+        let centre = distance_to_segment(axis.point(s_mm, 0.0), other.start_mm, other.end_mm);
         if centre <= reach + needed {
             return Err(Skip::Touches(j));
         }
@@ -254,7 +272,7 @@ fn clear_window(
             let limit = if side < 0.0 { -t_lo } else { t_hi };
             let mut t = needed;
             while t < limit {
-                if distance_to_segment(path.point(s_mm, side * t), other.start_mm, other.end_mm) <= reach {
+                if distance_to_segment(axis.point(s_mm, side * t), other.start_mm, other.end_mm) <= reach {
                     if side < 0.0 {
                         t_lo = -t
                     } else {

@@ -8,6 +8,8 @@
 //! test over the lines at level [`SIGN_TEST_ALPHA`]; if it is not significant the choice is
 //! reported as ambiguous.
 
+use rayon::prelude::*;
+
 use super::contrast::ColourAxis;
 use super::{Calibration, ColourImage, PrintedPath};
 
@@ -75,7 +77,7 @@ pub fn choose(img: &ColourImage, paths: &[PrintedPath], mut tied: Vec<Calibratio
 /// Per path: how much more the width proxy changes at the commanded speed changes than
 /// elsewhere; `None` for a path without speed changes or outside the photo.
 fn signatures(img: &ColourImage, paths: &[PrintedPath], cal: &Calibration) -> Vec<Option<f64>> {
-    paths.iter().map(|p| signature(img, p, cal)).collect()
+    paths.par_iter().map(|p| signature(img, p, cal)).collect()
 }
 
 fn signature(img: &ColourImage, path: &PrintedPath, cal: &Calibration) -> Option<f64> {
@@ -123,8 +125,9 @@ fn width_proxy(img: &ColourImage, axis: &ColourAxis, cal: &Calibration, path: &P
     let dt = 0.05;
     let mut sum = 0.0;
     let mut t = -half;
+    let path_axis = path.axis();
     while t <= half {
-        let p = cal.camera.project(path.point(s_mm, t))?;
+        let p = cal.camera.project(path_axis.point(s_mm, t))?;
         let (i, j) = (p[0].floor(), p[1].floor());
         if i < 0.0 || j < 0.0 || i as usize >= img.width || j as usize >= img.height {
             return None;

@@ -3,6 +3,8 @@
 //! Hand-written: kornia-imgproc 0.2.0 blurs only its own image type and samples no
 //! gradient, and these loops are a few lines each.
 
+use rayon::prelude::*;
+
 use super::PrintedPath;
 
 /// A row-major grid of values over the bed or the image.
@@ -83,67 +85,98 @@ fn draw_capsule(values: &mut [f32], width: usize, height: usize, origin: [f64; 2
     }
 }
 
-/// Distance from `p` to the segment `a`–`b`.
+/// The normalised Gaussian of width `sigma` over ±⌈3σ⌉ cells.
+fn gaussian_kernel(sigma: f64) -> Vec<f32> {
+    let radius = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f32> = (-radius..=radius).map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp() as f32).collect();
+    let norm: f32 = kernel.iter().sum();
+    kernel.iter().map(|k| k / norm).collect()
+}
+
+/// One row blurred by `kernel` (odd length), the row's ends clamped; each value summed in
+/// kernel order.
+fn blur_line(line: &[f32], kernel: &[f32], out: &mut [f32]) {
+    let (w, radius) = (line.len(), kernel.len() / 2);
+    let clamped = |i: usize, out: &mut f32| {
+        let mut sum = 0.0f32;
+        for (k, &kv) in kernel.iter().enumerate() {
+            sum += kv * line[(i + k).saturating_sub(radius).min(w - 1)];
+        }
+        *out = sum;
+    };
+    if w <= 2 * radius {
+        out.iter_mut().enumerate().for_each(|(i, o)| clamped(i, o));
+        return;
+    }
+    // the interior, where the kernel stays inside the row, as one vectorisable pass per tap
+    let interior = &mut out[radius..w - radius];
+    interior.fill(0.0);
+    for (k, &kv) in kernel.iter().enumerate() {
+        for (o, &v) in interior.iter_mut().zip(&line[k..k + w - 2 * radius]) {
+            *o += kv * v;
+        }
+    }
+    for i in (0..radius).chain(w - radius..w) {
+        clamped(i, &mut out[i]);
+    }
+}
+
+/// Distance from `p` to the segment `a`–`b` (a square root, not `hypot`: bed millimetres
+/// neither overflow nor underflow, and `hypot` was a tenth of the photo's calibration).
+#[inline]
 pub fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let d = [b[0] - a[0], b[1] - a[1]];
     let len2 = d[0] * d[0] + d[1] * d[1];
     let t = if len2 > 0.0 { (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
-    (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+    let (dx, dy) = (p[0] - a[0] - t * d[0], p[1] - a[1] - t * d[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 impl Raster {
-    /// Separable Gaussian blur of width `sigma` cells, edges clamped.
+    /// Separable Gaussian blur of width `sigma` cells, edges clamped; rows in parallel
+    /// (each value summed in kernel order, so the result does not depend on the threads).
     pub fn blurred(&self, sigma: f64) -> Raster {
         if sigma < 0.3 {
             return self.clone();
         }
-        let radius = (3.0 * sigma).ceil() as isize;
-        let kernel: Vec<f32> =
-            (-radius..=radius).map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp() as f32).collect();
-        let norm: f32 = kernel.iter().sum();
-        let kernel: Vec<f32> = kernel.iter().map(|k| k / norm).collect();
-        let (w, h) = (self.width as isize, self.height as isize);
+        let kernel = gaussian_kernel(sigma);
+        let w = self.width.max(1);
         let mut rows = vec![0.0f32; self.values.len()];
-        for j in 0..h {
-            let line = &self.values[(j * w) as usize..((j + 1) * w) as usize];
-            for i in 0..w {
-                rows[(j * w + i) as usize] = kernel
-                    .iter()
-                    .enumerate()
-                    .map(|(k, kv)| kv * line[(i + k as isize - radius).clamp(0, w - 1) as usize])
-                    .sum();
-            }
-        }
+        rows.par_chunks_mut(w).zip(self.values.par_chunks(w)).for_each(|(out, line)| blur_line(line, &kernel, out));
         let mut out = vec![0.0f32; self.values.len()];
-        for j in 0..h {
-            for i in 0..w {
-                out[(j * w + i) as usize] = kernel
-                    .iter()
-                    .enumerate()
-                    .map(|(k, kv)| kv * rows[((j + k as isize - radius).clamp(0, h - 1) * w + i) as usize])
-                    .sum();
+        let (radius, last) = ((kernel.len() / 2) as isize, self.height as isize - 1);
+        out.par_chunks_mut(w).enumerate().for_each(|(j, out_row)| {
+            for (k, &kv) in kernel.iter().enumerate() {
+                let source = (j as isize + k as isize - radius).clamp(0, last) as usize;
+                for (o, &v) in out_row.iter_mut().zip(&rows[source * w..(source + 1) * w]) {
+                    *o += kv * v;
+                }
             }
-        }
+        });
         Raster { width: self.width, height: self.height, values: out }
     }
 
     /// The mean of each `factor` × `factor` block (a partial block at the right and bottom
-    /// edges averages what it has).
+    /// edges averages what it has); rows of blocks in parallel.
     pub fn downsampled(&self, factor: usize) -> Raster {
         if factor <= 1 {
             return self.clone();
         }
         let (w, h) = (self.width.div_ceil(factor), self.height.div_ceil(factor));
-        let mut sum = vec![0.0f32; w * h];
-        let mut count = vec![0u32; w * h];
-        for j in 0..self.height {
-            for i in 0..self.width {
-                let k = (j / factor) * w + i / factor;
-                sum[k] += self.values[j * self.width + i];
-                count[k] += 1;
+        let mut values = vec![0.0f32; w * h];
+        values.par_chunks_mut(w).enumerate().for_each(|(block_row, out)| {
+            let rows = block_row * factor..((block_row + 1) * factor).min(self.height);
+            let count_y = rows.len();
+            for j in rows {
+                for (i, &v) in self.values[j * self.width..(j + 1) * self.width].iter().enumerate() {
+                    out[i / factor] += v;
+                }
             }
-        }
-        let values = sum.iter().zip(&count).map(|(s, &n)| s / n as f32).collect();
+            for (b, o) in out.iter_mut().enumerate() {
+                let count_x = ((b + 1) * factor).min(self.width) - b * factor;
+                *o /= (count_x * count_y) as f32;
+            }
+        });
         Raster { width: w, height: h, values }
     }
 

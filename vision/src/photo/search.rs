@@ -17,6 +17,7 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
@@ -73,31 +74,50 @@ pub fn coarse_candidates(contrast: &GrayImage, paths: &[PrintedPath], mirrored: 
     let extent_mm = (hi[0] - lo[0]).hypot(hi[1] - lo[1]).max(1.0);
     let s_max = image.width.max(image.height) as f64 / extent_mm;
     let bed = BedRaster::material(paths, (extent_mm / 400.0).max(0.05), 1.0);
+    let scales = scale_grid(s_max);
+    // the material blurred by half a coarse pixel at each scale, whatever the rotation
+    let blurred: Vec<BedRaster> = scales
+        .par_iter()
+        .map(|&s| BedRaster { raster: bed.raster.blurred(0.5 / (s * bed.res_mm)), ..bed.clone() })
+        .collect();
+    let thetas = orientation_candidates(&image, paths, sign);
+    let poses: Vec<(f64, f64)> = thetas.iter().flat_map(|&theta| scales.iter().map(move |&s| (theta, s))).collect();
+    let peaks: Vec<Option<(f64, [f64; 2])>> = poses
+        .par_iter()
+        .enumerate()
+        .map(|(k, &(theta, s))| correlator.best(&render(&blurred[k % scales.len()], theta, s, sign)))
+        .collect();
     let mut out = Vec::new();
-    for theta in orientation_candidates(&image, paths, sign) {
+    for (per_theta, peaks) in poses.chunks(scales.len().max(1)).zip(peaks.chunks(scales.len().max(1))) {
         let mut best: Option<Candidate> = None;
-        let mut s = s_max;
-        while s >= s_max * MIN_SCALE_FRACTION {
-            let blurred = BedRaster { raster: bed.raster.blurred(0.5 / (s * bed.res_mm)), ..bed.clone() };
-            if let Some((ncc, t)) = correlator.best(&render(&blurred, theta, s, sign)) {
-                if best.is_none_or(|b| ncc.abs() > b.score) {
-                    let camera = similarity_camera(theta, s, sign, t, factor as f64, contrast);
-                    let (score, polarity) = (ncc.abs(), ncc.signum());
-                    best = Some(Candidate {
-                        camera,
-                        score,
-                        rotation_rad: theta,
-                        scale_px_mm: s * factor as f64,
-                        polarity,
-                    });
-                }
+        for (&(theta, s), peak) in per_theta.iter().zip(peaks) {
+            let Some((ncc, t)) = *peak else { continue };
+            if best.is_none_or(|b| ncc.abs() > b.score) {
+                best = Some(Candidate {
+                    camera: similarity_camera(theta, s, sign, t, factor as f64, contrast),
+                    score: ncc.abs(),
+                    rotation_rad: theta,
+                    scale_px_mm: s * factor as f64,
+                    polarity: ncc.signum(),
+                });
             }
-            s *= (-LOG_SCALE_STEP).exp();
         }
         out.extend(best);
     }
     out.sort_by(|a, b| b.score.total_cmp(&a.score));
     out
+}
+
+/// The scales searched (coarse px/mm), from `s_max` down to [`MIN_SCALE_FRACTION`] of
+/// it by [`LOG_SCALE_STEP`].
+fn scale_grid(s_max: f64) -> Vec<f64> {
+    let mut scales = Vec::new();
+    let mut s = s_max;
+    while s >= s_max * MIN_SCALE_FRACTION {
+        scales.push(s);
+        s *= (-LOG_SCALE_STEP).exp();
+    }
+    scales
 }
 
 /// The pose image = factor·(s·R(θ)·diag(1, sign)·bed + t) as a camera.
