@@ -95,21 +95,9 @@ pub struct LineDeposit {
 
 /// The deposit of `line` under `settings`.
 pub fn deposit_line(line: &PrintedLine, settings: &DepositSettings) -> LineDeposit {
-    let flow = CommandedFlow::new(line, settings.tau_s);
-    let k = settings.pressure_advance.advance_s;
-    let half = settings.pressure_advance.smooth_time_s / 2.0;
-    let length = line.length_mm();
-    let n = (length / settings.step_mm + 1e-9).floor() as usize + 1;
-    let positions_mm: Vec<f64> = (0..n).map(|j| j as f64 * settings.step_mm).collect();
-    let deposited = |x: f64| flow.deposited_mm2(line.time_at_mm(x), k, half);
-    let commanded = |x: f64| flow.commanded_mm2(line.time_at_mm(x));
-    let (mut flow_widths_mm, mut commanded_widths_mm) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for &x in &positions_mm {
-        let (a, b) = ((x - settings.step_mm / 2.0).max(0.0), (x + settings.step_mm / 2.0).min(length));
-        let cell = (b - a).max(1e-12);
-        flow_widths_mm.push((deposited(b) - deposited(a)) / cell);
-        commanded_widths_mm.push((commanded(b) - commanded(a)) / cell);
-    }
+    let (k, tau) = (settings.pressure_advance.advance_s, settings.tau_s);
+    let DepositParts { positions_mm, cells: [pushed, lagged, commanded_widths_mm], .. } = deposit_parts(line, settings);
+    let flow_widths_mm: Vec<f64> = pushed.iter().zip(&lagged).map(|(p, l)| p + (k - tau) * l).collect();
     let gap: Vec<bool> = flow_widths_mm
         .iter()
         .zip(&commanded_widths_mm)
@@ -117,6 +105,8 @@ pub fn deposit_line(line: &PrintedLine, settings: &DepositSettings) -> LineDepos
         .collect();
     let smoothed = moving_average(&positions_mm, &flow_widths_mm, settings.smoothing_mm);
     let widths_mm = smoothed.iter().zip(&gap).map(|(w, g)| if *g { 0.0 } else { w.max(0.0) }).collect();
+    let flow = CommandedFlow::new(line, tau);
+    let half = settings.pressure_advance.smooth_time_s / 2.0;
     let end = flow.deposited_mm2(line.duration_s(), k, half);
     LineDeposit {
         positions_mm,
